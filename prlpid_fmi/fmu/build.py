@@ -131,7 +131,8 @@ def instantiation_token(spec: PlantSpec, fmi_version: int) -> str:
     """Deterministic GUID from the plant's sources, the shared layer and this builder."""
     digest = hashlib.sha256(f"fmi{fmi_version}".encode())
     for path in [*(PLANT_SOURCES / "common" / f for f in (*COMMON_SOURCES, API_SOURCE[fmi_version])),
-                 spec.directory / "model.c", spec.directory / "model.yaml", Path(__file__)]:
+                 spec.directory / "model.c", spec.directory / "model.yaml", Path(__file__),
+                 *sorted(spec.directory.glob("*.mo"))]:
         digest.update(path.read_bytes())
     return "{" + str(uuid.UUID(bytes=digest.digest()[:16])) + "}"
 

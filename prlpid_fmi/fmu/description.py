@@ -1,0 +1,159 @@
+"""What an FMU offers, read once from its modelDescription.xml: variables, interfaces, capabilities."""
+from __future__ import annotations
+
+import zipfile
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+from ..errors import PlantError
+
+REAL_TYPES = ("Real", "Float64")
+
+
+@dataclass(frozen=True)
+class FmuVariable:
+    name: str
+    value_reference: int
+    causality: str
+    variability: str
+    type: str
+    start: float | str | None
+    unit: str | None
+    description: str
+
+
+@dataclass(frozen=True)
+class FmuDescription:
+    """The parts of a modelDescription that decide whether an FMU can be a plant or a prior."""
+
+    path: Path
+    fmi_version: str
+    model_name: str
+    model_identifier: str
+    guid: str
+    co_simulation: bool
+    model_exchange: bool
+    can_get_and_set_state: bool
+    can_serialize_state: bool
+    default_step_size_s: float | None
+    variables: tuple[FmuVariable, ...]
+
+    def variable(self, name: str) -> FmuVariable | None:
+        for v in self.variables:
+            if v.name == name:
+                return v
+        return None
+
+    def _names(self, causality: str) -> tuple[str, ...]:
+        return tuple(v.name for v in self.variables if v.causality == causality and v.type in REAL_TYPES)
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        return self._names("input")
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        return self._names("output")
+
+    @property
+    def parameters(self) -> tuple[FmuVariable, ...]:
+        return tuple(v for v in self.variables if v.causality == "parameter")
+
+    def require(self, name: str, causalities: tuple[str, ...] | None, role: str) -> FmuVariable:
+        """The real variable `name`, with one of `causalities`; PlantError naming the FMU otherwise."""
+        v = self.variable(name)
+        if v is None:
+            raise PlantError(f"{self.path}: has no variable {name!r} (to use as {role}); "
+                             f"inputs: {', '.join(self.input_names) or 'none'}; "
+                             f"outputs: {', '.join(self.output_names) or 'none'}")
+        if v.type not in REAL_TYPES:
+            raise PlantError(f"{self.path}: variable {name!r} is {v.type}, expected a real (Real/Float64) to use as {role}")
+        if causalities is not None and v.causality not in causalities:
+            raise PlantError(f"{self.path}: variable {name!r} has causality {v.causality!r}, "
+                             f"expected {' or '.join(causalities)} to use as {role}")
+        return v
+
+    def plant_problems(self) -> list[str]:
+        """Why this FMU cannot be stepped as a plant (empty when it can)."""
+        problems = []
+        if not self.co_simulation:
+            problems.append("no co-simulation interface")
+        if not self.input_names:
+            problems.append("no real inputs")
+        if not self.output_names:
+            problems.append("no real outputs")
+        return problems
+
+    def prior_problems(self) -> list[str]:
+        """Why this FMU cannot serve as the predictive prior (empty when it can)."""
+        problems = self.plant_problems()
+        if not self.can_get_and_set_state:
+            problems.append("cannot get and set its state (canGetAndSetFMUstate)")
+        if not self.can_serialize_state:
+            problems.append("cannot serialize its state (canSerializeFMUstate), so the plant state cannot be copied in")
+        return problems
+
+
+@lru_cache(maxsize=64)
+def _describe(path: str, mtime: float) -> FmuDescription:
+    from fmpy import read_model_description
+
+    try:
+        md = read_model_description(path, validate=False)
+    except (zipfile.BadZipFile, KeyError):
+        raise PlantError(f"{path}: not an FMU (expected a ZIP archive with a modelDescription.xml)") from None
+    except Exception as exc:
+        raise PlantError(f"{path}: cannot read its modelDescription.xml: {exc}") from None
+    cs = md.coSimulation
+    variables = tuple(
+        FmuVariable(v.name, int(v.valueReference), v.causality, v.variability, v.type,
+                    v.start, getattr(v, "unit", None) or (v.declaredType.unit if v.declaredType is not None else None),
+                    v.description or "")
+        for v in md.modelVariables)
+    step = md.defaultExperiment.stepSize if md.defaultExperiment is not None else None
+    return FmuDescription(
+        path=Path(path), fmi_version=md.fmiVersion, model_name=md.modelName,
+        model_identifier=cs.modelIdentifier if cs else (md.modelExchange.modelIdentifier if md.modelExchange else ""),
+        guid=md.guid, co_simulation=cs is not None, model_exchange=md.modelExchange is not None,
+        can_get_and_set_state=bool(cs and cs.canGetAndSetFMUstate),
+        can_serialize_state=bool(cs and cs.canSerializeFMUstate),
+        default_step_size_s=float(step) if step else None, variables=variables)
+
+
+def describe_fmu(path: str | Path) -> FmuDescription:
+    """Read an FMU's model description (cached per file and modification time)."""
+    p = Path(path)
+    if not p.is_file():
+        raise PlantError(f"{p}: FMU file not found")
+    if not zipfile.is_zipfile(p):
+        raise PlantError(f"{p}: not an FMU (expected a ZIP archive with a modelDescription.xml)")
+    return _describe(str(p.resolve()), p.stat().st_mtime)
+
+
+def format_description(d: FmuDescription) -> str:
+    """Human-readable summary for `prlpid-fmi inspect`."""
+    kinds = [k for k, on in (("co-simulation", d.co_simulation), ("model exchange", d.model_exchange)) if on]
+    lines = [
+        f"FMU          {d.path}",
+        f"Model        {d.model_name}",
+        f"FMI version  {d.fmi_version}",
+        f"Interfaces   {', '.join(kinds) or 'none'}",
+        f"State        get/set: {'yes' if d.can_get_and_set_state else 'no'}, "
+        f"serialize: {'yes' if d.can_serialize_state else 'no'}",
+    ]
+    if d.default_step_size_s:
+        lines.append(f"Default step {d.default_step_size_s:g} s")
+    for title, causality in (("Inputs", "input"), ("Outputs", "output"), ("Parameters", "parameter")):
+        group = [v for v in d.variables if v.causality == causality]
+        lines.append(f"{title}:" + ("" if group else " none"))
+        for v in group:
+            start = "" if v.start is None else f"start={v.start}"
+            unit = f"[{v.unit}]" if v.unit else ""
+            extra = f" ({v.variability})" if causality == "parameter" else ""
+            lines.append(f"  {v.name:<16} {v.type:<8} {start:<18} {unit:<10} {v.description}{extra}".rstrip())
+    plant, prior = d.plant_problems(), d.prior_problems()
+    lines.append("As plant     " + ("yes" if not plant else "no: " + "; ".join(plant)))
+    lines.append("As prior     " + ("yes (a second instance receives the plant's state each step)"
+                                    if not prior else "no: " + "; ".join(prior)))
+    return "\n".join(lines)
