@@ -1,0 +1,269 @@
+"""Closed-loop performance metrics of one evaluation run, from sampled signals.
+
+Inputs (n samples; row k holds the values at time_s[k]): setpoint r and measurement y of shape (n,)
+or (n, n_loops), control signal u of the same number of loops, and the sample time Ts [s]. The
+tracking error is e = r - y. All sums are rectangular (left Riemann) sums over the samples of a
+window [a, b) (half-open sample indices, like the paper's Table 2 rows "0<=k<=200", "200<=k<=400")::
+
+    ISE  = sum e_k**2 * Ts               [y-unit^2 * s]
+    IAE  = sum |e_k| * Ts                [y-unit * s]
+    ITAE = sum t_k * |e_k| * Ts          [y-unit * s^2], t_k = time_s[k] - time_s[a] (from the window start)
+    ControlEffort  = sum u_k**2 * Ts     [u-unit^2 * s]
+    TotalVariation = sum |u_k - u_{k-1}| over k = max(a, 1) .. b-1   [u-unit]
+
+Each difference u_k - u_{k-1} belongs to the window of its later sample, so ISE, IAE, ControlEffort
+and TotalVariation of intervals that tile [0, n) add up to the overall values (ITAE does not: its
+clock restarts at every window start).
+
+Step metrics (names as in python-control's ``step_info``), per loop and per setpoint *segment*: a
+segment starts at sample 0 and at every sample where the loop's setpoint changes, and ends before
+the next change (or at the end of the run). The step of a segment starting at s > 0 is
+delta = r[s] - r[s-1] with base value r[s-1]; the first segment is the step from the initial
+measurement, delta = r[0] - y[0], base y[0]. Times are measured from time_s[s]; level crossings are
+linearly interpolated between samples.
+
+- Overshoot [%]: 100 * max over the segment of sign(delta)*(y - r[s]) / |delta|, 0 if the response
+  never passes the new setpoint (for a step down: how far it goes below the new setpoint).
+- RiseTime [s]: from the first time the response covers 10 % of the step (from the base value) to
+  the first time it covers 90 %.
+- SettlingTime [s]: from the step until |e| <= 2 % of |delta| for the rest of the segment
+  (0 if it always is).
+- SteadyStateError [y-unit]: mean |e| over the last 10 % of the segment's samples (at least one).
+
+Undefined and failed values (plain floats; ``json.dumps`` writes them as NaN / Infinity):
+
+- NaN = not defined: zero-size step (|delta| <= 1e-9 * max(1, |r[s]|, |base|)) -> Overshoot,
+  RiseTime and SettlingTime are NaN (SteadyStateError is still computed); segment shorter than
+  ``MIN_SEGMENT_STEPS`` samples -> all four are NaN.
+- inf = failed: the response never settles within its segment -> SettlingTime inf; it never covers
+  90 % of the step within its segment -> RiseTime inf. A non-finite measurement (diverged run) makes
+  the window's ISE/IAE/ITAE inf and the segment's SteadyStateError and defined step metrics inf; a
+  non-finite control signal makes ControlEffort and TotalVariation inf.
+
+Aggregates over segments ("overall", and per interval over the segments that *start* inside the
+interval; a segment is always measured to its own end): Overshoot, RiseTime and SettlingTime are
+the worst (max) segment value, SteadyStateError is the mean; NaN segments are ignored, inf
+propagates, NaN if no segment defines the value.
+
+Result of ``compute_metrics``::
+
+    {"loops": [names],
+     "overall":   {metric keys},
+     "intervals": [{"start_step": a, "end_step": b, metric keys}, ...],
+     "segments":  [{"loop": name, "start_step": s, "end_step": e, "start_time_s": t,
+                    "StepSize": delta, "Overshoot": .., "RiseTime": .., "SettlingTime": ..,
+                    "SteadyStateError": ..}, ...]}
+
+Metric keys are the names in ``METRIC_NAMES``: plain ("ISE") for one loop, "ISE[name]" for each
+loop when there are several (flat, so one dict is one CSV row). Default loop names are "0", "1", ...
+Segment metrics use plain names, the loop is in "loop". For ramps or other continuously varying
+setpoints the segments are single samples and the step metrics are NaN; use the integral metrics.
+"""
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+
+INTEGRAL_METRICS = ("ISE", "IAE", "ITAE", "ControlEffort", "TotalVariation")
+STEP_METRICS = ("Overshoot", "RiseTime", "SettlingTime", "SteadyStateError")
+METRIC_NAMES = INTEGRAL_METRICS + STEP_METRICS
+MIN_SEGMENT_STEPS = 2
+_REL_TOL = 1e-9
+
+__all__ = ["compute_metrics", "metric_key", "METRIC_NAMES", "INTEGRAL_METRICS", "STEP_METRICS",
+           "MIN_SEGMENT_STEPS"]
+
+
+def metric_key(name: str, loop: str, n_loops: int) -> str:
+    """Key of metric ``name`` for ``loop`` in the result: "ISE" for one loop, "ISE[loop]" otherwise."""
+    return name if n_loops == 1 else f"{name}[{loop}]"
+
+
+def _as_2d(x, n: int, what: str) -> np.ndarray:
+    a = np.asarray(x, dtype=float)
+    if a.ndim == 1:
+        a = a[:, None]
+    if a.ndim != 2 or a.shape[0] != n:
+        raise ValueError(f"{what} must have shape (n,) or (n, n_loops) with n = {n}, got {np.shape(x)}")
+    return a
+
+
+def _zero_step(delta: float, *values: float) -> bool:
+    return abs(delta) <= _REL_TOL * max(1.0, *(abs(v) for v in values))
+
+
+def _crossing_time(t: np.ndarray, s: np.ndarray, level: float) -> float:
+    """First time s (1-D) reaches >= level, interpolated linearly; inf if never; t[0] if already at start."""
+    idx = np.flatnonzero(s >= level)
+    if idx.size == 0:
+        return math.inf
+    j = int(idx[0])
+    if j == 0:
+        return float(t[0])
+    frac = (level - s[j - 1]) / (s[j] - s[j - 1])
+    return float(t[j - 1] + frac * (t[j] - t[j - 1]))
+
+
+def _segment_metrics(t: np.ndarray, r_new: float, base: float, y: np.ndarray, settling_threshold: float,
+                     rise_time_limits: tuple[float, float], steady_state_fraction: float) -> dict:
+    """Step metrics of one segment: t, y (m,) from the step sample on; step from base to r_new."""
+    m = y.size
+    nan = math.nan
+    delta = r_new - base
+    zero = _zero_step(delta, r_new, base)
+    if m < MIN_SEGMENT_STEPS:
+        return dict(Overshoot=nan, RiseTime=nan, SettlingTime=nan, SteadyStateError=nan)
+    if not np.all(np.isfinite(y)):
+        step_value = nan if zero else math.inf
+        return dict(Overshoot=step_value, RiseTime=step_value, SettlingTime=step_value,
+                    SteadyStateError=math.inf)
+    abs_e = np.abs(r_new - y)
+    n_tail = max(1, math.ceil(steady_state_fraction * m))
+    sse = float(np.mean(abs_e[-n_tail:]))
+    if zero:
+        return dict(Overshoot=nan, RiseTime=nan, SettlingTime=nan, SteadyStateError=sse)
+    size = abs(delta)
+    sign = 1.0 if delta > 0 else -1.0
+    overshoot = max(0.0, float(np.max(sign * (y - r_new)))) / size * 100.0
+    progress = sign * (y - base)  # distance covered towards the new setpoint
+    t_low = _crossing_time(t, progress, rise_time_limits[0] * size)
+    t_high = _crossing_time(t, progress, rise_time_limits[1] * size)
+    rise = t_high - t_low if math.isfinite(t_high) else math.inf
+    band = settling_threshold * size
+    outside = np.flatnonzero(abs_e > band)
+    if outside.size == 0:
+        settling = 0.0
+    elif outside[-1] == m - 1:
+        settling = math.inf
+    else:
+        j = int(outside[-1])
+        frac = (abs_e[j] - band) / (abs_e[j] - abs_e[j + 1])
+        settling = float(t[j] + frac * (t[j + 1] - t[j]) - t[0])
+    return dict(Overshoot=float(overshoot), RiseTime=float(rise), SettlingTime=float(settling),
+                SteadyStateError=sse)
+
+
+def _integral_metrics(t: np.ndarray, e: np.ndarray, u: np.ndarray, u_prev: float | None, ts: float) -> dict:
+    """ISE, IAE, ITAE of e (m,) and effort and TV of u (m,) on one window; u_prev = u before the window."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        if np.all(np.isfinite(e)):
+            abs_e = np.abs(e)
+            ise = float(np.sum(e * e) * ts)
+            iae = float(np.sum(abs_e) * ts)
+            itae = float(np.sum((t - t[0]) * abs_e) * ts)
+        else:
+            ise = iae = itae = math.inf
+        if np.all(np.isfinite(u)) and (u_prev is None or math.isfinite(u_prev)):
+            effort = float(np.sum(u * u) * ts)
+            uu = u if u_prev is None else np.concatenate(([u_prev], u))
+            tv = float(np.sum(np.abs(np.diff(uu))))
+        else:
+            effort = tv = math.inf
+    return dict(ISE=ise, IAE=iae, ITAE=itae, ControlEffort=effort, TotalVariation=tv)
+
+
+def _aggregate(segments: list[dict]) -> dict:
+    """Worst Overshoot/RiseTime/SettlingTime and mean SteadyStateError over segments, NaN ignored."""
+    out = {}
+    for name in STEP_METRICS:
+        values = [s[name] for s in segments if not math.isnan(s[name])]
+        if not values:
+            out[name] = math.nan
+        elif name == "SteadyStateError":
+            out[name] = float(math.inf if math.inf in values else sum(values) / len(values))
+        else:
+            out[name] = float(max(values))
+    return out
+
+
+def compute_metrics(time_s, setpoint, measurement, control_signal, sample_time_s: float,
+                    intervals: Sequence[tuple[int, int]] | None = None,
+                    loop_names: Sequence[str] | None = None, *,
+                    settling_threshold: float = 0.02, rise_time_limits: tuple[float, float] = (0.1, 0.9),
+                    steady_state_fraction: float = 0.1) -> dict:
+    """Closed-loop metrics of one run (see the module docstring for definitions and the result layout).
+
+    time_s: (n,) sample times [s], increasing. setpoint, measurement: (n,) or (n, n_loops).
+    control_signal: (n,) or (n, n_loops). sample_time_s: Ts [s] > 0 for the rectangular sums.
+    intervals: optional (start_step, end_step) half-open index ranges, 0 <= start < end <= n.
+    loop_names: optional names (n_loops,) used in the keys; default "0", "1", ...
+    settling_threshold, rise_time_limits, steady_state_fraction: 2 % band, 10 %/90 % levels, last
+    10 % of a segment (fractions of the step size / segment length).
+    Returns a dict of plain Python floats/ints/strings/lists, serialisable with json.dumps.
+    """
+    t = np.asarray(time_s, dtype=float)
+    if t.ndim != 1 or t.size == 0:
+        raise ValueError(f"time_s must be a non-empty 1-D array, got shape {np.shape(time_s)}")
+    n = t.size
+    if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
+        raise ValueError("time_s must be finite and strictly increasing")
+    ts = float(sample_time_s)
+    if not (math.isfinite(ts) and ts > 0):
+        raise ValueError(f"sample_time_s must be a positive finite number, got {sample_time_s!r}")
+    r = _as_2d(setpoint, n, "setpoint")
+    y = _as_2d(measurement, n, "measurement")
+    u = _as_2d(control_signal, n, "control_signal")
+    n_loops = r.shape[1]
+    if y.shape[1] != n_loops or u.shape[1] != n_loops:
+        raise ValueError(f"setpoint, measurement and control_signal must have the same number of loops, "
+                         f"got {r.shape[1]}, {y.shape[1]}, {u.shape[1]}")
+    if not np.all(np.isfinite(r)):
+        raise ValueError("setpoint must be finite")
+    if loop_names is None:
+        names = [str(i) for i in range(n_loops)]
+    else:
+        names = [str(x) for x in loop_names]
+        if len(names) != n_loops or len(set(names)) != n_loops:
+            raise ValueError(f"loop_names must be {n_loops} distinct names, got {list(loop_names)!r}")
+    if not (0.0 <= settling_threshold and 0.0 <= rise_time_limits[0] < rise_time_limits[1] <= 1.0
+            and 0.0 < steady_state_fraction <= 1.0):
+        raise ValueError("settling_threshold >= 0, 0 <= rise_time_limits[0] < [1] <= 1 and "
+                         "0 < steady_state_fraction <= 1 are required")
+    windows = []
+    for iv in intervals or []:
+        try:
+            a, b = (int(v) for v in iv)
+        except (TypeError, ValueError):
+            raise ValueError(f"an interval must be a pair (start_step, end_step), got {iv!r}") from None
+        if not 0 <= a < b <= n:
+            raise ValueError(f"interval {iv!r} must satisfy 0 <= start_step < end_step <= {n}")
+        windows.append((a, b))
+
+    e = r - y
+    segments = []
+    per_loop_segments = []
+    for i, name in enumerate(names):
+        ri = r[:, i]
+        tol = _REL_TOL * np.maximum(1.0, np.maximum(np.abs(ri[1:]), np.abs(ri[:-1])))
+        changes = [int(k) + 1 for k in np.flatnonzero(np.abs(np.diff(ri)) > tol)]
+        starts = [0] + changes
+        ends = changes + [n]
+        loop_segments = []
+        for s, end in zip(starts, ends):
+            base = y[0, i] if s == 0 else r[s - 1, i]
+            m = _segment_metrics(t[s:end], float(r[s, i]), float(base), y[s:end, i], settling_threshold,
+                                 tuple(rise_time_limits), steady_state_fraction)
+            seg = {"loop": name, "start_step": int(s), "end_step": int(end), "start_time_s": float(t[s]),
+                   "StepSize": float(r[s, i] - base) if math.isfinite(base) else math.nan, **m}
+            loop_segments.append(seg)
+        per_loop_segments.append(loop_segments)
+        segments.extend(loop_segments)
+
+    def window(a: int, b: int) -> dict:
+        out = {}
+        for i, name in enumerate(names):
+            u_prev = float(u[a - 1, i]) if a > 0 else None
+            values = _integral_metrics(t[a:b], e[a:b, i], u[a:b, i], u_prev, ts)
+            values.update(_aggregate([s for s in per_loop_segments[i] if a <= s["start_step"] < b]))
+            for metric in METRIC_NAMES:
+                out[metric_key(metric, name, n_loops)] = float(values[metric])
+        return out
+
+    return {
+        "loops": names,
+        "overall": window(0, n),
+        "intervals": [{"start_step": a, "end_step": b, **window(a, b)} for a, b in windows],
+        "segments": segments,
+    }

@@ -1,0 +1,193 @@
+"""Metrics against truth computed independently: hand sums, analytic step responses."""
+import json
+import math
+
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+from prlpid_fmi.metrics import METRIC_NAMES, compute_metrics
+
+TS = 0.01
+
+
+def second_order_step(t, zeta=0.5, wn=1.0):
+    """Unit step response of wn^2/(s^2 + 2 zeta wn s + wn^2), zero initial state."""
+    wd = wn * math.sqrt(1 - zeta**2)
+    phi = math.acos(zeta)
+    return 1 - np.exp(-zeta * wn * t) / math.sqrt(1 - zeta**2) * np.sin(wd * t + phi)
+
+
+def test_hand_computed_sums_and_intervals():
+    # e = [1, 0.5, 0, -0.5], Ts = 0.5, t = [0, 0.5, 1, 1.5]
+    res = compute_metrics([0.0, 0.5, 1.0, 1.5], [1, 1, 1, 1], [0.0, 0.5, 1.0, 1.5],
+                          [2.0, -1.0, 0.5, 0.5], 0.5, intervals=[(0, 2), (2, 4)])
+    o = res["overall"]
+    assert o["ISE"] == pytest.approx(0.75)           # (1 + .25 + 0 + .25) * .5
+    assert o["IAE"] == pytest.approx(1.0)            # (1 + .5 + 0 + .5) * .5
+    assert o["ITAE"] == pytest.approx(0.5)           # (0*1 + .5*.5 + 1*0 + 1.5*.5) * .5
+    assert o["ControlEffort"] == pytest.approx(2.75)  # (4 + 1 + .25 + .25) * .5
+    assert o["TotalVariation"] == pytest.approx(4.5)  # 3 + 1.5 + 0
+    first, second = res["intervals"]
+    assert (first["start_step"], first["end_step"], second["start_step"], second["end_step"]) == (0, 2, 2, 4)
+    assert first["ISE"] == pytest.approx(0.625) and second["ISE"] == pytest.approx(0.125)
+    assert first["IAE"] == pytest.approx(0.75) and second["IAE"] == pytest.approx(0.25)
+    assert first["ITAE"] == pytest.approx(0.125)     # t from 0: (0*1 + .5*.5) * .5
+    assert second["ITAE"] == pytest.approx(0.125)    # t from 1.0: (0*0 + .5*.5) * .5
+    assert first["ControlEffort"] == pytest.approx(2.5) and second["ControlEffort"] == pytest.approx(0.25)
+    assert first["TotalVariation"] == pytest.approx(3.0)   # |-1 - 2|
+    assert second["TotalVariation"] == pytest.approx(1.5)  # |0.5 - (-1)| (boundary) + 0
+
+
+def test_total_variation_of_known_sequence():
+    u = [0.0, 1.0, -1.0, 2.0, 2.0]
+    res = compute_metrics(np.arange(5) * 0.1, np.zeros(5), np.zeros(5), u, 0.1)
+    assert res["overall"]["TotalVariation"] == pytest.approx(6.0)  # 1 + 2 + 3 + 0
+    assert res["overall"]["ControlEffort"] == pytest.approx(1.0)   # (0 + 1 + 1 + 4 + 4) * 0.1
+
+
+def test_first_order_step_response():
+    t = np.arange(0, 10 + TS / 2, TS)
+    y = 1 - np.exp(-t / 1.0)
+    res = compute_metrics(t, np.ones_like(t), y, np.ones_like(t), TS)
+    o = res["overall"]
+    assert o["RiseTime"] == pytest.approx(math.log(9), abs=TS)        # 2.197 s
+    assert o["SettlingTime"] == pytest.approx(math.log(50), abs=TS)   # 3.912 s
+    assert o["Overshoot"] == 0.0
+    assert o["SteadyStateError"] == pytest.approx(np.mean(np.exp(-t[-101:])), rel=1e-9)
+    # integrals of e = exp(-t) on [0, 10]: ISE ~ 1/2, IAE ~ 1, ITAE ~ 1 (rectangular sum, O(Ts) error)
+    assert o["ISE"] == pytest.approx(0.5, abs=TS)
+    assert o["IAE"] == pytest.approx(1.0, abs=TS)
+    assert o["ITAE"] == pytest.approx(1.0, abs=TS)
+    (seg,) = res["segments"]
+    assert seg["StepSize"] == 1.0 and seg["start_step"] == 0 and seg["end_step"] == t.size
+
+
+def _second_order_truth():
+    f = lambda x: second_order_step(np.array(x)).item()
+    rise = brentq(lambda x: f(x) - 0.9, 0.5, 3.0) - brentq(lambda x: f(x) - 0.1, 0.0, 1.5)
+    # last time |e| = 0.02: dense scan for the last sample outside the band, then refine
+    grid = np.arange(0, 20, 1e-3)
+    j = np.flatnonzero(np.abs(1 - second_order_step(grid)) > 0.02)[-1]
+    settle = brentq(lambda x: abs(1 - f(x)) - 0.02, grid[j], grid[j + 1])
+    return rise, settle
+
+
+def test_underdamped_second_order_step_response():
+    t = np.arange(0, 20 + TS / 2, TS)
+    y = second_order_step(t)
+    res = compute_metrics(t, np.ones_like(t), y, np.zeros_like(t), TS)
+    o = res["overall"]
+    zeta = 0.5
+    assert o["Overshoot"] == pytest.approx(100 * math.exp(-zeta * math.pi / math.sqrt(1 - zeta**2)), abs=0.01)
+    assert o["Overshoot"] == pytest.approx(16.30, abs=0.01)
+    rise, settle = _second_order_truth()
+    assert o["RiseTime"] == pytest.approx(rise, abs=TS)
+    assert o["SettlingTime"] == pytest.approx(settle, abs=TS)
+
+
+def test_step_down_and_zero_step_segment():
+    t = np.arange(0, 25 + TS / 2, TS)
+    k0 = 500  # setpoint 1 -> 0 at t = 5 s; the plant starts at the setpoint (zero-size first step)
+    r = np.where(np.arange(t.size) < k0, 1.0, 0.0)
+    y = np.ones_like(t)
+    y[k0:] = 1 - second_order_step(t[k0:] - t[k0])
+    res = compute_metrics(t, r, y, np.zeros_like(t), TS, intervals=[(0, k0), (k0, t.size)])
+    hold, down = res["segments"]
+    assert (hold["start_step"], hold["end_step"], down["start_step"], down["end_step"]) == (0, k0, k0, t.size)
+    assert hold["StepSize"] == 0.0
+    assert math.isnan(hold["Overshoot"]) and math.isnan(hold["RiseTime"]) and math.isnan(hold["SettlingTime"])
+    assert hold["SteadyStateError"] == 0.0
+    assert down["StepSize"] == -1.0 and down["start_time_s"] == pytest.approx(5.0)
+    assert down["Overshoot"] == pytest.approx(16.30, abs=0.01)   # below the new setpoint
+    rise, settle = _second_order_truth()
+    assert down["RiseTime"] == pytest.approx(rise, abs=TS)
+    assert down["SettlingTime"] == pytest.approx(settle, abs=TS)
+    o = res["overall"]
+    assert o["Overshoot"] == down["Overshoot"] and o["SettlingTime"] == down["SettlingTime"]
+    assert o["SteadyStateError"] == pytest.approx(down["SteadyStateError"] / 2)  # mean over both segments
+    first, second = res["intervals"]
+    assert math.isnan(first["Overshoot"]) and second["Overshoot"] == down["Overshoot"]
+
+
+def test_intervals_add_up_to_overall():
+    rng = np.random.default_rng(0)
+    n = 300
+    t = np.arange(n) * 0.05
+    r = np.repeat([0.0, 2.0, -1.0], 100)
+    y = r + rng.normal(0, 0.3, n)
+    u = rng.normal(0, 1, n)
+    res = compute_metrics(t, r, y, u, 0.05, intervals=[(0, 70), (70, 200), (200, 300)])
+    for name in ("ISE", "IAE", "ControlEffort", "TotalVariation"):
+        assert sum(iv[name] for iv in res["intervals"]) == pytest.approx(res["overall"][name], rel=1e-12)
+    assert len(res["segments"]) == 3
+
+
+def test_mimo_keys_and_json():
+    t = np.arange(0, 10 + TS / 2, TS)
+    y1 = 1 - np.exp(-t)
+    y2 = 2 * second_order_step(t)
+    r = np.column_stack([np.ones_like(t), 2 * np.ones_like(t)])
+    y = np.column_stack([y1, y2])
+    u = np.column_stack([np.ones_like(t), np.zeros_like(t)])
+    res = compute_metrics(t, r, y, u, TS, intervals=[(0, 500)], loop_names=["phi", "theta"])
+    assert res["loops"] == ["phi", "theta"]
+    assert set(res["overall"]) == {f"{m}[{n}]" for m in METRIC_NAMES for n in ("phi", "theta")}
+    assert res["overall"]["SettlingTime[phi]"] == pytest.approx(math.log(50), abs=TS)
+    assert res["overall"]["Overshoot[theta]"] == pytest.approx(16.30, abs=0.01)  # % of a step of 2
+    assert res["overall"]["ControlEffort[theta]"] == 0.0
+    assert [s["loop"] for s in res["segments"]] == ["phi", "theta"]
+    assert set(res["intervals"][0]) == {"start_step", "end_step", *res["overall"]}
+    back = json.loads(json.dumps(res))
+    assert back["overall"]["ISE[phi]"] == res["overall"]["ISE[phi]"]
+    default = compute_metrics(t, r, y, u, TS)
+    assert "ISE[0]" in default["overall"] and "ISE[1]" in default["overall"]
+    single = compute_metrics(t, r[:, :1], y[:, :1], u[:, :1], TS)
+    assert set(single["overall"]) == set(METRIC_NAMES)
+
+
+def test_diverged_run_is_inf():
+    t = np.arange(0, 2, TS)
+    y = np.exp(t) - 1      # step from 0 to 1, unstable response, then non-finite
+    y[150:] = np.nan
+    u = np.ones_like(t)
+    u[160] = np.inf
+    res = compute_metrics(t, np.ones_like(t), y, u, TS, intervals=[(0, 100), (100, t.size)])
+    o = res["overall"]
+    for name in ("ISE", "IAE", "ITAE", "ControlEffort", "TotalVariation", "SettlingTime", "SteadyStateError"):
+        assert o[name] == math.inf, name
+    assert math.isfinite(res["intervals"][0]["ISE"]) and res["intervals"][1]["ISE"] == math.inf
+    json.dumps(res)  # NaN/inf are written as NaN/Infinity
+
+
+def test_never_settles_and_short_segment():
+    t = np.arange(0, 3, TS)
+    n = t.size
+    y = 1 - np.exp(-t)            # only 95 % after 3 s: does not settle in the 2 % band
+    r = np.ones(n)
+    r[-1] = 2.0                    # a one-sample segment at the end: too short
+    res = compute_metrics(t, r, y, np.zeros(n), TS)
+    first, short = res["segments"]
+    assert first["SettlingTime"] == math.inf
+    assert first["RiseTime"] == pytest.approx(math.log(9), abs=TS)
+    assert first["SteadyStateError"] == pytest.approx(np.mean(np.exp(-t[n - 1 - 30:n - 1])))
+    assert short["start_step"] == n - 1 and short["end_step"] == n
+    assert all(math.isnan(short[m]) for m in ("Overshoot", "RiseTime", "SettlingTime", "SteadyStateError"))
+    assert res["overall"]["SettlingTime"] == math.inf
+    assert res["overall"]["SteadyStateError"] == first["SteadyStateError"]
+    # never reaches 90 % within its segment -> rise time inf
+    res = compute_metrics(t[:150], np.ones(150), y[:150], np.zeros(150), TS)
+    assert res["overall"]["RiseTime"] == math.inf
+
+
+@pytest.mark.parametrize("kwargs", [
+    dict(intervals=[(0, 11)]), dict(intervals=[(3, 3)]), dict(intervals=[(0,)]),
+    dict(sample_time_s=0.0), dict(loop_names=["a", "b"]),
+    dict(measurement=np.zeros((10, 2))), dict(time_s=np.zeros(10)),
+])
+def test_invalid_input_raises(kwargs):
+    args = dict(time_s=np.arange(10.0), setpoint=np.ones(10), measurement=np.zeros(10),
+                control_signal=np.zeros(10), sample_time_s=1.0)
+    args.update(kwargs)
+    with pytest.raises(ValueError):
+        compute_metrics(**args)
