@@ -1,0 +1,108 @@
+"""Typed configuration of one tuning problem: plant, prior, loops, controller, strategies, reward, episodes.
+
+These dataclasses are the single source of truth for every default. The YAML scenario loader
+builds them (validating at the edge); the environment, training and evaluation only read them.
+Units: seconds for times, samples ("steps") for counts, plant units for setpoints and signals.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Optional
+
+from .control.reward import RewardWeights
+from .control.smoothing import DEFAULT_WINDOW
+
+INF = float("inf")
+
+
+@dataclass(frozen=True)
+class GainRange:
+    """Range an action in [-1, 1] maps into. scale "log" (geometric, needs low > 0) or "linear"."""
+
+    low: float
+    high: float
+    scale: str = "log"
+
+
+@dataclass(frozen=True)
+class LoopConfig:
+    """One control loop: the FMU input it drives and the FMU output it measures.
+
+    measurement_scale (plant units) normalises errors for the observation and the reward, so that
+    the reward's clip bounds and bonus band mean the same for a level in cm and an angle in rad.
+    """
+
+    input: str
+    output: str
+    setpoint_range: tuple[float, float] = (0.0, 1.0)
+    u_min: float = -INF
+    u_max: float = INF
+    Kp: GainRange = GainRange(0.1, 10.0, "log")
+    Ti: GainRange = GainRange(0.1, 100.0, "log")
+    Td: GainRange = GainRange(0.0, 1.0, "linear")
+    measurement_scale: float = 1.0
+    divergence_bound: float = 100.0  # |measurement - setpoint| / measurement_scale past this ends the episode
+
+
+@dataclass(frozen=True)
+class Disturbance:
+    """A change applied during an episode, from start_step to end_step (exclusive; None = to the end).
+
+    kind "fmu": set the FMU input or tunable parameter `target` to `value` (restored after end_step);
+    kind "actuator" / "measurement": add `value` to the control signal / measurement of loop `target`.
+    """
+
+    kind: str
+    target: str
+    start_step: int
+    value: float
+    end_step: Optional[int] = None
+
+
+@dataclass(frozen=True)
+class PriorConfig:
+    """The predictive prior: by default a second instance of the plant FMU.
+
+    fmu: another FMU file (None: the plant's). parameters: values applied to the prior after every
+    state copy (model mismatch). state_map {prior parameter: plant variable}: for a different FMU,
+    whose state cannot be copied, the prior is re-initialised each step from these plant values.
+    """
+
+    fmu: Optional[str] = None
+    parameters: dict = field(default_factory=dict)
+    state_map: dict = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class TuningConfig:
+    """Everything PidTuningEnv needs. `fmu` is a path to a .fmu file or a bundled plant's name."""
+
+    fmu: str
+    loops: tuple[LoopConfig, ...]
+    plant_parameters: dict = field(default_factory=dict)
+    sample_time_s: float = 0.1
+    fmi_version: int = 2  # for bundled plants only
+    prior: PriorConfig = PriorConfig()
+    # controller
+    anti_windup: str = "clamping"
+    derivative_filter_N: Optional[float] = None
+    coupled: bool = False  # cross-axis coupled PID (paper eq. 26-27), needs 3 loops
+    coupling_range: float = 0.5  # coupling coefficients in [-c, c]
+    # strategies
+    forecast_horizon: int = 3  # N; 0 = plain one-step reward
+    smoothing: str = "era"  # none | sma | lwma | era
+    smoothing_window: int = DEFAULT_WINDOW
+    smoothing_alpha: Optional[float] = None  # None: the method's default (LWMA 0.2, ERA 0.3)
+    reward: RewardWeights = RewardWeights()
+    divergence_penalty: float = -100.0
+    # episodes
+    episode_steps: int = 200
+    setpoint_hold_steps: int = 100
+    setpoint_schedule: Optional[tuple[tuple[int, tuple[float, ...]], ...]] = None  # ((step, setpoints), ...)
+    disturbances: tuple[Disturbance, ...] = ()
+    measurement_noise_std: float = 0.0  # plant units, Gaussian, every loop
+    actuator_noise_std: float = 0.0  # control-signal units, Gaussian, every loop
+
+    @property
+    def n_loops(self) -> int:
+        return len(self.loops)
