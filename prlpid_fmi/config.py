@@ -106,3 +106,30 @@ class TuningConfig:
     @property
     def n_loops(self) -> int:
         return len(self.loops)
+
+
+@dataclass(frozen=True)
+class AgentConfig:
+    """The RL agent and its training budget (paper Table 1 / Algorithm 1 defaults for PPO)."""
+
+    algorithm: str = "ppo"  # ppo | sac | td3
+    total_timesteps: int = 500_000
+    seed: int = 0
+    n_envs: int = 1
+    vec_env: str = "dummy"  # dummy (one process) | subproc (one process per env)
+    normalize: bool = False  # VecNormalize on observations and rewards
+    learning_rate: float = 3e-4
+    gamma: float = 0.99
+    net_arch: tuple[int, ...] = (64, 64)  # shared tanh MLP of the actor and the critic (Table 1)
+    # PPO
+    n_steps: int = 2048  # per env, per rollout
+    batch_size: int = 256
+    n_epochs: int = 10
+    gae_lambda: float = 0.95
+    clip_range: float = 0.2
+    ent_coef: float = 0.0
+    # SAC / TD3
+    buffer_size: int = 200_000
+    learning_starts: int = 1_000
+    checkpoint_every: int = 50_000  # timesteps between checkpoints
+    extra: dict = field(default_factory=dict)  # further keyword arguments for the SB3 algorithm

@@ -1,0 +1,118 @@
+"""Training with stable-baselines3: PPO per Algorithm 1 / Table 1, SAC and TD3 as the paper's baselines.
+
+The actor and the critic share one tanh MLP feature extractor (Table 1: state -> 64 -> 64), followed
+by a linear action head and a linear value head. Vectorised envs hold one plant + prior FMU pair each.
+"""
+from __future__ import annotations
+
+import functools
+from pathlib import Path
+
+import gymnasium as gym
+import torch
+from torch import nn
+
+from .config import AgentConfig, TuningConfig
+from .env import PidTuningEnv
+from .errors import PrlPidError
+
+ALGORITHMS = ("ppo", "sac", "td3")
+
+
+def _shared_mlp_class():
+    from stable_baselines3.common.torch_layers import BaseFeaturesExtractor
+
+    class SharedMLP(BaseFeaturesExtractor):
+        """obs (batch, n_obs) -> tanh MLP features (batch, net_arch[-1]), shared by actor and critic."""
+
+        def __init__(self, observation_space: gym.spaces.Box, net_arch=(64, 64)):
+            super().__init__(observation_space, features_dim=net_arch[-1])
+            layers, n_in = [], int(observation_space.shape[0])
+            for width in net_arch:
+                layers += [nn.Linear(n_in, width), nn.Tanh()]
+                n_in = width
+            self.mlp = nn.Sequential(*layers)
+
+        def forward(self, observations: torch.Tensor) -> torch.Tensor:
+            return self.mlp(observations)
+
+    return SharedMLP
+
+
+def make_vec_env(config: TuningConfig, agent: AgentConfig, monitor_dir: Path | None = None):
+    """n_envs PidTuningEnvs (each with its own plant and prior FMU instances), seeded from agent.seed."""
+    from stable_baselines3.common.env_util import make_vec_env as sb3_make_vec_env
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    vec_cls = SubprocVecEnv if agent.vec_env == "subproc" and agent.n_envs > 1 else DummyVecEnv
+    return sb3_make_vec_env(functools.partial(PidTuningEnv, config), n_envs=agent.n_envs, seed=agent.seed,
+                            vec_env_cls=vec_cls, monitor_dir=str(monitor_dir) if monitor_dir else None)
+
+
+def build_model(agent: AgentConfig, env, tensorboard_dir: Path | None = None):
+    """An untrained SB3 model for `env` as configured by `agent`."""
+    from stable_baselines3 import PPO, SAC, TD3
+
+    if agent.algorithm not in ALGORITHMS:
+        raise PrlPidError(f"agent.algorithm must be one of {', '.join(ALGORITHMS)}, got {agent.algorithm!r}")
+    common = dict(learning_rate=agent.learning_rate, gamma=agent.gamma, seed=agent.seed, device="cpu",
+                  tensorboard_log=str(tensorboard_dir) if tensorboard_dir else None, verbose=0, **agent.extra)
+    if agent.algorithm == "ppo":
+        policy_kwargs = dict(features_extractor_class=_shared_mlp_class(),
+                             features_extractor_kwargs=dict(net_arch=tuple(agent.net_arch)),
+                             share_features_extractor=True, net_arch=dict(pi=[], vf=[]), activation_fn=nn.Tanh)
+        return PPO("MlpPolicy", env, n_steps=agent.n_steps, batch_size=agent.batch_size, n_epochs=agent.n_epochs,
+                   gae_lambda=agent.gae_lambda, clip_range=agent.clip_range, ent_coef=agent.ent_coef,
+                   policy_kwargs=policy_kwargs, **common)
+    policy_kwargs = dict(net_arch=list(agent.net_arch), activation_fn=nn.Tanh)
+    cls = SAC if agent.algorithm == "sac" else TD3
+    return cls("MlpPolicy", env, buffer_size=agent.buffer_size, learning_starts=agent.learning_starts,
+               batch_size=agent.batch_size, policy_kwargs=policy_kwargs, **common)
+
+
+def load_model(path: Path, algorithm: str, env=None):
+    """Load a saved SB3 model of the given algorithm."""
+    from stable_baselines3 import PPO, SAC, TD3
+
+    return {"ppo": PPO, "sac": SAC, "td3": TD3}[algorithm].load(str(path), env=env, device="cpu")
+
+
+def train(config: TuningConfig, agent: AgentConfig, run_dir: Path, progress_bar: bool = False,
+          resume_from: Path | None = None, total_timesteps: int | None = None):
+    """Train an agent; checkpoints, TensorBoard logs and Monitor CSVs go under run_dir.
+
+    Returns the trained model (also saved as run_dir/model.zip, with run_dir/vecnormalize.pkl when used).
+    """
+    from stable_baselines3.common.callbacks import CheckpointCallback
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    run_dir = Path(run_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    env = make_vec_env(config, agent, run_dir / "monitor")
+    if agent.normalize:
+        stats = run_dir / "vecnormalize.pkl"
+        env = VecNormalize.load(str(stats), env) if resume_from and stats.exists() else VecNormalize(env, gamma=agent.gamma)
+    if resume_from is not None:
+        model = load_model(resume_from, agent.algorithm, env)
+        model.tensorboard_log = str(run_dir / "tensorboard")
+    else:
+        model = build_model(agent, env, run_dir / "tensorboard")
+    steps = total_timesteps if total_timesteps is not None else agent.total_timesteps
+    checkpoint = CheckpointCallback(save_freq=max(agent.checkpoint_every // agent.n_envs, 1),
+                                    save_path=str(run_dir / "checkpoints"), name_prefix="model",
+                                    save_vecnormalize=agent.normalize)
+    try:
+        model.learn(total_timesteps=steps, callback=checkpoint, progress_bar=progress_bar,
+                    reset_num_timesteps=resume_from is None, tb_log_name=agent.algorithm)
+    finally:
+        _save_atomic(model, run_dir / "model.zip")
+        if agent.normalize:
+            env.save(str(run_dir / "vecnormalize.pkl"))
+        env.close()
+    return model
+
+
+def _save_atomic(model, path: Path) -> None:
+    tmp = path.with_name(path.stem + ".part.zip")
+    model.save(str(tmp))
+    tmp.replace(path)
