@@ -49,7 +49,8 @@ class Disturbance:
     """A change applied during an episode, from start_step to end_step (exclusive; None = to the end).
 
     kind "fmu": set the FMU input or tunable parameter `target` to `value` (restored after end_step);
-    kind "actuator" / "measurement": add `value` to the control signal / measurement of loop `target`.
+    kind "actuator" / "measurement": add `value` to the control signal / measurement of the loop whose
+    output (measured variable) is named `target`.
     """
 
     kind: str
@@ -132,4 +133,5 @@ class AgentConfig:
     buffer_size: int = 200_000
     learning_starts: int = 1_000
     checkpoint_every: int = 50_000  # timesteps between checkpoints
+    torch_threads: int = 1  # 64-64 MLPs train fastest on one CPU thread; more only adds contention
     extra: dict = field(default_factory=dict)  # further keyword arguments for the SB3 algorithm

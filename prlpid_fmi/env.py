@@ -78,8 +78,8 @@ class PidTuningEnv(gym.Env):
             if prior_path != path and not c.prior.state_map:
                 raise PlantError(f"prior FMU {prior_path} differs from the plant {path}: its state cannot be "
                                  "copied, so prior.state_map must say which prior parameters take which plant values")
-            self.forecast = RewardForecast(c.forecast_horizon, self._reward, self.scale, self.u_min, self.u_max,
-                                           self.bound, c.divergence_penalty, StepRejected)
+            self.forecast = RewardForecast(c.forecast_horizon, self._reward, self.scale, self.bound,
+                                           c.divergence_penalty, StepRejected)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (self.action_map.size,), np.float32)
         self.observation_space = gym.spaces.Box(-OBS_CLIP, OBS_CLIP, (4 * n,), np.float32)
         self._fmu_disturbances = [d for d in c.disturbances if d.kind == "fmu"]

@@ -88,6 +88,7 @@ def train(config: TuningConfig, agent: AgentConfig, run_dir: Path, progress_bar:
 
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
+    torch.set_num_threads(agent.torch_threads)
     env = make_vec_env(config, agent, run_dir / "monitor")
     if agent.normalize:
         stats = run_dir / "vecnormalize.pkl"

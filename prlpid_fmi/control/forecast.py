@@ -22,21 +22,17 @@ class RewardForecast:
         horizon: N >= 1, number of predicted steps.
         reward: reward(error (n_loops,), previous_error (n_loops,)) -> float, errors already normalised.
         measurement_scale: (n_loops,) divisor that normalises errors before the reward.
-        u_min, u_max: (n_loops,) saturation of the predicted control signal.
         divergence_bound: |normalised error| past which the prediction stops with `divergence_penalty`.
         rejected: exception type(s) the prior raises when it discards a step (counts as divergence).
     """
 
     def __init__(self, horizon: int, reward: Callable[[np.ndarray, np.ndarray], float],
-                 measurement_scale: np.ndarray, u_min: np.ndarray, u_max: np.ndarray,
-                 divergence_bound: np.ndarray, divergence_penalty: float, rejected=()):
+                 measurement_scale: np.ndarray, divergence_bound: np.ndarray, divergence_penalty: float, rejected=()):
         if horizon < 1:
             raise ValueError(f"forecast horizon must be >= 1, got {horizon}")
         self.horizon = horizon
         self.reward = reward
         self.scale = np.asarray(measurement_scale, float)
-        self.u_min = np.asarray(u_min, float)
-        self.u_max = np.asarray(u_max, float)
         self.bound = np.asarray(divergence_bound, float)
         self.penalty = float(divergence_penalty)
         self.rejected = rejected
@@ -48,7 +44,7 @@ class RewardForecast:
         """Predict N steps from the current measurement; return the mean predicted reward (eq. 14).
 
         `prior` must already hold the plant's state. `control_law(measurement) -> u` runs the PID
-        with the fixed current gains (eq. 13); its internal state is saved before and restored after.
+        with the fixed current gains (eq. 13) and returns the saturated u; its internal state is saved before and restored after.
         """
         saved = pid.get_state()
         rewards = self.last_rewards = []
@@ -57,7 +53,7 @@ class RewardForecast:
         y = measurement
         try:
             for _ in range(self.horizon):
-                u = np.clip(control_law(y), self.u_min, self.u_max)
+                u = control_law(y)  # the PID saturates u itself
                 try:
                     y = prior.step(u)
                 except self.rejected:

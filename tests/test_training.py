@@ -1,0 +1,63 @@
+"""Short training runs within CI's budget: learning happens, runs are reproducible, checkpoints are kept."""
+import dataclasses
+
+import numpy as np
+import pytest
+
+from prlpid_fmi.config import AgentConfig
+from prlpid_fmi.evaluate import evaluate, model_policy
+from prlpid_fmi.presets import preset
+from prlpid_fmi.train import build_model, make_vec_env, train
+
+CONFIG = dataclasses.replace(preset("first_order"), forecast_horizon=3, smoothing="era")
+SERVO = dataclasses.replace(CONFIG, setpoint_schedule=((0, (1.0,)), (100, (-0.5,))), episode_steps=200)
+
+
+def test_short_prl_pid_training_beats_the_untrained_policy(tmp_path):
+    agent = AgentConfig(total_timesteps=40_960, seed=0)
+    untrained = build_model(agent, make_vec_env(CONFIG, agent))
+    before, _ = evaluate(model_policy(untrained), SERVO)
+    model = train(CONFIG, agent, tmp_path / "run")
+    after, traj = evaluate(model_policy(model), SERVO)
+    assert not after["terminated"]
+    assert after["overall"]["ISE"] < 0.8 * before["overall"]["ISE"]
+    assert (tmp_path / "run" / "model.zip").is_file()
+    assert list((tmp_path / "run" / "tensorboard").rglob("events.out.tfevents*"))
+    assert list((tmp_path / "run" / "monitor").glob("*.monitor.csv"))
+
+
+def _params(model):
+    return np.concatenate([p.detach().numpy().ravel() for p in model.policy.parameters()])
+
+
+def test_same_seed_same_policy_and_checkpoints(tmp_path):
+    agent = AgentConfig(total_timesteps=2048, n_steps=512, seed=7, checkpoint_every=1024)
+    a = train(CONFIG, agent, tmp_path / "a")
+    b = train(CONFIG, agent, tmp_path / "b")
+    c = train(CONFIG, dataclasses.replace(agent, seed=8), tmp_path / "c")
+    assert np.array_equal(_params(a), _params(b))
+    assert not np.array_equal(_params(a), _params(c))
+    assert sorted(p.name for p in (tmp_path / "a" / "checkpoints").glob("*.zip")) == \
+        ["model_1024_steps.zip", "model_2048_steps.zip"]
+
+
+def test_resume_continues_from_a_checkpoint(tmp_path):
+    agent = AgentConfig(total_timesteps=1024, n_steps=512, seed=1, checkpoint_every=512)
+    train(CONFIG, agent, tmp_path / "run")
+    model = train(CONFIG, agent, tmp_path / "run", resume_from=tmp_path / "run" / "checkpoints" / "model_1024_steps.zip",
+                  total_timesteps=1024)
+    assert model.num_timesteps == 2048
+
+
+@pytest.mark.parametrize("algorithm", ["sac", "td3"])
+def test_baseline_algorithms_train_on_the_same_env(tmp_path, algorithm):
+    agent = AgentConfig(algorithm=algorithm, total_timesteps=300, learning_starts=100, batch_size=64, seed=0)
+    model = train(CONFIG, agent, tmp_path / algorithm)
+    assert model.num_timesteps == 300
+
+
+def test_subprocess_vector_env_and_vecnormalize(tmp_path):
+    agent = AgentConfig(total_timesteps=1024, n_steps=256, n_envs=2, vec_env="subproc", normalize=True, seed=3)
+    model = train(CONFIG, agent, tmp_path / "run")
+    assert model.num_timesteps == 1024
+    assert (tmp_path / "run" / "vecnormalize.pkl").is_file()
