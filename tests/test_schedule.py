@@ -6,7 +6,6 @@ rollout (the replay of a constant-gain table must reproduce it bit for bit).
 """
 import csv
 import dataclasses
-import math
 
 import numpy as np
 import pytest
