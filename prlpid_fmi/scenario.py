@@ -637,7 +637,7 @@ def _range(lo: float, hi: float) -> list[float]:
     return [float(lo), float(hi)]
 
 
-def _disturbance_to_dict(d: Disturbance, fmu_desc_kind: str = "step") -> dict:
+def _disturbance_to_dict(d: Disturbance) -> dict:
     out: dict[str, Any] = {"type": "step" if d.end_step is None else "pulse"}
     if d.kind == "fmu":
         out["target"] = d.target
