@@ -135,3 +135,12 @@ class AgentConfig:
     checkpoint_every: int = 50_000  # timesteps between checkpoints
     torch_threads: int = 1  # 64-64 MLPs train fastest on one CPU thread; more only adds contention
     extra: dict = field(default_factory=dict)  # further keyword arguments for the SB3 algorithm
+
+
+@dataclass(frozen=True)
+class BaselineConfig:
+    """Search budget of the fixed-PID baseline (differential evolution over constant gains)."""
+
+    episodes: int = 3  # seeded training episodes per cost evaluation
+    maxiter: int = 20  # generations
+    popsize: int = 8  # population = popsize x number of parameters

@@ -23,16 +23,21 @@ def model_policy(model, vecnormalize=None) -> Policy:
     return act
 
 
-def rollout(policy: Policy, config: TuningConfig, seed: int = 0, forecast: bool = False) -> dict[str, np.ndarray]:
+def rollout(policy: Policy, config: TuningConfig, seed: int = 0, forecast: bool = False,
+            env: PidTuningEnv | None = None) -> dict[str, np.ndarray]:
     """One episode of `policy` on `config` (forecast off unless asked: it does not change the plant).
+
+    env: an open PidTuningEnv built from this config to reuse (it is not closed); default: a new one.
 
     Returns arrays: time_s (n+1,), setpoint, measurement, control_signal (n+1, n_loops) — row k is the
     signal at t = k·Ts (control_signal's last row repeats), gains {Kp, Ti, Td: (n, n_loops), coupling},
     reward (n,), terminated (bool).
     """
-    if not forecast:
-        config = dataclasses.replace(config, forecast_horizon=0)
-    env = PidTuningEnv(config)
+    own_env = env is None
+    if own_env:
+        if not forecast:
+            config = dataclasses.replace(config, forecast_horizon=0)
+        env = PidTuningEnv(config)
     try:
         obs, info = env.reset(seed=seed)
         setpoints, measurements, controls, rewards, gains = [info["setpoint"]], [info["measurement"]], [], [], []
@@ -45,7 +50,8 @@ def rollout(policy: Policy, config: TuningConfig, seed: int = 0, forecast: bool 
             rewards.append(reward)
             gains.append(info["gains"])
     finally:
-        env.close()
+        if own_env:
+            env.close()
     controls.append(controls[-1])
     n = len(rewards)
     return {

@@ -22,7 +22,7 @@ from typing import Any, Optional
 
 import yaml
 
-from .config import AgentConfig, Disturbance, GainRange, LoopConfig, PriorConfig, TuningConfig
+from .config import AgentConfig, BaselineConfig, Disturbance, GainRange, LoopConfig, PriorConfig, TuningConfig
 from .control.pid import ANTI_WINDUP_MODES
 from .control.reward import RewardWeights
 from .control.smoothing import DEFAULT_ALPHA, SMOOTHING_METHODS
@@ -65,6 +65,7 @@ class Scenario:
     tuning: TuningConfig
     agent: AgentConfig
     evaluation: EvaluationConfig = EvaluationConfig()
+    baseline: BaselineConfig = BaselineConfig()
 
     def evaluation_config(self) -> TuningConfig:
         """The tuning config with the evaluation's schedule, disturbances, noise and length substituted."""
@@ -104,7 +105,9 @@ _LOOP_KEYS = ("input", "output", "u_limits", "setpoint_range", "measurement_scal
 _PRIOR_KEYS = tuple(f.name for f in dataclasses.fields(PriorConfig))
 _AGENT_KEYS = tuple(f.name for f in dataclasses.fields(AgentConfig))
 _DISTURBANCE_KEYS = ("type", "target", "loop", "at_step", "duration_steps", "value")
-_TOP_KEYS = ("name", "plant", "prior", "controller", "strategies", "reward", "agent", "training", "evaluation")
+_TOP_KEYS = ("name", "plant", "prior", "controller", "strategies", "reward", "agent", "training", "evaluation",
+             "baseline")
+_BASELINE_KEYS = tuple(f.name for f in dataclasses.fields(BaselineConfig))
 _OPTIONAL_FLOAT = {"derivative_filter_N", "smoothing_alpha"}
 
 
@@ -599,7 +602,13 @@ def _build(r: _Reader, doc: Any, stem: str) -> Scenario:
                           f"0 <= start < end <= {n_eval} (evaluation.episode_steps)")
         intervals.append((a, b))
     ekw["intervals"] = tuple(intervals)
-    return Scenario(name=name, path=r.file, tuning=tuning, agent=agent, evaluation=EvaluationConfig(**ekw))
+
+    bm = r.mapping(doc.get("baseline"), "baseline", _BASELINE_KEYS)
+    bkw = _section_values(r, bm, "baseline", _defaults(BaselineConfig))
+    for k in bkw:
+        r.positive(bm[k], f"baseline.{k}", integer=True, minimum=1, inclusive=True)
+    return Scenario(name=name, path=r.file, tuning=tuning, agent=agent, evaluation=EvaluationConfig(**ekw),
+                    baseline=BaselineConfig(**bkw))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -689,6 +698,7 @@ def scenario_to_dict(s: Scenario) -> dict:
                        "disturbances": [_disturbance_to_dict(d) for d in e.disturbances],
                        "measurement_noise_std": e.measurement_noise_std,
                        "actuator_noise_std": e.actuator_noise_std, "seed": e.seed},
+        "baseline": dataclasses.asdict(s.baseline),
     }
 
 

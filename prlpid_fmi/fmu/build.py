@@ -74,9 +74,9 @@ def bundled_plant_names() -> list[str]:
     return sorted(p.name for p in PLANT_SOURCES.iterdir() if (p / "model.yaml").is_file())
 
 
-def load_spec(name: str) -> PlantSpec:
-    """Read plant_sources/<name>/model.yaml. Raises PlantError for an unknown plant."""
-    directory = PLANT_SOURCES / name
+def load_spec(name: str, directory: Path | None = None) -> PlantSpec:
+    """Read <directory>/model.yaml (default plant_sources/<name>/). Raises PlantError for an unknown plant."""
+    directory = Path(directory) if directory is not None else PLANT_SOURCES / name
     if not (directory / "model.yaml").is_file():
         known = ", ".join(bundled_plant_names()) or "none found"
         raise PlantError(f"unknown bundled plant {name!r}; expected one of: {known} (in {PLANT_SOURCES})")
@@ -239,13 +239,18 @@ def fmu_path(name: str, fmi_version: int = DEFAULT_FMI_VERSION, out_dir: Path | 
     return base / f"{name}.fmu" if fmi_version == 2 else base / "fmi3" / f"{name}.fmu"
 
 
-def build_fmu(name: str, fmi_version: int = DEFAULT_FMI_VERSION, out_dir: Path | None = None) -> Path:
-    """Build one bundled plant into an FMU (binary for this platform + sources). Returns its path."""
+def build_fmu(name: str, fmi_version: int = DEFAULT_FMI_VERSION, out_dir: Path | None = None,
+              source_dir: Path | None = None) -> Path:
+    """Build one plant into an FMU (binary for this platform + sources). Returns its path.
+
+    source_dir: a directory with model.yaml and model.c written like plant_sources/<Name>/ (default:
+    the bundled plant `name`), so a user's own C model builds with the same shared FMI layer.
+    """
     if fmi_version not in API_SOURCE:
         raise PlantError(f"--fmi-version must be 2 or 3, got {fmi_version!r}")
     from fmpy.build import build_platform_binary
 
-    spec = load_spec(name)
+    spec = load_spec(name, source_dir)
     token = instantiation_token(spec, fmi_version)
     target = fmu_path(name, fmi_version, out_dir)
     target.parent.mkdir(parents=True, exist_ok=True)
