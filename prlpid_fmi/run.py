@@ -248,8 +248,16 @@ def tune(scenario_path: str | Path, timesteps: int | None = None, seed: int | No
                  "evaluations": result.evaluations}
         write_json(run_dir / "fixed_pid.json", fixed)
     evaluate_into(run_dir, scenario, run_dir, policy, fixed)
-    schedule = extract_schedule(policy, scenario.tuning, seed=agent.seed)
-    write_schedule_csv(schedule, run_dir / "schedule.csv")
+    try:
+        schedule = extract_schedule(policy, scenario.tuning, seed=agent.seed)
+        write_schedule_csv(schedule, run_dir / "schedule.csv")
+        note = ("" if not schedule.excluded else "\nThe closed loop diverged at setpoint(s) "
+                + ", ".join(f"{v:g}" for v in schedule.excluded) + ": left out of schedule.csv.\n")
+    except PrlPidError as exc:
+        note = f"\nNo gain schedule: {exc}\n"
+        info["schedule_error"] = str(exc)
+    if note:
+        write_text_atomic(run_dir / "report.md", (run_dir / "report.md").read_text(encoding="utf-8") + note)
     plots.plot_learning_curve(run_dir / "monitor", run_dir / "learning_curve.png")
     info["finished"] = _now()
     write_json(run_dir / "run.json", info)

@@ -68,7 +68,8 @@ class GainSchedule:
     COUPLING_NAMES order, or None for independent loops. sample_time_s: Ts of the PID law [s].
     loop_names: the measured outputs, loop_inputs: the driven inputs, output_units/input_units: their
     units ("" if unknown). anti_windup, derivative_filter_N and u_min/u_max (n_loops,): the PID settings
-    the gains were tuned with.
+    the gains were tuned with. excluded: operating points (held setpoints) left out because the
+    closed loop diverged there; the table does not cover them.
     """
 
     variable: str
@@ -87,6 +88,7 @@ class GainSchedule:
     u_min: np.ndarray
     u_max: np.ndarray
     derivative_filter_N: Optional[float] = None
+    excluded: tuple = ()
 
     @property
     def n_loops(self) -> int:
@@ -239,7 +241,7 @@ def extract_schedule(policy: Policy, config: TuningConfig, schedule_by: str = "s
         raise PrlPidError(f"hold_setpoints needs {config.n_loops} values, got {len(others)}")
     tail = max(1, math.ceil(SETTLED_FRACTION * steps))
 
-    rows = []
+    rows, excluded = [], []
     env = None
     try:
         for sp in setpoints:
@@ -263,9 +265,13 @@ def extract_schedule(policy: Policy, config: TuningConfig, schedule_by: str = "s
                 values.append(probe())
                 obs, _, terminated, _, info = env.step(policy(obs))
                 if terminated:
-                    raise PrlPidError(f"the closed loop diverged at {variable} setpoint {sp:g} (step {k + 1}): "
-                                      "no gains can be scheduled there; narrow the operating range")
+                    break
                 gains.append(info["gains"])
+            if terminated:  # no safe gains exist there: leave the point out of the table
+                excluded.append(float(sp))
+                warnings.warn(f"the closed loop diverged at {variable} setpoint {sp:g} (step {k + 1}); "
+                              "that operating point is left out of the schedule", stacklevel=2)
+                continue
             g = {key: np.array([x[key] for x in gains[-tail:]]) for key in gains[0]}
             rows.append((float(_exact_mean(np.array(values[-tail:]))),
                          {key: _exact_mean(v) for key, v in g.items()}))
@@ -273,6 +279,10 @@ def extract_schedule(policy: Policy, config: TuningConfig, schedule_by: str = "s
         if env is not None:
             env.close()
 
+    if not rows:
+        raise PrlPidError(f"the closed loop diverged at every operating point of {variable} "
+                          f"({', '.join(f'{v:g}' for v in excluded)}): no gains can be scheduled; "
+                          "train longer or narrow the operating range")
     rows.sort(key=lambda r: r[0])
     merged: list[list] = []
     span = max(abs(rows[-1][0] - rows[0][0]), abs(rows[0][0]), 1.0)
@@ -296,7 +306,7 @@ def extract_schedule(policy: Policy, config: TuningConfig, schedule_by: str = "s
         sample_time_s=float(config.sample_time_s), loop_names=tuple(names),
         anti_windup=config.anti_windup, u_min=np.array([l.u_min for l in config.loops], float),
         u_max=np.array([l.u_max for l in config.loops], float),
-        derivative_filter_N=config.derivative_filter_N, **meta)
+        derivative_filter_N=config.derivative_filter_N, excluded=tuple(excluded), **meta)
 
 
 # -- CSV ------------------------------------------------------------------------------------------
@@ -322,6 +332,8 @@ def _metadata(s: GainSchedule) -> list[tuple[str, str]]:
         ("anti_windup", s.anti_windup),
         ("anti_windup_method", _ANTI_WINDUP_TEXT.get(s.anti_windup, s.anti_windup)),
         ("derivative_filter_N", "none" if s.derivative_filter_N is None else _f(s.derivative_filter_N)),
+        ("excluded_operating_points", "none" if not s.excluded else
+         " ".join(_f(v) for v in s.excluded) + " (held setpoints where the closed loop diverged)"),
     ]
     for i, name in enumerate(s.loop_names):
         meta.append((f"loop[{name}]", f"input={s.loop_inputs[i]}; u_min={_f(s.u_min[i])}; u_max={_f(s.u_max[i])}; "
@@ -406,7 +418,9 @@ def read_schedule_csv(path) -> GainSchedule:
         u_min=np.array([float(info[n]["u_min"]) for n in loops]),
         u_max=np.array([float(info[n]["u_max"]) for n in loops]),
         derivative_filter_N=None if meta.get("derivative_filter_N", "none") == "none"
-        else float(meta["derivative_filter_N"]))
+        else float(meta["derivative_filter_N"]),
+        excluded=tuple(float(v) for v in meta.get("excluded_operating_points", "none").split(" (")[0].split()
+                       if v != "none"))
     if np.any(np.diff(s.breakpoints) <= 0):
         raise PrlPidError(f"{path}: breakpoints ({variable}) must be strictly increasing")
     if not (np.allclose(get("Ki"), s.Ki, rtol=1e-9, atol=0) and np.allclose(get("Kd"), s.Kd, rtol=1e-9, atol=0)):
