@@ -63,9 +63,12 @@ def rollout(policy: Policy, config: TuningConfig, seed: int = 0, forecast: bool 
     }
 
 
-def evaluate(policy: Policy, config: TuningConfig, seed: int = 0, intervals=None) -> tuple[dict, dict]:
-    """Roll out and compute metrics (prlpid_fmi.metrics.compute_metrics). Returns (metrics, trajectory)."""
-    traj = rollout(policy, config, seed)
+def evaluate(policy: Policy, config: TuningConfig, seed: int = 0, intervals=None,
+             env: PidTuningEnv | None = None) -> tuple[dict, dict]:
+    """Roll out (on `env` if given) and compute metrics (prlpid_fmi.metrics.compute_metrics).
+
+    Returns (metrics, trajectory)."""
+    traj = rollout(policy, config, seed, env=env)
     metrics = compute_metrics(traj["time_s"], traj["setpoint"], traj["measurement"], traj["control_signal"],
                               config.sample_time_s, intervals=intervals,
                               loop_names=[l.output for l in config.loops])

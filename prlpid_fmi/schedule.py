@@ -40,7 +40,6 @@ from .actions import Gains
 from .config import TuningConfig
 from .control import COUPLING_NAMES, make_smoother, parallel_gains
 from .errors import PrlPidError
-from .metrics import compute_metrics
 
 Policy = Callable[[np.ndarray], np.ndarray]
 
@@ -467,6 +466,8 @@ def replay_schedule(schedule: GainSchedule, config: TuningConfig, seed: int = 0,
     if not math.isclose(schedule.sample_time_s, config.sample_time_s, rel_tol=1e-12):
         warnings.warn(f"the schedule was tuned at Ts = {schedule.sample_time_s} s, the config runs at "
                       f"Ts = {config.sample_time_s} s", stacklevel=2)
+    from .evaluate import evaluate
+
     config = dataclasses.replace(config, forecast_horizon=0)
     env = PidTuningEnv(config)
     try:
@@ -475,31 +476,16 @@ def replay_schedule(schedule: GainSchedule, config: TuningConfig, seed: int = 0,
         env.smoother = make_smoother("none", n_params=lookup.size)
         probe = _Probe(schedule.variable, env)
         action = np.zeros(lookup.size, np.float32)
-        obs, info = env.reset(seed=seed)
-        setpoints, measurements, controls, rewards, gains, values = [info["setpoint"]], [info["measurement"]], [], [], [], []
-        terminated = truncated = False
-        while not (terminated or truncated):
+        values = []
+
+        def table_policy(obs):  # called before every step: look the gains up, the action is unused
             z = probe()
-            lookup.gains = schedule.gains_object(z)
-            obs, reward, terminated, truncated, info = env.step(action)
             values.append(z)
-            setpoints.append(env.setpoint.copy())
-            measurements.append(info["measurement"])
-            controls.append(info["control_signal"])
-            rewards.append(reward)
-            gains.append(info["gains"])
+            lookup.gains = schedule.gains_object(z)
+            return action
+
+        metrics, traj = evaluate(table_policy, config, seed=seed, intervals=intervals, env=env)
     finally:
         env.close()
-    controls.append(controls[-1])
-    n = len(rewards)
-    traj = {
-        "time_s": np.arange(n + 1) * config.sample_time_s,
-        "setpoint": np.array(setpoints), "measurement": np.array(measurements),
-        "control_signal": np.array(controls), "reward": np.array(rewards),
-        "gains": {k: np.array([g[k] for g in gains]) for k in gains[0]},
-        "terminated": bool(terminated), "scheduling_value": np.array(values),
-    }
-    metrics = compute_metrics(traj["time_s"], traj["setpoint"], traj["measurement"], traj["control_signal"],
-                              config.sample_time_s, intervals=intervals, loop_names=names)
-    metrics["terminated"] = traj["terminated"]
+    traj["scheduling_value"] = np.array(values)
     return metrics, traj

@@ -12,7 +12,7 @@ import pytest
 
 from prlpid_fmi import __version__
 from prlpid_fmi.errors import PrlPidError
-from prlpid_fmi.evaluate import evaluate, rollout
+from prlpid_fmi.evaluate import evaluate
 from prlpid_fmi.presets import preset
 from prlpid_fmi.schedule import (INTERPOLATION, PID_EQUATION, GainSchedule, extract_schedule, read_schedule_csv,
                                  read_schedule_metadata, replay_schedule, write_schedule_csv)
