@@ -183,7 +183,7 @@ def plot_learning_curve(monitor_dir, path, window: int = 20, title: str = "Learn
     fig, ax = plt.subplots(figsize=(8, 4))
     if rewards.size:
         ax.plot(steps, rewards, ".", color="tab:blue", alpha=0.35, ms=4, label="episode reward")
-        w = max(1, min(window, rewards.size))
+        w = max(1, min(window, rewards.size // 5))  # keep a visible curve for short runs
         mean = np.convolve(rewards, np.ones(w) / w, mode="valid")
         ax.plot(steps[w - 1:], mean, color="tab:red", lw=2, label=f"rolling mean ({w} episodes)")
         ax.legend(loc="best", fontsize=8)
