@@ -3,7 +3,8 @@ against PPO-PID (no forecast, no smoothing), same seed, same budget (paper: 500k
 
 Run: python benchmarks/bench_prlpid_vs_ppo.py [--timesteps 500000] [--seeds 0] [--out runs/bench]
 Prints ISE, IAE, overshoot (%), 2 % settling time (s) on a servo schedule (0 -> 1 at t = 0,
-1 -> -0.5 at t = 10 s), training steps per second, and the PRL/PPO ratios measured in the same run.
+1 -> -0.5 at t = 10 s), training steps per second, and the PRL/PPO ratios measured in the same run;
+a fixed PID tuned by differential evolution on the same training distribution is the reference row.
 """
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ import json
 import time
 from pathlib import Path
 
+from prlpid_fmi.baseline import constant_policy, tune_fixed_pid
 from prlpid_fmi.config import AgentConfig
 from prlpid_fmi.evaluate import evaluate, model_policy
 from prlpid_fmi.presets import preset
@@ -44,6 +46,11 @@ def main() -> None:
                    **{k: metrics["overall"][k] for k in COLUMNS}}
             rows.append(row)
             print(json.dumps(row), flush=True)
+    fixed = tune_fixed_pid(base, seed=args.seeds[0])
+    metrics, _ = evaluate(constant_policy(fixed.action), schedule, seed=args.seeds[0])
+    rows.append({"variant": "fixedPID", "seed": args.seeds[0], "steps_per_s": float("nan"),
+                 **{k: metrics["overall"][k] for k in COLUMNS}})
+    print(json.dumps({**rows[-1], "gains": {k: v.tolist() for k, v in fixed.gains.as_dict().items()}}), flush=True)
     print(f"\n{'variant':<9}{'seed':>5}{'ISE':>9}{'IAE':>9}{'OS %':>8}{'Ts 2% s':>9}{'steps/s':>9}")
     for r in rows:
         print(f"{r['variant']:<9}{r['seed']:>5}{r['ISE']:>9.4f}{r['IAE']:>9.4f}{r['Overshoot']:>8.2f}"
