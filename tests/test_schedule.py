@@ -108,8 +108,21 @@ def test_variable_that_ignores_the_setpoint_collapses_to_one_row_with_its_unit()
 
 def test_diverging_operating_point_is_refused():
     unstable = lambda obs: np.array([-1.0, 1.0, -1.0], np.float32)  # Kp = 0.5 < 1 cannot hold 1/(s - 1)
-    with pytest.raises(PrlPidError, match="diverged"):
+    with pytest.warns(UserWarning, match="left out"), pytest.raises(PrlPidError, match="every operating point"):
         extract_schedule(unstable, CONFIG, points=[1.0], settle_steps=100)
+
+
+def test_diverging_operating_points_are_left_out_and_named(tmp_path):
+    def policy(obs):  # stable gains below setpoint 0.5, Kp = 0.5 (unstable for 1/(s - 1)) above
+        return np.array([-1.0 if obs[0] > 0.5 else 0.5, 0.0, -1.0], np.float32)
+
+    with pytest.warns(UserWarning, match="setpoint 1 "):
+        s = extract_schedule(policy, CONFIG, points=[-1.0, 0.0, 1.0], settle_steps=100)
+    assert s.excluded == (1.0,)
+    np.testing.assert_allclose(s.breakpoints, [-1.0, 0.0], atol=1e-9)
+    back = read_schedule_csv(write_schedule_csv(s, tmp_path / "s.csv"))
+    assert back.excluded == (1.0,)
+    assert "excluded_operating_points: 1.0" in (tmp_path / "s.csv").read_text()
 
 
 def test_coupled_mimo_schedule_reports_every_loop_and_the_coupling(tmp_path):
