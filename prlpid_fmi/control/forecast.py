@@ -34,6 +34,7 @@ class RewardForecast:
         self.reward = reward
         self.scale = np.asarray(measurement_scale, float)
         self.bound = np.asarray(divergence_bound, float)
+        self.bound_list = self.bound.tolist()
         self.penalty = float(divergence_penalty)
         self.rejected = rejected
         self.last_rewards: list[float] = []
@@ -60,7 +61,7 @@ class RewardForecast:
                     rewards.append(self.penalty)
                     break
                 error = (setpoint - y) / self.scale
-                if not np.all(np.isfinite(error)) or np.any(np.abs(error) > self.bound):
+                if not all(abs(e) <= b for e, b in zip(error.tolist(), self.bound_list)):  # also catches NaN
                     rewards.append(self.penalty)
                     break
                 rewards.append(self.reward(error, previous_error))
@@ -68,4 +69,4 @@ class RewardForecast:
                 previous_error = error
         finally:
             pid.set_state(saved)
-        return float(np.mean(rewards))
+        return sum(rewards) / len(rewards)
