@@ -84,6 +84,9 @@ class PidTuningEnv(gym.Env):
         self.observation_space = gym.spaces.Box(-OBS_CLIP, OBS_CLIP, (4 * n,), np.float32)
         self._fmu_disturbances = [d for d in c.disturbances if d.kind == "fmu"]
         self._fmu_defaults = {d.target: self.plant.get([d.target])[0] for d in self._fmu_disturbances}
+        # The prior is a model: it knows the plant's state but not the disturbances acting on it, so
+        # disturbed FMU inputs/parameters go back to their nominal values after each state copy.
+        self._prior_overrides = {**self._fmu_defaults, **c.prior.parameters}
 
     # -- pieces --------------------------------------------------------------------------------
     def _reward(self, error: np.ndarray, previous_error: np.ndarray) -> float:
@@ -141,8 +144,8 @@ class PidTuningEnv(gym.Env):
             self.prior.reset(parameters=dict(zip(c.prior.state_map.keys(), values)))
         else:
             self.plant.copy_state_to(self.prior)
-            if c.prior.parameters:
-                self.prior.set(c.prior.parameters)
+            if self._prior_overrides:
+                self.prior.set(self._prior_overrides)
 
     # -- gym API -------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict | None = None):
