@@ -141,7 +141,11 @@ def _units(spec: PlantSpec) -> list[str]:
     return sorted({v.unit for v in spec.variables if v.unit})
 
 
-def _default_experiment(root: ET.Element) -> None:
+def _units_and_experiment(root: ET.Element, spec: PlantSpec) -> None:
+    """UnitDefinitions and DefaultExperiment, the same in FMI 2.0 and 3.0."""
+    units = ET.SubElement(root, "UnitDefinitions")
+    for u in _units(spec):
+        ET.SubElement(units, "Unit", name=u)
     ET.SubElement(root, "DefaultExperiment", startTime="0.0", stopTime="10.0",
                   stepSize=_fmt(DEFAULT_EXPERIMENT_STEP_S))
 
@@ -156,10 +160,7 @@ def _model_description_fmi2(spec: PlantSpec, token: str) -> ET.Element:
     files = ET.SubElement(cs, "SourceFiles")
     for f in _compiled_sources(spec, 2):
         ET.SubElement(files, "File", name=f)
-    units = ET.SubElement(root, "UnitDefinitions")
-    for u in _units(spec):
-        ET.SubElement(units, "Unit", name=u)
-    _default_experiment(root)
+    _units_and_experiment(root, spec)
     variables = ET.SubElement(root, "ModelVariables")
     outputs = []
     for vr, v in enumerate(spec.variables):
@@ -193,10 +194,7 @@ def _model_description_fmi3(spec: PlantSpec, token: str) -> ET.Element:
     ET.SubElement(root, "CoSimulation", modelIdentifier=spec.name,
                   canHandleVariableCommunicationStepSize="true", canGetAndSetFMUState="true",
                   canSerializeFMUState="true", hasEventMode="false", providesIntermediateUpdate="false")
-    units = ET.SubElement(root, "UnitDefinitions")
-    for u in _units(spec):
-        ET.SubElement(units, "Unit", name=u)
-    _default_experiment(root)
+    _units_and_experiment(root, spec)
     variables = ET.SubElement(root, "ModelVariables")
     outputs = []
     for vr, v in enumerate(spec.variables):
