@@ -150,6 +150,16 @@ class FmuPlant:
         self._flags = (ctypes.c_bool(), ctypes.c_bool(), ctypes.c_bool(), ctypes.c_double())
         self._byte = ctypes.c_uint8 if self._fmi3 else ctypes.c_char  # fmi3Byte / fmi2Byte
 
+    @property
+    def library(self) -> ctypes.CDLL:
+        """The FMU's loaded shared library (for plain C functions it exports beside the FMI API)."""
+        return self._fmu.dll
+
+    @property
+    def component(self):
+        """The FMI instance pointer (fmi2Component / fmi3Instance) of this plant."""
+        return self._c
+
     def _log3(self, env, status, category, message):
         self.last_message = message.decode("utf-8", "replace") if message else ""
 
