@@ -117,50 +117,29 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
     (void)vr; (void)value; return no_such_variable(c, nvr);
 }
 
-fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state) {
-    if (*state) { /* overwrite a state returned earlier */
-        snapshot_capture(CORE(c), (Snapshot *)*state);
-        return fmi2OK;
-    }
-    *state = snapshot_new(CORE(c));
-    return *state ? fmi2OK : fmi2Error;
-}
+/* FMU state: version-neutral in instance.c. */
+fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state) { return to_fmi2(instance_get_state(CORE(c), state)); }
 
-fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state) {
-    if (!state) return fmi2Error;
-    snapshot_restore(CORE(c), (const Snapshot *)state);
-    return fmi2OK;
-}
+fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state) { return to_fmi2(instance_set_state(CORE(c), state)); }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state) {
     (void)c;
-    if (state && *state) {
-        free(*state);
-        *state = NULL;
-    }
+    instance_free_state(state);
     return fmi2OK;
 }
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size) {
     (void)c; (void)state;
-    *size = snapshot_serialized_size();
+    *size = instance_serialized_state_size();
     return fmi2OK;
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte serializedState[], size_t size) {
-    if (!state || size < snapshot_serialized_size()) {
-        instance_log(CORE(c), STATUS_ERROR, "buffer too small for the serialized state");
-        return fmi2Error;
-    }
-    snapshot_serialize((const Snapshot *)state, (unsigned char *)serializedState);
-    return fmi2OK;
+    return to_fmi2(instance_serialize_state(CORE(c), state, (unsigned char *)serializedState, size));
 }
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size, fmi2FMUstate *state) {
-    Snapshot *s = (Snapshot *)*state;
-    Status status = snapshot_deserialize(CORE(c), (const unsigned char *)serializedState, size, &s);
-    *state = s;
-    return to_fmi2(status);
+    return to_fmi2(instance_deserialize_state(CORE(c), (const unsigned char *)serializedState, size, state));
 }
 
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,

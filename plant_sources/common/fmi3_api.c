@@ -169,50 +169,29 @@ fmi3Status fmi3GetVariableDependencies(fmi3Instance c, fmi3ValueReference depend
     return unsupported(c, "variable dependency queries");
 }
 
-fmi3Status fmi3GetFMUState(fmi3Instance c, fmi3FMUState *state) {
-    if (*state) { /* overwrite a state returned earlier */
-        snapshot_capture(CORE(c), (Snapshot *)*state);
-        return fmi3OK;
-    }
-    *state = snapshot_new(CORE(c));
-    return *state ? fmi3OK : fmi3Error;
-}
+/* FMU state: version-neutral in instance.c. */
+fmi3Status fmi3GetFMUState(fmi3Instance c, fmi3FMUState *state) { return to_fmi3(instance_get_state(CORE(c), state)); }
 
-fmi3Status fmi3SetFMUState(fmi3Instance c, fmi3FMUState state) {
-    if (!state) return fmi3Error;
-    snapshot_restore(CORE(c), (const Snapshot *)state);
-    return fmi3OK;
-}
+fmi3Status fmi3SetFMUState(fmi3Instance c, fmi3FMUState state) { return to_fmi3(instance_set_state(CORE(c), state)); }
 
 fmi3Status fmi3FreeFMUState(fmi3Instance c, fmi3FMUState *state) {
     (void)c;
-    if (state && *state) {
-        free(*state);
-        *state = NULL;
-    }
+    instance_free_state(state);
     return fmi3OK;
 }
 
 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance c, fmi3FMUState state, size_t *size) {
     (void)c; (void)state;
-    *size = snapshot_serialized_size();
+    *size = instance_serialized_state_size();
     return fmi3OK;
 }
 
 fmi3Status fmi3SerializeFMUState(fmi3Instance c, fmi3FMUState state, fmi3Byte serializedState[], size_t size) {
-    if (!state || size < snapshot_serialized_size()) {
-        instance_log(CORE(c), STATUS_ERROR, "buffer too small for the serialized state");
-        return fmi3Error;
-    }
-    snapshot_serialize((const Snapshot *)state, (unsigned char *)serializedState);
-    return fmi3OK;
+    return to_fmi3(instance_serialize_state(CORE(c), state, (unsigned char *)serializedState, size));
 }
 
 fmi3Status fmi3DeserializeFMUState(fmi3Instance c, const fmi3Byte serializedState[], size_t size, fmi3FMUState *state) {
-    Snapshot *s = (Snapshot *)*state;
-    Status status = snapshot_deserialize(CORE(c), (const unsigned char *)serializedState, size, &s);
-    *state = s;
-    return to_fmi3(status);
+    return to_fmi3(instance_deserialize_state(CORE(c), (const unsigned char *)serializedState, size, state));
 }
 
 fmi3Status fmi3GetDirectionalDerivative(fmi3Instance c, const fmi3ValueReference unknowns[], size_t nUnknowns,

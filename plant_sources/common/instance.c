@@ -1,4 +1,4 @@
-/* Shared co-simulation core: modes, fixed-step RK4, real variables, state snapshots. */
+/* Shared co-simulation core: modes, fixed-step RK4, real variables, FMU states and their serialization. */
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
@@ -181,42 +181,75 @@ Status instance_set_real(Instance *c, const unsigned int vr[], size_t nvr, const
     return STATUS_OK;
 }
 
-void snapshot_capture(const Instance *c, Snapshot *s) {
+/* Snapshot of everything that defines the simulation: what get/set FMU state copies. */
+typedef struct {
+    ModelData m;
+    Mode mode;
+} Snapshot;
+
+void instance_copy_state(const Instance *from, Instance *to) {
+    to->m = from->m;
+    to->mode = from->mode;
+}
+
+Status instance_get_state(Instance *c, void **state) {
+    Snapshot *s = (Snapshot *)*state;
+    if (!s) { /* otherwise overwrite a state returned earlier */
+        s = (Snapshot *)malloc(sizeof(Snapshot));
+        if (!s) {
+            instance_log(c, STATUS_ERROR, "out of memory for the FMU state");
+            return STATUS_ERROR;
+        }
+        *state = s;
+    }
     s->m = c->m;
     s->mode = c->mode;
+    return STATUS_OK;
 }
 
-Snapshot *snapshot_new(const Instance *c) {
-    Snapshot *s = (Snapshot *)malloc(sizeof(Snapshot));
-    if (s) snapshot_capture(c, s);
-    return s;
-}
-
-void snapshot_restore(Instance *c, const Snapshot *s) {
+Status instance_set_state(Instance *c, const void *state) {
+    const Snapshot *s = (const Snapshot *)state;
+    if (!s) {
+        instance_log(c, STATUS_ERROR, "the FMU state is NULL");
+        return STATUS_ERROR;
+    }
     c->m = s->m;
     c->mode = s->mode;
+    return STATUS_OK;
 }
 
-size_t snapshot_serialized_size(void) {
+void instance_free_state(void **state) {
+    if (state && *state) {
+        free(*state);
+        *state = NULL;
+    }
+}
+
+size_t instance_serialized_state_size(void) {
     return sizeof(SerialHeader) + sizeof(Snapshot);
 }
 
-void snapshot_serialize(const Snapshot *s, unsigned char *buffer) {
+Status instance_serialize_state(Instance *c, const void *state, unsigned char *buffer, size_t size) {
     SerialHeader header;
+    if (!state || size < instance_serialized_state_size()) {
+        instance_log(c, STATUS_ERROR, "buffer too small for the serialized state");
+        return STATUS_ERROR;
+    }
     header.magic = SERIAL_MAGIC;
     header.version = SERIAL_VERSION;
     header.n_variables = N_VARIABLES;
     header.n_states = N_STATES;
     header.payload_size = sizeof(Snapshot);
     memcpy(buffer, &header, sizeof(header));
-    memcpy(buffer + sizeof(header), s, sizeof(Snapshot));
+    memcpy(buffer + sizeof(header), state, sizeof(Snapshot));
+    return STATUS_OK;
 }
 
-Status snapshot_deserialize(Instance *c, const unsigned char *buffer, size_t size, Snapshot **s) {
+Status instance_deserialize_state(Instance *c, const unsigned char *buffer, size_t size, void **state) {
     SerialHeader header;
-    if (size != snapshot_serialized_size()) {
+    if (size != instance_serialized_state_size()) {
         instance_log(c, STATUS_ERROR, "serialized state has %lu bytes, expected %lu",
-                     (unsigned long)size, (unsigned long)snapshot_serialized_size());
+                     (unsigned long)size, (unsigned long)instance_serialized_state_size());
         return STATUS_ERROR;
     }
     memcpy(&header, buffer, sizeof(header));
@@ -226,10 +259,13 @@ Status snapshot_deserialize(Instance *c, const unsigned char *buffer, size_t siz
         instance_log(c, STATUS_ERROR, "serialized state is not from this model or has another format version");
         return STATUS_ERROR;
     }
-    if (*s == NULL) {
-        *s = (Snapshot *)malloc(sizeof(Snapshot));
-        if (!*s) return STATUS_ERROR;
+    if (*state == NULL) {
+        *state = malloc(sizeof(Snapshot));
+        if (!*state) {
+            instance_log(c, STATUS_ERROR, "out of memory for the FMU state");
+            return STATUS_ERROR;
+        }
     }
-    memcpy(*s, buffer + sizeof(header), sizeof(Snapshot));
+    memcpy(*state, buffer + sizeof(header), sizeof(Snapshot));
     return STATUS_OK;
 }

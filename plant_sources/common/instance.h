@@ -19,12 +19,6 @@ typedef struct {
     void *log_env;
 } Instance;
 
-/* Snapshot of everything that defines the simulation: what get/set FMU state copies. */
-typedef struct {
-    ModelData m;
-    Mode mode;
-} Snapshot;
-
 Instance *instance_new(const char *name, LogFunction log, void *log_env);
 void instance_free(Instance *c);
 void instance_reset(Instance *c);
@@ -35,11 +29,17 @@ Status instance_get_real(Instance *c, const unsigned int vr[], size_t nvr, doubl
 Status instance_set_real(Instance *c, const unsigned int vr[], size_t nvr, const double value[]);
 void instance_log(const Instance *c, Status status, const char *fmt, ...);
 
-Snapshot *snapshot_new(const Instance *c);
-void snapshot_capture(const Instance *c, Snapshot *s);
-void snapshot_restore(Instance *c, const Snapshot *s);
-size_t snapshot_serialized_size(void);
-void snapshot_serialize(const Snapshot *s, unsigned char *buffer);
-Status snapshot_deserialize(Instance *c, const unsigned char *buffer, size_t size, Snapshot **s);
+/* The FMU-state functions of FMI 2.0 and 3.0, version-neutral: a state handle is an opaque
+ * pointer to a snapshot of the model data (time included) and the mode. The API files only convert
+ * types. */
+Status instance_get_state(Instance *c, void **state);          /* new handle, or overwrite *state */
+Status instance_set_state(Instance *c, const void *state);
+void instance_free_state(void **state);                        /* frees *state and sets it to NULL */
+size_t instance_serialized_state_size(void);
+Status instance_serialize_state(Instance *c, const void *state, unsigned char *buffer, size_t size);
+Status instance_deserialize_state(Instance *c, const unsigned char *buffer, size_t size, void **state);
+
+/* What get/set FMU state would move from `from` to `to` (same model), without a handle. */
+void instance_copy_state(const Instance *from, Instance *to);
 
 #endif
