@@ -1,0 +1,264 @@
+"""Speed of PidTuningEnv beside its numpy twin and FMUGym, training throughput, a full run, memory (issue 7).
+
+Run:  python benchmarks/bench_speed.py            (full table, a few minutes)
+      python benchmarks/bench_speed.py --quick    (same table, fewer repeats and steps, under a minute)
+      python benchmarks/bench_speed.py --full-run (adds the 500k-step `prlpid-fmi tune` run, minutes)
+
+Per-step rows: CPU µs per env step (process CPU time; reset included: each measurement is a seeded
+reset and E episodes of the scenario's length with uniformly random actions from a fixed seed, reset
+again whenever an episode ends), median over R repeats. Within a repeat every implementation is
+measured once, in an order shuffled per repeat, so load on the shared machine hits all alike.
+- env: PidTuningEnv(dataclasses.replace(preset(name), forecast_horizon=N)) on the bundled FMU;
+- fmi: the same with PidTuningEnv(config, forecast_path="fmi"), the standard FMI path a third-party
+  FMU takes (n/a while the keyword does not exist);
+- twin: benchmarks/twins.py, the same logic in numpy/Python with the same RK4 sub-steps
+  (its agreement with env is printed below the table);
+- FMUGym: benchmarks/fmugym_peer.py, gains as its action, the PID in _process_action, reward -e^2;
+  it forecasts nothing, so its cost is the same at every N.
+Run rows: training steps/s of prlpid_fmi.train.train with the AgentConfig defaults (wall time),
+the optional full run (wall time, peak RSS of the child), and the peak RSS of this process.
+Targets (issue 7) are printed beside the ratios they apply to.
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import platform
+import resource
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from fmugym_peer import UNAVAILABLE as PEER_UNAVAILABLE, make_peer  # noqa: E402
+from twins import agreement, make_twin  # noqa: E402
+
+from prlpid_fmi.config import AgentConfig  # noqa: E402
+from prlpid_fmi.env import PidTuningEnv  # noqa: E402
+from prlpid_fmi.fmu import bundled_fmu  # noqa: E402
+from prlpid_fmi.presets import preset  # noqa: E402
+
+REPO = Path(__file__).resolve().parents[1]
+SCENARIOS = ("first_order", "two_tank", "quadrotor")
+HORIZONS = (0, 3, 10)
+TARGET_HORIZON = 3
+# Issue 7 targets: (numerator, denominator) -> maximum ratio, at N = TARGET_HORIZON.
+RATIO_TARGETS = {("env", "twin"): 2.0, ("fmi", "twin"): 4.0, ("env", "peer"): 0.5, ("fmi", "peer"): 1.0}
+FULL_RUN_WALL_TARGET_S = 180.0
+RSS_TARGET_MIB = 1024.0
+FULL_RUN_STEPS = 500_000
+NA_FMI = "n/a (forecast_path not available)"
+
+
+@dataclasses.dataclass
+class Contestant:
+    """One implementation on one scenario and horizon, with its fixed action sequence."""
+
+    kind: str  # env | fmi | twin | peer
+    scenario: str
+    horizon: int | None  # None for the peer (no forecast)
+    env: object
+    actions: np.ndarray
+    samples: list = dataclasses.field(default_factory=list)  # µs per step, one per repeat
+    resets: int = 0
+
+
+def cpu_us_per_step(c: Contestant, seed: int) -> float:
+    """Seeded reset + len(c.actions) steps (reset when an episode ends before the last); process CPU µs per step.
+
+    FMUGym also resets itself inside step() when its stop_time or a termination is reached; those
+    resets are in its time but not in c.resets (the resets this loop asked for).
+    """
+    env, actions = c.env, c.actions
+    resets, last = 1, len(actions) - 1
+    start = time.process_time_ns()
+    env.reset(seed=seed)
+    for i, a in enumerate(actions):
+        _, _, terminated, truncated, _ = env.step(a)
+        if (terminated or truncated) and i < last:
+            env.reset()
+            resets += 1
+    elapsed = time.process_time_ns() - start
+    c.resets = resets
+    return elapsed / len(actions) / 1e3
+
+
+def build_contestants(episodes: int, seed: int) -> tuple[list[Contestant], str | None, str | None]:
+    """Every implementation that can run here; also why the fmi and peer columns are missing, if they are."""
+    contestants, fmi_missing, peer_missing = [], None, PEER_UNAVAILABLE
+    for name in SCENARIOS:
+        base = preset(name)
+        steps = episodes * base.episode_steps
+        for n in HORIZONS:
+            config = dataclasses.replace(base, forecast_horizon=n)
+            env = PidTuningEnv(config)
+            actions = np.random.default_rng(seed).uniform(-1, 1, (steps, env.action_space.shape[0])).astype(np.float32)
+            contestants.append(Contestant("env", name, n, env, actions))
+            contestants.append(Contestant("twin", name, n, make_twin(config), actions))
+            try:
+                fmi_env = PidTuningEnv(config, forecast_path="fmi")
+            except TypeError:
+                fmi_missing = NA_FMI
+            else:
+                contestants.append(Contestant("fmi", name, n, fmi_env, actions))
+        if peer_missing is None:
+            try:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", UserWarning)  # FMUGym's float64 Box bounds
+                    peer = make_peer(base, bundled_fmu(base.fmu, base.fmi_version))
+            except Exception as exc:  # report why and skip the column, do not hide it
+                peer_missing = f"FMUGym failed on {name}: {type(exc).__name__}: {exc}"
+            else:
+                low, high = peer.action_space.low, peer.action_space.high
+                actions = np.random.default_rng(seed).uniform(low, high, (steps, low.size)).astype(np.float32)
+                contestants.append(Contestant("peer", name, None, peer, actions))
+    return contestants, fmi_missing, peer_missing
+
+
+def measure(contestants: list[Contestant], repeats: int, seed: int) -> None:
+    order = np.random.default_rng(seed)
+    for r in range(repeats):
+        for i in order.permutation(len(contestants)):
+            contestants[i].samples.append(cpu_us_per_step(contestants[i], seed))
+        print(f"  repeat {r + 1}/{repeats} done", file=sys.stderr, flush=True)
+
+
+def training_steps_per_s(steps: int) -> float:
+    """Wall-clock steps/s of train() on first_order with AgentConfig's defaults (model build and saves included)."""
+    from prlpid_fmi.train import train
+
+    with tempfile.TemporaryDirectory() as tmp:
+        start = time.perf_counter()
+        train(preset("first_order"), AgentConfig(total_timesteps=steps, seed=0), Path(tmp) / "run")
+        return steps / (time.perf_counter() - start)
+
+
+def full_run() -> tuple[float, float, int]:
+    """`prlpid-fmi tune scenarios/first_order.yaml --timesteps 500000`: wall s, peak child RSS MiB, exit code."""
+    exe = Path(sys.executable).with_name("prlpid-fmi")
+    with tempfile.TemporaryDirectory() as tmp:
+        cmd = [str(exe), "tune", str(REPO / "scenarios" / "first_order.yaml"),
+               "--timesteps", str(FULL_RUN_STEPS), "--out", str(Path(tmp) / "run")]
+        with open(Path(tmp) / "tune.log", "w") as log:
+            start = time.perf_counter()
+            code = subprocess.call(cmd, stdout=log, stderr=subprocess.STDOUT, cwd=REPO)
+            wall = time.perf_counter() - start
+        if code != 0:
+            print((Path(tmp) / "tune.log").read_text()[-2000:], file=sys.stderr)
+    return wall, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0, code
+
+
+# -- printing -------------------------------------------------------------------------------------------
+def verdict(value: float, target: float) -> str:
+    return "met" if value <= target else "missed"
+
+
+def ratio_cell(num: float | None, den: float | None, key: tuple[str, str], horizon: int) -> tuple[str, str]:
+    """(ratio, 'target: met/missed' or '') for one ratio column."""
+    if num is None or den is None:
+        return "n/a", ""
+    ratio = num / den
+    if horizon != TARGET_HORIZON:
+        return f"{ratio:.2f}", ""
+    target = RATIO_TARGETS[key]
+    return f"{ratio:.2f}", f"<={target:g} {verdict(ratio, target)}"
+
+
+def print_table(contestants, fmi_missing, peer_missing, args, train_rate, full, agreements) -> None:
+    med = {(c.kind, c.scenario, c.horizon): statistics.median(c.samples) for c in contestants}
+    cols = [("scenario", 12), ("N", 3), ("env", 8), ("twin", 8), ("env/twin", 9), ("target", 13),
+            ("fmi", 8), ("fmi/twin", 9), ("target", 13), ("FMUGym", 8), ("env/FMUGym", 11), ("target", 15),
+            ("fmi/FMUGym", 11), ("target", 15)]
+    line = "  ".join(f"{title:>{w}}" for title, w in cols)
+    print(f"\nbench_speed (issue 7): CPU µs per env step, median of {args.repeats} interleaved repeats of "
+          f"{args.episodes} episode(s) each, resets included; python {platform.python_version()}, {os.cpu_count()} CPUs")
+    print(line)
+    print("-" * len(line))
+    for name in SCENARIOS:
+        for n in HORIZONS:
+            env, twin = med.get(("env", name, n)), med.get(("twin", name, n))
+            fmi, peer = med.get(("fmi", name, n)), med.get(("peer", name, None))
+            if n not in (0, TARGET_HORIZON):
+                peer = None  # FMUGym is compared at N = 0 and N = 3 only
+            cells = [name, str(n), f"{env:.1f}", f"{twin:.1f}", *ratio_cell(env, twin, ("env", "twin"), n),
+                     "n/a" if fmi is None else f"{fmi:.1f}", *ratio_cell(fmi, twin, ("fmi", "twin"), n),
+                     "" if peer is None else f"{peer:.1f}", *(("", "") if peer is None else
+                                                              ratio_cell(env, peer, ("env", "peer"), n)),
+                     *(("", "") if peer is None else ratio_cell(fmi, peer, ("fmi", "peer"), n))]
+            print("  ".join(f"{cell:>{w}}" for cell, (_, w) in zip(cells, cols)))
+    print("-" * len(line))
+    print(f"{'training, first_order':<40}{train_rate:>12.0f} steps/s over {args.train_steps} steps "
+          f"(train() with AgentConfig defaults, wall time)")
+    if full is None:
+        print(f"{'full run (500k steps, tune)':<40}{'not run':>12} (pass --full-run); target <= "
+              f"{FULL_RUN_WALL_TARGET_S:.0f} s wall, <= {RSS_TARGET_MIB:.0f} MiB")
+    else:
+        wall, rss, code = full
+        status = f"exit {code}" if code else f"{verdict(wall, FULL_RUN_WALL_TARGET_S)}"
+        print(f"{'full run (500k steps, tune) wall':<40}{wall:>12.1f} s      target <= {FULL_RUN_WALL_TARGET_S:.0f} s: {status}")
+        print(f"{'full run peak RSS (child)':<40}{rss:>12.0f} MiB    target <= {RSS_TARGET_MIB:.0f} MiB: "
+              f"{verdict(rss, RSS_TARGET_MIB)}")
+    rss_self = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+    print(f"{'peak RSS of this benchmark process':<40}{rss_self:>12.0f} MiB")
+    print("-" * len(line))
+    if fmi_missing:
+        print(f"fmi columns: {fmi_missing}")
+    if peer_missing:
+        print(f"FMUGym columns: skipped: {peer_missing}")
+    sub_steps = ", ".join(f"{c.scenario} {c.env.plant.n_sub}" for c in contestants
+                          if c.kind == "twin" and c.horizon == 0)
+    print(f"RK4 sub-steps per sample (bundled FMUs' fixed_step): {sub_steps}")
+    print("twin vs env, same seed and actions, max |Δ observation| / max |Δ reward|: " + "; ".join(
+        f"{name} N={n} {d_obs:.1e}/{d_rew:.1e}" for (name, n), (d_obs, d_rew) in agreements.items()))
+    resets = {}
+    for c in contestants:
+        if c.kind in ("env", "twin", "peer") and c.horizon in (None, TARGET_HORIZON):
+            resets.setdefault(c.scenario, []).append(f"{c.kind} {c.resets}")
+    print(f"resets asked for per measurement of {args.episodes} episode(s) (last repeat, N={TARGET_HORIZON}): "
+          + "; ".join(f"{k}: {', '.join(v)}" for k, v in resets.items()))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--quick", action="store_true", help="3 repeats of 1 episode, 4096 training steps")
+    parser.add_argument("--repeats", type=int, default=None, help="interleaved repeats (default 7, quick 3)")
+    parser.add_argument("--episodes", type=int, default=None, help="episodes per measurement (default 2, quick 1)")
+    parser.add_argument("--train-steps", type=int, default=None, help="training steps (default 50000, quick 4096)")
+    parser.add_argument("--full-run", action="store_true", help="also time a 500k-step `prlpid-fmi tune` run")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    args.repeats = args.repeats or (3 if args.quick else 7)
+    args.episodes = args.episodes or (1 if args.quick else 2)
+    args.train_steps = args.train_steps or (4096 if args.quick else 50_000)
+    if min(args.repeats, args.episodes, args.train_steps) < 1:
+        parser.error("--repeats, --episodes and --train-steps must be >= 1")
+
+    contestants, fmi_missing, peer_missing = build_contestants(args.episodes, args.seed)
+    agreements = {}
+    for name in SCENARIOS:
+        for n in (0, TARGET_HORIZON):
+            env, twin = (next(c.env for c in contestants if (c.kind, c.scenario, c.horizon) == (k, name, n))
+                         for k in ("env", "twin"))
+            agreements[(name, n)] = agreement(env, twin, preset(name).episode_steps, args.seed)
+    measure(contestants, args.repeats, args.seed)
+    for c in contestants:
+        c.env.close()
+    print("  training ...", file=sys.stderr, flush=True)
+    train_rate = training_steps_per_s(args.train_steps)
+    full = None
+    if args.full_run:
+        print("  full run ...", file=sys.stderr, flush=True)
+        full = full_run()
+    print_table(contestants, fmi_missing, peer_missing, args, train_rate, full, agreements)
+
+
+if __name__ == "__main__":
+    main()
