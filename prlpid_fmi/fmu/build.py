@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import fcntl
 import hashlib
+import math
 import os
 import shutil
 import subprocess
@@ -33,7 +34,7 @@ FMU_DIR = REPO_ROOT / "fmus"
 COMMON_SOURCES = ("plant_model.h", "instance.h", "instance.c")
 API_SOURCE = {2: "fmi2_api.c", 3: "fmi3_api.c"}
 DEFAULT_FMI_VERSION = 2
-DEFAULT_FIXED_STEP_S = 1e-3
+DEFAULT_FIXED_STEP_S = 1e-3  # internal RK4 step of a plant whose model.yaml declares none (bundled plants do)
 DEFAULT_EXPERIMENT_STEP_S = 0.1
 CAUSALITY_CODES = {
     ("independent", None): "CAUSALITY_INDEPENDENT",
@@ -81,9 +82,13 @@ def load_spec(name: str, directory: Path | None = None) -> PlantSpec:
         known = ", ".join(bundled_plant_names()) or "none found"
         raise PlantError(f"unknown bundled plant {name!r}; expected one of: {known} (in {PLANT_SOURCES})")
     raw = yaml.safe_load((directory / "model.yaml").read_text())
+    fixed_step = raw.get("fixed_step", DEFAULT_FIXED_STEP_S)
+    if isinstance(fixed_step, bool) or not isinstance(fixed_step, (int, float)) or not 0 < fixed_step < math.inf:
+        raise PlantError(f"{directory / 'model.yaml'}: fixed_step: must be a positive finite number of seconds "
+                         f"(got {fixed_step!r}; expected e.g. 0.01)")
     variables = [
         Variable("time", "independent", description="Simulation time", unit="s"),
-        Variable("fixed_step", "parameter", "fixed", DEFAULT_FIXED_STEP_S, "s",
+        Variable("fixed_step", "parameter", "fixed", float(fixed_step), "s",
                  "Internal fixed RK4 step; each communication step uses ceil(h/fixed_step) sub-steps"),
     ]
     for item in raw["variables"]:
