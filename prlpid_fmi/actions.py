@@ -1,14 +1,26 @@
-"""Map agent actions in [-1, 1] to PID parameters.
+"""Map agent actions in [-1, 1] to PID parameters: the absolute map (paper) and the anchored map (default).
 
 Action layout, shape (3 * n_loops [+ 6],): (Kp, Ti, Td) for loop 0, then loop 1, ..., then the six
 cross-axis coupling coefficients (c_rp, c_ry, c_pr, c_py, c_yr, c_yp) when the PID is coupled.
 A "log" range maps geometrically (equal action steps = equal gain ratios, right for gains that span
 decades such as Kp and Ti); a "linear" range maps affinely (needed when the range contains 0 or
 negative values, e.g. Td = 0 or a reverse-acting Kp).
+
+Anchored map (AnchoredActionMap, the default once a fixed PID is tuned): action 0 gives exactly the
+anchor gains (the tuned fixed PID); a in [-1, 1] moves each gain within a band around it and the
+result is clipped into the loop's gain range::
+
+    Kp = Kp0 * f_Kp**a      Ti = Ti0 * f_Ti**a      (multiplicative bands, factors >= 1)
+    Td = Td0 + a * b_Td * (Td.high - Td.low)         (additive, a fraction of the Td range)
+    c  = c0 + a * b_c                                (additive, coupling coefficients)
+
+`values(action list) -> (Kp, Ti, Td, coupling)` lists is the per-step path; `__call__` returns Gains.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+
+import math
 
 import numpy as np
 
@@ -31,6 +43,16 @@ class Gains:
         if self.coupling is not None:
             d["coupling"] = self.coupling.copy()
         return d
+
+
+def gains_from_values(Kp: list, Ti: list, Td: list, coupling: list | None = None) -> Gains:
+    """Gains (numpy arrays) from per-loop lists."""
+    return Gains(np.array(Kp, float), np.array(Ti, float), np.array(Td, float),
+                 None if coupling is None else np.array(coupling, float))
+
+
+def _split(values: list, n: int, coupled: bool) -> tuple[list, list, list, list | None]:
+    return values[0:3 * n:3], values[1:3 * n:3], values[2:3 * n:3], (values[3 * n:] if coupled else None)
 
 
 def map_range(a: np.ndarray, r: GainRange) -> np.ndarray:
@@ -59,14 +81,23 @@ class ActionMap:
         self.coupling = GainRange(-coupling_range, coupling_range, "linear")
         self.size = 3 * len(loops) + (6 if coupled else 0)
 
-    def __call__(self, action: np.ndarray) -> Gains:
-        n = len(self.loops)
-        per_loop = action[: 3 * n].reshape(n, 3)
-        kp = np.array([map_range(per_loop[i, 0], l.Kp) for i, l in enumerate(self.loops)])
-        ti = np.array([map_range(per_loop[i, 1], l.Ti) for i, l in enumerate(self.loops)])
-        td = np.array([map_range(per_loop[i, 2], l.Td) for i, l in enumerate(self.loops)])
-        coupling = map_range(action[3 * n:], self.coupling) if self.coupled else None
-        return Gains(kp, ti, td, coupling)
+        ranges = [r for l in loops for r in (l.Kp, l.Ti, l.Td)] + [self.coupling] * (6 if coupled else 0)
+        # per parameter: (is_log, low or log(low), span or log span, low, high)
+        self._maps = [(r.scale == "log",) + ((math.log(r.low), math.log(r.high) - math.log(r.low))
+                                             if r.scale == "log" else (r.low, r.high - r.low)) + (r.low, r.high)
+                      for r in ranges]
+
+    def __call__(self, action) -> Gains:
+        return gains_from_values(*self.values(np.asarray(action, dtype=float).tolist()))
+
+    def values(self, action: list) -> tuple[list, list, list, list | None]:
+        """Action (size floats, clipped to [-1, 1]) -> Kp, Ti, Td lists (n_loops,), coupling list (6,) or None."""
+        out = []
+        for a, (is_log, base, span, low, high) in zip(action, self._maps):
+            a = -1.0 if a < -1.0 else 1.0 if a > 1.0 else a
+            frac = (a + 1.0) / 2.0
+            out.append(math.exp(base + frac * span) if is_log else base + frac * span)
+        return _split(out, len(self.loops), self.coupled)
 
     def names(self, loop_names: list[str]) -> list[str]:
         """Column names of the mapped parameters, e.g. Kp[y], Ti[y], Td[y], c_rp, ..."""
@@ -74,3 +105,39 @@ class ActionMap:
         if self.coupled:
             cols += ["c_rp", "c_ry", "c_pr", "c_py", "c_yr", "c_yp"]
         return cols
+
+
+class AnchoredActionMap(ActionMap):
+    """Action 0 -> exactly the anchor gains; each gain moves within a band around them (see module docstring).
+
+    Args:
+        loops, coupled, coupling_range: as ActionMap (the gain ranges the result is clipped into).
+        anchor: the tuned fixed PID's Gains (inside the ranges).
+        bands: object with Kp, Ti (factors >= 1), Td (fraction of the Td range), coupling (additive).
+    """
+
+    def __init__(self, loops: tuple[LoopConfig, ...], anchor: Gains, bands, coupled: bool = False,
+                 coupling_range: float = 0.5):
+        super().__init__(loops, coupled, coupling_range)
+        self.anchor = anchor
+        anchor_values = [float(x) for i in range(len(loops))
+                         for x in (anchor.Kp[i], anchor.Ti[i], anchor.Td[i])]
+        anchor_values += [float(x) for x in anchor.coupling] if coupled else []
+        ranges = [r for l in loops for r in (l.Kp, l.Ti, l.Td)] + [self.coupling] * (6 if coupled else 0)
+        kinds = ["Kp", "Ti", "Td"] * len(loops) + ["coupling"] * (6 if coupled else 0)
+        self._anchored = []
+        for value, r, kind in zip(anchor_values, ranges, kinds):
+            if kind in ("Kp", "Ti"):   # multiplicative: value * exp(a * log(f))
+                self._anchored.append((True, value, math.log(getattr(bands, kind)), r.low, r.high))
+            elif kind == "Td":
+                self._anchored.append((False, value, bands.Td * (r.high - r.low), r.low, r.high))
+            else:
+                self._anchored.append((False, value, bands.coupling, r.low, r.high))
+
+    def values(self, action: list) -> tuple[list, list, list, list | None]:
+        out = []
+        for a, (multiplicative, value, band, low, high) in zip(action, self._anchored):
+            a = -1.0 if a < -1.0 else 1.0 if a > 1.0 else a
+            g = value * math.exp(a * band) if multiplicative else value + a * band
+            out.append(low if g < low else high if g > high else g)
+        return _split(out, len(self.loops), self.coupled)

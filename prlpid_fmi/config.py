@@ -42,6 +42,7 @@ class LoopConfig:
     Td: GainRange = GainRange(0.0, 1.0, "linear")
     measurement_scale: float = 1.0
     divergence_bound: float = 100.0  # |measurement - setpoint| / measurement_scale past this ends the episode
+    control_scale: Optional[float] = None  # [input units] normalises |u_k - u_{k-1}|; None: u_max - u_min if finite
 
 
 @dataclass(frozen=True)
@@ -75,6 +76,20 @@ class PriorConfig:
 
 
 @dataclass(frozen=True)
+class AnchorBands:
+    """How far the anchored gain map moves each gain from the tuned fixed PID (action -1 .. +1).
+
+    Kp, Ti: factors >= 1 (Kp within [Kp0/f, Kp0*f]); Td: additive band, a fraction (0, 1] of the
+    loop's Td range width; coupling: additive band for the coupling coefficients.
+    """
+
+    Kp: float = 3.0
+    Ti: float = 3.0
+    Td: float = 0.1
+    coupling: float = 0.1
+
+
+@dataclass(frozen=True)
 class TuningConfig:
     """Everything PidTuningEnv needs. `fmu` is a path to a .fmu file or a bundled plant's name."""
 
@@ -89,6 +104,8 @@ class TuningConfig:
     derivative_filter_N: Optional[float] = None
     coupled: bool = False  # cross-axis coupled PID (paper eq. 26-27), needs 3 loops
     coupling_range: float = 0.5  # coupling coefficients in [-c, c]
+    gain_mapping: str = "anchored"  # anchored (action 0 = tuned fixed PID) | absolute (paper: whole ranges)
+    anchor_bands: AnchorBands = AnchorBands()
     # strategies
     forecast_horizon: int = 3  # N; 0 = plain one-step reward
     smoothing: str = "era"  # none | sma | lwma | era
@@ -103,6 +120,7 @@ class TuningConfig:
     disturbances: tuple[Disturbance, ...] = ()
     measurement_noise_std: float = 0.0  # plant units, Gaussian, every loop
     actuator_noise_std: float = 0.0  # control-signal units, Gaussian, every loop
+    randomize: dict = field(default_factory=dict)  # {FMU parameter: (low, high)} drawn uniformly per episode
 
     @property
     def n_loops(self) -> int:
@@ -116,14 +134,14 @@ class AgentConfig:
     algorithm: str = "ppo"  # ppo | sac | td3
     total_timesteps: int = 500_000
     seed: int = 0
-    n_envs: int = 1
+    n_envs: int = 8  # parallel episodes in one process: batches the policy's forward pass (measured, architecture.md)
     vec_env: str = "dummy"  # dummy (one process) | subproc (one process per env)
     normalize: bool = False  # VecNormalize on observations and rewards
     learning_rate: float = 3e-4
     gamma: float = 0.99
     net_arch: tuple[int, ...] = (64, 64)  # shared tanh MLP of the actor and the critic (Table 1)
     # PPO
-    n_steps: int = 2048  # per env, per rollout
+    n_steps: int = 256  # per env, per rollout: 8 x 256 = Table 1's 2048 samples per update
     batch_size: int = 256
     n_epochs: int = 10
     gae_lambda: float = 0.95

@@ -1,16 +1,25 @@
-"""Closed-loop evaluation: run a policy (trained agent or fixed gains) on a TuningConfig and measure it."""
+"""Closed-loop evaluation: run a policy (trained agent) or gains (fixed PID, gain schedule) and measure it.
+
+Both drivers step the same LoopCore; `rollout` goes through the agent's action path (PidTuningEnv),
+`gains_rollout` hands gains in physical units to the core directly. For the same seed, constant gains
+given either way produce the same trajectory.
+"""
 from __future__ import annotations
 
 import dataclasses
 from typing import Callable
 
 import numpy as np
+from gymnasium.utils.seeding import np_random
 
 from .config import TuningConfig
+from .core import LoopCore
 from .env import PidTuningEnv
 from .metrics import compute_metrics
 
+GAIN_NAMES = ("Kp", "Ti", "Td", "coupling")  # order of the gains tuple LoopCore.step takes
 Policy = Callable[[np.ndarray], np.ndarray]
+GainsFn = Callable[[LoopCore], tuple]  # core -> (Kp, Ti, Td, coupling) lists, called before each step
 
 
 def model_policy(model, vecnormalize=None) -> Policy:
@@ -23,6 +32,37 @@ def model_policy(model, vecnormalize=None) -> Policy:
     return act
 
 
+class _Recorder:
+    """Collects the signals of one episode from a LoopCore (row k of each signal is its value at t = k·Ts)."""
+
+    def __init__(self, core: LoopCore):
+        self.core = core
+        self.setpoints, self.measurements = [list(core.setpoint)], [list(core.measurement)]
+        self.controls, self.commands, self.rewards, self.gains = [], [], [], []
+
+    def add(self, reward: float, gains: tuple) -> None:
+        core = self.core
+        self.setpoints.append(list(core.setpoint))
+        self.measurements.append(list(core.measurement))
+        self.controls.append(list(core.control_signal))
+        self.commands.append(list(core.pid_output))
+        self.rewards.append(reward)
+        self.gains.append(gains)
+
+    def trajectory(self, terminated: bool) -> dict:
+        n = len(self.rewards)
+        controls = self.controls + [self.controls[-1]] if self.controls else [list(self.core.control_signal)]
+        gains = {name: np.array([g[i] for g in self.gains], float) for i, name in enumerate(GAIN_NAMES)
+                 if self.gains and self.gains[0][i] is not None}
+        return {
+            "time_s": np.arange(n + 1) * self.core.config.sample_time_s,
+            "setpoint": np.array(self.setpoints), "measurement": np.array(self.measurements),
+            "control_signal": np.array(controls), "reward": np.array(self.rewards),
+            "pid_output": np.array(self.commands).reshape(n, -1),
+            "gains": gains, "terminated": bool(terminated),
+        }
+
+
 def rollout(policy: Policy, config: TuningConfig, seed: int = 0, forecast: bool = False,
             env: PidTuningEnv | None = None) -> dict[str, np.ndarray]:
     """One episode of `policy` on `config` (forecast off unless asked: it does not change the plant).
@@ -30,37 +70,68 @@ def rollout(policy: Policy, config: TuningConfig, seed: int = 0, forecast: bool 
     env: an open PidTuningEnv built from this config to reuse (it is not closed); default: a new one.
 
     Returns arrays: time_s (n+1,), setpoint, measurement, control_signal (n+1, n_loops) — row k is the
-    signal at t = k·Ts (control_signal's last row repeats), gains {Kp, Ti, Td: (n, n_loops), coupling},
-    reward (n,), terminated (bool).
+    signal at t = k·Ts (control_signal's last row repeats; it is what the plant received, actuator
+    offsets and noise included) — pid_output (n, n_loops, the controller's command), gains {Kp, Ti,
+    Td: (n, n_loops), coupling}, reward (n,), terminated (bool).
     """
     own_env = env is None
     if own_env:
         if not forecast:
             config = dataclasses.replace(config, forecast_horizon=0)
-        env = PidTuningEnv(config)
+        env = PidTuningEnv(config, info=False)
     try:
-        obs, info = env.reset(seed=seed)
-        setpoints, measurements, controls, rewards, gains = [info["setpoint"]], [info["measurement"]], [], [], []
+        obs, _ = env.reset(seed=seed)
+        record = _Recorder(env.core)
         terminated = truncated = False
         while not (terminated or truncated):
-            obs, reward, terminated, truncated, info = env.step(policy(obs))
-            setpoints.append(env.setpoint.copy())
-            measurements.append(info["measurement"])
-            controls.append(info["control_signal"])
-            rewards.append(reward)
-            gains.append(info["gains"])
+            obs, reward, terminated, truncated, _ = env.step(policy(obs))
+            record.add(reward, env.gains)
     finally:
         if own_env:
             env.close()
-    controls.append(controls[-1])
-    n = len(rewards)
-    return {
-        "time_s": np.arange(n + 1) * config.sample_time_s,
-        "setpoint": np.array(setpoints), "measurement": np.array(measurements),
-        "control_signal": np.array(controls), "reward": np.array(rewards),
-        "gains": {k: np.array([g[k] for g in gains]) for k in gains[0]},
-        "terminated": bool(terminated),
-    }
+    return record.trajectory(terminated)
+
+
+def gains_rollout(gains_fn: GainsFn, config: TuningConfig, seed: int = 0, core: LoopCore | None = None,
+                  setpoint_schedule=None) -> dict[str, np.ndarray]:
+    """One episode with gains in physical units from `gains_fn(core)` before every step; rollout's layout.
+
+    core: an open LoopCore of this config to reuse (not closed); default: a new one with the forecast off.
+    setpoint_schedule: overrides config.setpoint_schedule for this episode (((step, setpoints), ...)).
+    """
+    own_core = core is None
+    if own_core:
+        core = LoopCore(dataclasses.replace(config, forecast_horizon=0))
+    try:
+        core.reset(np_random(seed)[0], setpoint_schedule=setpoint_schedule)
+        record = _Recorder(core)
+        terminated = False
+        for _ in range(core.config.episode_steps):
+            gains = gains_fn(core)
+            reward, terminated = core.step(*gains)
+            record.add(reward, gains)
+            if terminated:
+                break
+    finally:
+        if own_core:
+            core.close()
+    return record.trajectory(terminated)
+
+
+def constant_gains(Kp, Ti, Td, coupling=None) -> GainsFn:
+    """A gains function that always returns the same gains (a fixed PID); arguments are (n_loops,) values."""
+    gains = ([float(x) for x in np.atleast_1d(Kp)], [float(x) for x in np.atleast_1d(Ti)],
+             [float(x) for x in np.atleast_1d(Td)], None if coupling is None else [float(x) for x in coupling])
+    return lambda core: gains
+
+
+def measure(traj: dict, config: TuningConfig, intervals=None) -> dict:
+    """compute_metrics on a trajectory of `config`, plus whether the episode terminated."""
+    metrics = compute_metrics(traj["time_s"], traj["setpoint"], traj["measurement"], traj["control_signal"],
+                              config.sample_time_s, intervals=intervals,
+                              loop_names=[l.output for l in config.loops])
+    metrics["terminated"] = traj["terminated"]
+    return metrics
 
 
 def evaluate(policy: Policy, config: TuningConfig, seed: int = 0, intervals=None,
@@ -69,8 +140,11 @@ def evaluate(policy: Policy, config: TuningConfig, seed: int = 0, intervals=None
 
     Returns (metrics, trajectory)."""
     traj = rollout(policy, config, seed, env=env)
-    metrics = compute_metrics(traj["time_s"], traj["setpoint"], traj["measurement"], traj["control_signal"],
-                              config.sample_time_s, intervals=intervals,
-                              loop_names=[l.output for l in config.loops])
-    metrics["terminated"] = traj["terminated"]
-    return metrics, traj
+    return measure(traj, config, intervals), traj
+
+
+def evaluate_gains(gains_fn: GainsFn, config: TuningConfig, seed: int = 0, intervals=None,
+                   core: LoopCore | None = None) -> tuple[dict, dict]:
+    """gains_rollout + metrics: (metrics, trajectory)."""
+    traj = gains_rollout(gains_fn, config, seed, core=core)
+    return measure(traj, config, intervals), traj

@@ -189,16 +189,14 @@ def test_forecast_call_leaves_plant_and_pid_untouched(name):
     action = random_actions(env, 1, seed=3)[0]
     gains = env.action_map(np.asarray(action, float))
     r, y = env.setpoint.copy(), env.measurement.copy()
-    if env.config.coupled:
-        law = lambda m: env.pid.step(r, m, gains.Kp, gains.Ti, gains.Td, gains.coupling)  # noqa: E731
-    else:
-        law = lambda m: env.pid.step(r, m, gains.Kp, gains.Ti, gains.Td)  # noqa: E731
+    coupling = gains.coupling.tolist() if env.config.coupled else None
 
     plant_state, plant_time, plant_out = env.plant.get_state(), env.plant.time, env.plant.read_outputs()
     pid_state = env.pid.get_state()
     env.plant.copy_state_to(env.prior)
     assert env.prior.time == plant_time
-    reward = env.forecast.mean_reward(env.prior, env.pid, r, y, law)
+    reward = env.forecast.mean_reward(r.tolist(), y.tolist(), gains.Kp.tolist(), gains.Ti.tolist(), gains.Td.tolist(),
+                                      coupling, env.core.pid_output)
 
     assert env.plant.get_state() == plant_state  # byte-identical
     assert env.plant.time == plant_time

@@ -190,10 +190,12 @@ class PID:
         Kp [u per error unit], Ti [s] (> 0, inf = no integral), Td [s] (>= 0): scalars or (n_loops,).
         """
         n = self.n_loops
-        errors = _per_loop(error, n, "error")
-        Kps = _per_loop(Kp, n, "Kp")
-        Tis = _per_loop(Ti, n, "Ti")
-        Tds = _per_loop(Td, n, "Td")
+        return np.array(self.step_values(_per_loop(error, n, "error"), _per_loop(Kp, n, "Kp"),
+                                         _per_loop(Ti, n, "Ti"), _per_loop(Td, n, "Td")))
+
+    def step_values(self, errors: list, Kps: list, Tis: list, Tds: list) -> list:
+        """`step_error` on lists of n_loops floats, unchecked; returns saturated u as a list. The hot path."""
+        n = self.n_loops
         dt = self.sample_time_s
         N = self.derivative_filter_N
         mode = self.anti_windup
@@ -231,7 +233,17 @@ class PID:
             u_unsat_out[i] = u_unsat
 
         self._unsaturated_u = u_unsat_out
-        return np.array(u_out)
+        return u_out
+
+    def preset_integral(self, u0: list, Kps: list, Tis: list) -> None:
+        """Bumpless start: before the first step, set the error sum so that the integral term Kp/Ti*I equals u0.
+
+        u0, Kps, Tis: lists of n_loops floats (u0 in control-signal units). Loops without integral
+        action (Ti = inf or Kp = 0) keep I = 0. Call after reset(), before the first step.
+        """
+        for i in range(self.n_loops):
+            ki = Kps[i] / Tis[i]
+            self._integral[i] = u0[i] / ki if ki != 0 else 0.0
 
 
 def coupling_matrix(coupling) -> np.ndarray:
@@ -247,6 +259,12 @@ def _coupling_rows(c: list) -> list:
     return [[0.0, c_rp, c_ry],
             [c_pr, 0.0, c_py],
             [c_yr, c_yp, 0.0]]
+
+
+def _coupled_errors(r: list, y: list, c: list) -> list:
+    """Eq. 27 on lists: e_i = (r_i - y_i) + sum_j C[i][j] * y_j, summed left to right (C's diagonal is 0)."""
+    C = _coupling_rows(c)
+    return [r[i] - y[i] + C[i][0] * y[0] + C[i][1] * y[1] + C[i][2] * y[2] for i in range(3)]
 
 
 class CoupledPID:
@@ -277,14 +295,19 @@ class CoupledPID:
         return np.array(self._coupled_error(setpoint, measurement, coupling))
 
     def _coupled_error(self, setpoint, measurement, coupling) -> list:
-        r = _per_loop(setpoint, 3, "setpoint")
-        y = _per_loop(measurement, 3, "measurement")
-        C = _coupling_rows(_per_loop(coupling, 6, "coupling"))
-        return [r[i] - y[i] + C[i][0] * y[0] + C[i][1] * y[1] + C[i][2] * y[2] for i in range(3)]
+        return _coupled_errors(_per_loop(setpoint, 3, "setpoint"), _per_loop(measurement, 3, "measurement"),
+                               _per_loop(coupling, 6, "coupling"))
 
     def step(self, setpoint, measurement, Kp, Ti, Td, coupling) -> np.ndarray:
         """One sample of eq. 26; Kp, Ti, Td scalars or (3,); returns saturated u (3,)."""
         return self.pid.step_error(self._coupled_error(setpoint, measurement, coupling), Kp, Ti, Td)
+
+    def step_values(self, r: list, y: list, Kps: list, Tis: list, Tds: list, c: list) -> list:
+        """`step` on lists of floats (r, y, gains (3,), coupling (6,)), unchecked; returns u as a list."""
+        return self.pid.step_values(_coupled_errors(r, y, c), Kps, Tis, Tds)
+
+    def preset_integral(self, u0: list, Kps: list, Tis: list) -> None:
+        self.pid.preset_integral(u0, Kps, Tis)
 
     def reset(self) -> None:
         self.pid.reset()

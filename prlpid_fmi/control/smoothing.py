@@ -41,6 +41,9 @@ class NoSmoothing:
     def __call__(self, raw_action) -> np.ndarray:
         return _checked(raw_action, self.n_params).copy()
 
+    def values(self, raw: list) -> list:
+        return list(raw)
+
 
 class _WindowAverage:
     """Weighted average over the last ``window`` raw actions, ring buffer of shape (window, n_params).
@@ -59,23 +62,29 @@ class _WindowAverage:
         self._full = w[age] / w.sum()
         filling = np.where(slots[None, :] <= slots[:, None], w[age], 0.0)
         self._filling = filling / filling.sum(axis=1, keepdims=True)
-        self._buffer = np.zeros((window, n_params))
+        self._full_rows, self._filling_rows = self._full.tolist(), self._filling.tolist()
+        self._buffer = [[0.0] * n_params for _ in range(window)]
         self.reset()
 
     def reset(self) -> None:
-        self._buffer.fill(0.0)
+        for row in self._buffer:
+            row[:] = [0.0] * self.n_params
         self._newest = -1
-        self._weights = self._filling
+        self._weights = self._filling_rows
 
     def __call__(self, raw_action) -> np.ndarray:
-        raw = _checked(raw_action, self.n_params)
+        return np.array(self.values(_checked(raw_action, self.n_params).tolist()))
+
+    def values(self, raw: list) -> list:
+        """The smoothed action for the newest raw action (list of n_params floats)."""
         j = self._newest + 1
         if j == self.window:
             j = 0
-            self._weights = self._full
+            self._weights = self._full_rows
         self._newest = j
-        self._buffer[j] = raw
-        return self._weights[j] @ self._buffer
+        self._buffer[j] = list(raw)
+        weights, buffer = self._weights[j], self._buffer
+        return [sum([w * row[p] for w, row in zip(weights, buffer)]) for p in range(self.n_params)]
 
 
 class SimpleMovingAverage(_WindowAverage):
@@ -101,20 +110,24 @@ class ExponentialRecursiveAverage:
     def __init__(self, n_params: int, alpha: float = DEFAULT_ALPHA["era"]):
         self.n_params = n_params
         self.alpha = alpha
-        self._smoothed = np.zeros(n_params)
+        self._smoothed = [0.0] * n_params
         self.reset()
 
     def reset(self) -> None:
         self._started = False
 
     def __call__(self, raw_action) -> np.ndarray:
-        raw = _checked(raw_action, self.n_params)
+        return np.array(self.values(_checked(raw_action, self.n_params).tolist()))
+
+    def values(self, raw: list) -> list:
+        """The smoothed action for the newest raw action (list of n_params floats)."""
         if self._started:
-            self._smoothed = self.alpha * raw + (1.0 - self.alpha) * self._smoothed
+            a, b = self.alpha, 1.0 - self.alpha
+            self._smoothed = [a * r + b * s for r, s in zip(raw, self._smoothed)]
         else:
-            self._smoothed = raw.copy()
+            self._smoothed = list(raw)
             self._started = True
-        return self._smoothed.copy()
+        return list(self._smoothed)
 
 
 def _checked(raw_action, n_params: int) -> np.ndarray:

@@ -1,0 +1,271 @@
+"""LoopCore: one closed loop (plant FMU, prior, PID, reward, setpoints, disturbances) stepped with gains.
+
+The core takes gains in physical units (Kp, Ti [s], Td [s], coupling). Three drivers use it: the
+agent's action path (PidTuningEnv: clip, smoothing, gain map), the fixed-PID search (constant gains)
+and the gain-schedule replay (table lookup). None of them reaches into another's internals.
+
+One step k (sample time Ts), all signals plain Python lists of n_loops floats:
+  FMU disturbances due at k -> reward forecast on the prior (eq. 12-14, before the plant moves)
+  -> PID (eq. 2 / 26-27) on (setpoint_k, measurement_k) -> + actuator offsets and noise -> clip
+  -> plant step -> measurement_{k+1} (+ offsets, noise) -> reward (eq. 10-11 + control-variation term).
+
+Bumpless start: before the first PID step the error sum is preset so that the integral term equals
+the plant's input at t = 0 (its start value, clipped to the limits), i.e. the input that holds an
+initial steady state (the two-tank needs 25 cm3/s). The control-variation term of the first step
+is taken against that input too.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .config import TuningConfig
+from .control import CoupledPID, PID
+from .control.reward import _loop_reward
+from .errors import PlantError
+from .fmu import FmuPlant, StepRejected, bundled_fmu, bundled_plant_names
+
+
+def resolve_fmu(fmu: str, fmi_version: int = 2) -> Path:
+    """A bundled plant's name -> its (freshly built if needed) FMU; otherwise the path itself."""
+    if fmu in bundled_plant_names():
+        return bundled_fmu(fmu, fmi_version)
+    path = Path(fmu)
+    if not path.is_file():
+        raise PlantError(f"{fmu}: FMU file not found (and not a bundled plant: {', '.join(bundled_plant_names())})")
+    return path
+
+
+def control_scales(config: TuningConfig) -> list[float]:
+    """Per loop, the control-signal span that normalises |u_k - u_{k-1}| in the reward [input units]:
+    loop.control_scale, else u_max - u_min when both are finite, else Kp.high * measurement_scale."""
+    out = []
+    for l in config.loops:
+        scale = getattr(l, "control_scale", None)
+        if scale is None:
+            span = l.u_max - l.u_min
+            scale = span if np.isfinite(span) and span > 0 else l.Kp.high * l.measurement_scale
+        out.append(float(scale))
+    return out
+
+
+def randomized_parameters(config: TuningConfig) -> list[tuple[str, float, float]]:
+    """training/evaluation `randomize` as (parameter, low, high) triples."""
+    spec = getattr(config, "randomize", None) or ()
+    if isinstance(spec, dict):
+        return [(name, float(lo), float(hi)) for name, (lo, hi) in spec.items()]
+    return [(name, float(lo), float(hi)) for name, lo, hi in spec]
+
+
+class LoopCore:
+    """The closed loop of one TuningConfig, stepped with PID gains.
+
+    Args:
+        config: the tuning problem.
+        forecast_path: "auto" (one C call for bundled plants, the FMI path otherwise) | "fmi" (force
+            the standard get/serialize/deserialize/set path, as for a third-party FMU).
+    After reset/step (lists of n_loops floats): setpoint, measurement (the sample the next step uses),
+    and after a step: applied_setpoint (what u was computed for), control_signal (u applied to the plant),
+    pid_output (u before actuator offsets and noise), forecast_reward, step_reward, k (samples done).
+    """
+
+    def __init__(self, config: TuningConfig, forecast_path: str = "auto"):
+        self.config = c = config
+        self.n_loops = n = c.n_loops
+        self.loop_names = [l.output for l in c.loops]
+        path = resolve_fmu(c.fmu, c.fmi_version)
+        self.inputs, outputs = [l.input for l in c.loops], [l.output for l in c.loops]
+        self.plant = FmuPlant(path, self.inputs, outputs, c.sample_time_s, c.plant_parameters, "plant")
+        self.scale = [float(l.measurement_scale) for l in c.loops]
+        self.bound = [float(l.divergence_bound) for l in c.loops]
+        self.u_min = [float(l.u_min) for l in c.loops]
+        self.u_max = [float(l.u_max) for l in c.loops]
+        self.u_scale = control_scales(c)
+        self.weights = c.reward
+        self.penalty = float(c.divergence_penalty)
+        pid_args = dict(sample_time_s=c.sample_time_s, u_min=self.u_min, u_max=self.u_max,
+                        anti_windup=c.anti_windup, derivative_filter_N=c.derivative_filter_N)
+        if c.coupled:
+            if n != 3:
+                raise PlantError(f"the cross-axis coupled PID needs 3 loops (roll, pitch, yaw), got {n}")
+            self.pid = CoupledPID(**pid_args)
+        else:
+            self.pid = PID(n_loops=n, **pid_args)
+        self._randomize = randomized_parameters(c)
+        for name, _, _ in self._randomize:
+            self.plant.description.require(name, ("parameter", "input"), "a randomised parameter")
+        self._fmu_disturbances = [d for d in c.disturbances if d.kind == "fmu"]
+        self._fmu_defaults = {d.target: float(self.plant.get([d.target])[0]) for d in self._fmu_disturbances}
+        self._fmu_events: dict[int, list[tuple[str, float]]] = {}
+        for d in self._fmu_disturbances:
+            self._fmu_events.setdefault(d.start_step, []).append((d.target, d.value))
+            if d.end_step is not None:
+                self._fmu_events.setdefault(d.end_step, []).append((d.target, self._fmu_defaults[d.target]))
+        self._offsets = {kind: [(d.start_step, d.end_step, self.loop_names.index(d.target), d.value)
+                                for d in c.disturbances if d.kind == kind] for kind in ("actuator", "measurement")}
+        self.prior = self.forecast = None
+        if c.forecast_horizon > 0:
+            self.prior, self.forecast = self._make_prior(path, forecast_path)
+        self.k = 0
+        self._rng = np.random.default_rng(0)
+
+    # -- construction ---------------------------------------------------------------------------
+    def _make_prior(self, path: Path, forecast_path: str):
+        from .control.forecast import make_forecast
+
+        c = self.config
+        prior_path = resolve_fmu(c.prior.fmu, c.fmi_version) if c.prior.fmu else path
+        prior = FmuPlant(prior_path, self.inputs, self.loop_names, c.sample_time_s,
+                         {**c.plant_parameters, **c.prior.parameters}, "prior")
+        if prior_path != path and not c.prior.state_map:
+            raise PlantError(f"prior FMU {prior_path} differs from the plant {path}: its state cannot be "
+                             "copied, so prior.state_map must say which prior parameters take which plant values")
+        # The prior is a model: it knows the plant's state but not the disturbances acting on it nor the
+        # randomised parameters, so those return to their nominal values after each state copy.
+        nominal = {name: float(c.plant_parameters.get(name, self.plant.get([name])[0]))
+                   for name, _, _ in self._randomize}
+        overrides = {**self._fmu_defaults, **nominal, **c.prior.parameters}
+        forecast = make_forecast(self.plant, prior, self.pid, horizon=c.forecast_horizon, scale=self.scale,
+                                 bound=self.bound, penalty=self.penalty, weights=self.weights,
+                                 u_scale=self.u_scale, overrides=overrides, state_map=dict(c.prior.state_map),
+                                 path=forecast_path, reward=self.reward)
+        return prior, forecast
+
+    # -- episode ------------------------------------------------------------------------------
+    def reset(self, rng: np.random.Generator, setpoint_schedule=None) -> None:
+        """Start an episode: plant (with freshly drawn randomised parameters) at t = 0, PID reset.
+
+        rng: the episode's random generator (setpoints, noise, randomised parameters).
+        setpoint_schedule: ((step, setpoints), ...) for this episode instead of the config's.
+        """
+        c = self.config
+        self._rng = rng
+        self._schedule = setpoint_schedule if setpoint_schedule is not None else c.setpoint_schedule
+        self.k = 0
+        if self._randomize:
+            drawn = {name: float(rng.uniform(lo, hi)) for name, lo, hi in self._randomize}
+            y_true = self.plant.reset(parameters=drawn).tolist()
+        else:
+            y_true = self.plant.reset().tolist()
+        self.pid.reset()
+        self._bumpless = True
+        u0 = self.plant.get(self.inputs).tolist()
+        self.pid_output = [min(max(u, lo), hi) for u, lo, hi in zip(u0, self.u_min, self.u_max)]
+        self.control_signal = list(self.pid_output)
+        self._noise_y = self._noise_u = None
+        if c.measurement_noise_std > 0:
+            self._noise_y = rng.normal(0.0, c.measurement_noise_std, (c.episode_steps + 1, self.n_loops)).tolist()
+        if c.actuator_noise_std > 0:
+            self._noise_u = rng.normal(0.0, c.actuator_noise_std, (c.episode_steps + 1, self.n_loops)).tolist()
+        self.setpoint = self._setpoint_at(0)
+        self.measurement = self._measure(y_true, 0)
+        self.previous_error = [r - y for r, y in zip(self.setpoint, self.measurement)]
+        self.applied_setpoint = list(self.setpoint)
+        self.forecast_reward = self.step_reward = None
+
+    def _setpoint_at(self, k: int) -> list[float]:
+        c = self.config
+        if self._schedule is not None:
+            value = self._schedule[0][1]
+            for start, values in self._schedule:
+                if k >= start:
+                    value = values
+            return [float(v) for v in value]
+        if k % c.setpoint_hold_steps == 0:
+            lo = [l.setpoint_range[0] for l in c.loops]
+            hi = [l.setpoint_range[1] for l in c.loops]
+            self._random_setpoint = self._rng.uniform(lo, hi).tolist()
+        return self._random_setpoint
+
+    def _offset(self, kind: str, k: int, values: list[float]) -> list[float]:
+        out = values
+        for start, end, i, value in self._offsets[kind]:
+            if start <= k and (end is None or k < end):
+                out = list(out) if out is values else out
+                out[i] += value
+        return out
+
+    def _noise(self, table, k: int) -> list[float]:
+        if k >= len(table):  # a caller stepping past episode_steps: extend the pre-drawn noise
+            std = self.config.measurement_noise_std if table is self._noise_y else self.config.actuator_noise_std
+            table.extend(self._rng.normal(0.0, std, (k + 1 - len(table), self.n_loops)).tolist())
+        return table[k]
+
+    def _measure(self, y_true: list[float], k: int) -> list[float]:
+        y = self._offset("measurement", k, y_true) if self._offsets["measurement"] else y_true
+        if self._noise_y is not None:
+            y = [a + b for a, b in zip(y, self._noise(self._noise_y, k))]
+        return y
+
+    def reward(self, error: list[float], previous_error: list[float], u: list[float], u_prev: list[float]) -> float:
+        """Eq. 10-11 plus the control-variation term, mean over loops; errors normalised."""
+        w, n = self.weights, self.n_loops
+        cv = getattr(w, "control_variation_weight", 0.0)
+        total = 0.0
+        for i in range(n):
+            r = _loop_reward(error[i], previous_error[i], w)
+            if cv:
+                du = abs(u[i] - u_prev[i]) / self.u_scale[i]
+                r -= cv * (du if du < 1.0 else 1.0)
+            total += r
+        return total / n
+
+    def step(self, Kp: list[float], Ti: list[float], Td: list[float], coupling: list[float] | None = None
+             ) -> tuple[float, bool]:
+        """One sample with gains Kp, Ti [s], Td [s] (lists of n_loops floats) and coupling (6 floats or None).
+
+        Returns (reward, terminated): terminated when the plant rejects the step, a measurement is not
+        finite, or |error| / measurement_scale exceeds divergence_bound (reward = divergence penalty).
+        """
+        c, k, n = self.config, self.k, self.n_loops
+        events = self._fmu_events.get(k)
+        if events:
+            self.plant.set(dict(events))
+        setpoint, measurement = self.setpoint, self.measurement
+        scale = self.scale
+        error = [(setpoint[i] - measurement[i]) / scale[i] for i in range(n)]
+        if self._bumpless:
+            self._bumpless = False
+            if any(self.pid_output):
+                self.pid.preset_integral(self.pid_output, Kp, Ti)
+        u_prev = self.pid_output
+
+        self.forecast_reward = None
+        if self.forecast is not None:
+            self.forecast_reward = self.forecast.mean_reward(setpoint, measurement, Kp, Ti, Td, coupling, u_prev)
+
+        if coupling is not None:
+            u = self.pid.step_values(setpoint, measurement, Kp, Ti, Td, coupling)
+        else:
+            u = self.pid.step_values([setpoint[i] - measurement[i] for i in range(n)], Kp, Ti, Td)
+        self.pid_output = u
+        applied = self._offset("actuator", k, u) if self._offsets["actuator"] else u
+        if self._noise_u is not None:
+            applied = [a + b for a, b in zip(applied, self._noise(self._noise_u, k))]
+        umin, umax = self.u_min, self.u_max
+        applied = [umin[i] if applied[i] < umin[i] else umax[i] if applied[i] > umax[i] else applied[i]
+                   for i in range(n)]
+        self.control_signal = applied
+        try:
+            y_true = self.plant.step_values(applied)
+        except StepRejected:
+            y_true = [float("nan")] * n
+        self.k = k = k + 1
+        self.applied_setpoint = setpoint
+        self.previous_error = [setpoint[i] - measurement[i] for i in range(n)]
+        self.setpoint = self._setpoint_at(k)
+        y = self.measurement = self._measure(y_true, k)
+        new_error = [(setpoint[i] - y[i]) / scale[i] for i in range(n)]
+        bound = self.bound
+        if not all(abs(new_error[i]) <= bound[i] for i in range(n)):  # also catches NaN
+            self.step_reward = None
+            self.measurement = [v if v == v and abs(v) != float("inf") else 0.0 for v in y]
+            return self.penalty, True
+        self.step_reward = self.reward(new_error, error, u, u_prev)
+        return (self.forecast_reward if self.forecast_reward is not None else self.step_reward), False
+
+    def close(self) -> None:
+        for p in (self.plant, self.prior):
+            if p is not None:
+                p.close()
