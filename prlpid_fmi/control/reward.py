@@ -50,9 +50,12 @@ class RewardWeights:
     bonus_threshold: float = 0.05
     bonus_numerator: float = 0.1
     bonus_offset: float = 0.05
+    # weight of the control-variation term -w * min(|u_k - u_{k-1}| / control_scale, 1) per loop (the
+    # environment adds it; prlpid_fmi.core.LoopCore.reward); it also weights effort in the fixed-PID search
+    control_variation_weight: float = 0.0
 
     def __post_init__(self):
-        for name in ("alpha", "beta", "bonus_threshold", "bonus_numerator"):
+        for name in ("alpha", "beta", "bonus_threshold", "bonus_numerator", "control_variation_weight"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"RewardWeights.{name} must be >= 0, got {getattr(self, name)!r}")
         for name in ("v_clip", "e_clip", "bonus_offset"):
