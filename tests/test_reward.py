@@ -6,12 +6,13 @@ import numpy as np
 import pytest
 
 from prlpid_fmi.control import RewardWeights, hierarchical_reward, hierarchical_reward_per_loop
+from prlpid_fmi.control.reward import mean_loop_reward
 
 W = RewardWeights()
 
 
 def test_defaults():
-    assert dataclasses.astuple(W) == (1.0, 1.0, 0.5, 1.0, 0.05, 0.1, 0.05)
+    assert dataclasses.astuple(W) == (1.0, 1.0, 0.5, 1.0, 0.05, 0.1, 0.05, 0.0)  # last: control variation off
     with pytest.raises(dataclasses.FrozenInstanceError):
         W.alpha = 2.0
 
@@ -96,3 +97,47 @@ def test_invalid_weights_and_shapes():
         RewardWeights(alpha=-1.0)
     with pytest.raises(ValueError, match="length"):
         hierarchical_reward(np.zeros(2), np.zeros(3), W)
+
+
+CV = RewardWeights(control_variation_weight=0.5)
+
+
+@pytest.mark.parametrize("error, previous, u, u_prev, u_scale, expected", [
+    # steady |e| = 0.2 (V = 0.02, no growth): -0.02 - 0.2; |du|/scale = 2/10 = 0.2 -> -0.5*0.2
+    (0.2, 0.2, 3.0, 1.0, 10.0, -0.22 - 0.1),
+    # the move counts in either direction
+    (0.2, 0.2, 1.0, 3.0, 10.0, -0.22 - 0.1),
+    # clipped at 1: |du|/scale = 20/10 -> -0.5*1
+    (0.2, 0.2, 15.0, -5.0, 10.0, -0.22 - 0.5),
+    # exactly at the clip
+    (0.2, 0.2, 10.0, 0.0, 10.0, -0.22 - 0.5),
+    # no move, no penalty; in the bonus band: V = 0.0002, bonus 0.1/0.07
+    (0.02, 0.02, 4.0, 4.0, 10.0, -0.0002 - 0.02 + 0.1 / 0.07),
+])
+def test_control_variation_hand_computed(error, previous, u, u_prev, u_scale, expected):
+    assert hierarchical_reward(error, previous, CV, u, u_prev, u_scale) == pytest.approx(expected, abs=1e-12)
+    assert hierarchical_reward_per_loop(error, previous, CV, u, u_prev, u_scale)[0] == pytest.approx(expected, abs=1e-12)
+
+
+def test_control_variation_per_loop_scale_and_mean():
+    # loop 1: -0.22 - 0.5*0.2; loop 2: steady e = 0.5 (-0.625) - 0.5*min(3/2, 1)
+    r = hierarchical_reward([0.2, 0.5], [0.2, 0.5], CV, [3.0, 1.0], [1.0, -2.0], [10.0, 2.0])
+    assert r == pytest.approx((-0.32 + -1.125) / 2, abs=1e-12)
+    assert mean_loop_reward([0.2, 0.5], [0.2, 0.5], CV, [3.0, 1.0], [1.0, -2.0], [10.0, 2.0]) == r
+
+
+def test_control_variation_is_zero_without_u_or_weight():
+    assert hierarchical_reward(0.5, 0.3, CV) == hierarchical_reward(0.5, 0.3, W)
+    assert hierarchical_reward(0.5, 0.3, W, 5.0, -5.0, 1.0) == hierarchical_reward(0.5, 0.3, W)
+    assert math.isnan(hierarchical_reward(0.5, 0.3, CV, float("nan"), 0.0, 1.0))  # min(NaN, 1) is NaN
+
+
+def test_control_variation_needs_all_three_and_a_positive_scale():
+    with pytest.raises(ValueError, match="together"):
+        hierarchical_reward(0.5, 0.3, CV, u=1.0)
+    with pytest.raises(ValueError, match="u_scale"):
+        hierarchical_reward(0.5, 0.3, CV, 1.0, 0.0, 0.0)
+    with pytest.raises(ValueError, match="values each"):
+        hierarchical_reward([0.5, 0.1], [0.3, 0.1], CV, [1.0], [0.0], [1.0])
+    with pytest.raises(ValueError, match="control_variation_weight"):
+        RewardWeights(control_variation_weight=-0.1)
