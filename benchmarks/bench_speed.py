@@ -12,7 +12,9 @@ measured once, in an order shuffled per repeat, so load on the shared machine hi
 - fmi: the same with PidTuningEnv(config, forecast_path="fmi"), the standard FMI path a third-party
   FMU takes (n/a while the keyword does not exist);
 - twin: benchmarks/twins.py, the same logic in numpy/Python with the same RK4 sub-steps
-  (its agreement with env is printed below the table);
+  (its agreement with env is printed below the table); twin-RK4: the twin less the time of its plant
+  steps (RK4 plant steps per env step x the median CPU time of one, timed alone in the same repeats),
+  i.e. the twin's control logic, smoothing, reward and glue without the integrator that env runs in C;
 - FMUGym: benchmarks/fmugym_peer.py, gains as its action, the PID in _process_action, reward -e^2;
   it forecasts nothing, so its cost is the same at every N.
 Run rows: training steps/s of prlpid_fmi.train.train with the AgentConfig defaults (wall time),
@@ -62,13 +64,24 @@ NA_FMI = "n/a (forecast_path not available)"
 class Contestant:
     """One implementation on one scenario and horizon, with its fixed action sequence."""
 
-    kind: str  # env | fmi | twin | peer
+    kind: str  # env | fmi | twin | peer | rk4 (the twin's plant step alone)
     scenario: str
-    horizon: int | None  # None for the peer (no forecast)
+    horizon: int | None  # None for the peer (no forecast) and rk4
     env: object
-    actions: np.ndarray
-    samples: list = dataclasses.field(default_factory=list)  # µs per step, one per repeat
+    actions: np.ndarray  # for rk4: the number of plant steps to time
+    samples: list = dataclasses.field(default_factory=list)  # µs per step (rk4: per plant step), one per repeat
     resets: int = 0
+    plant_calls_per_step: float = 0.0  # twin: RK4 plant steps (plant and prior) per env step
+
+
+def cpu_us_per_plant_step(c: Contestant) -> float:
+    """Process CPU µs per call of the twin plant's step (the RK4 sub-steps of one sample)."""
+    plant, u = c.env, [0.0] * len(c.env.inputs)
+    plant.reset()
+    start = time.process_time_ns()
+    for _ in range(len(c.actions)):
+        plant.step(u)
+    return (time.process_time_ns() - start) / len(c.actions) / 1e3
 
 
 def cpu_us_per_step(c: Contestant, seed: int) -> float:
@@ -78,6 +91,8 @@ def cpu_us_per_step(c: Contestant, seed: int) -> float:
     resets are in its time but not in c.resets (the resets this loop asked for).
     """
     env, actions = c.env, c.actions
+    if c.kind == "twin":
+        env.plant.calls = env.prior.calls = 0
     resets, last = 1, len(actions) - 1
     start = time.process_time_ns()
     env.reset(seed=seed)
@@ -88,6 +103,8 @@ def cpu_us_per_step(c: Contestant, seed: int) -> float:
             resets += 1
     elapsed = time.process_time_ns() - start
     c.resets = resets
+    if c.kind == "twin":
+        c.plant_calls_per_step = (env.plant.calls + env.prior.calls) / len(actions)
     return elapsed / len(actions) / 1e3
 
 
@@ -103,6 +120,8 @@ def build_contestants(episodes: int, seed: int) -> tuple[list[Contestant], str |
             actions = np.random.default_rng(seed).uniform(-1, 1, (steps, env.action_space.shape[0])).astype(np.float32)
             contestants.append(Contestant("env", name, n, env, actions))
             contestants.append(Contestant("twin", name, n, make_twin(config), actions))
+            if n == 0:
+                contestants.append(Contestant("rk4", name, None, make_twin(config).plant, np.empty(steps)))
             try:
                 fmi_env = PidTuningEnv(config, forecast_path="fmi")
             except TypeError:
@@ -127,7 +146,8 @@ def measure(contestants: list[Contestant], repeats: int, seed: int) -> None:
     order = np.random.default_rng(seed)
     for r in range(repeats):
         for i in order.permutation(len(contestants)):
-            contestants[i].samples.append(cpu_us_per_step(contestants[i], seed))
+            c = contestants[i]
+            c.samples.append(cpu_us_per_plant_step(c) if c.kind == "rk4" else cpu_us_per_step(c, seed))
         print(f"  repeat {r + 1}/{repeats} done", file=sys.stderr, flush=True)
 
 
@@ -161,38 +181,43 @@ def verdict(value: float, target: float) -> str:
     return "met" if value <= target else "missed"
 
 
-def ratio_cell(num: float | None, den: float | None, key: tuple[str, str], horizon: int) -> tuple[str, str]:
-    """(ratio, 'target: met/missed' or '') for one ratio column."""
+def ratio_cell(num: float | None, den: float | None, key: tuple[str, str] | None, horizon: int) -> str:
+    """'ratio' or, at the target horizon, 'ratio (<=target met|missed)'; 'n/a' when a side is missing."""
     if num is None or den is None:
-        return "n/a", ""
+        return "n/a"
     ratio = num / den
-    if horizon != TARGET_HORIZON:
-        return f"{ratio:.2f}", ""
+    if key is None or horizon != TARGET_HORIZON:
+        return f"{ratio:.2f}"
     target = RATIO_TARGETS[key]
-    return f"{ratio:.2f}", f"<={target:g} {verdict(ratio, target)}"
+    return f"{ratio:.2f} (<={target:g} {verdict(ratio, target)})"
 
 
 def print_table(contestants, fmi_missing, peer_missing, args, train_rate, full, agreements) -> None:
     med = {(c.kind, c.scenario, c.horizon): statistics.median(c.samples) for c in contestants}
-    cols = [("scenario", 12), ("N", 3), ("env", 8), ("twin", 8), ("env/twin", 9), ("target", 13),
-            ("fmi", 8), ("fmi/twin", 9), ("target", 13), ("FMUGym", 8), ("env/FMUGym", 11), ("target", 15),
-            ("fmi/FMUGym", 11), ("target", 15)]
+    calls = {(c.scenario, c.horizon): c.plant_calls_per_step for c in contestants if c.kind == "twin"}
+    cols = [("scenario", 11), ("N", 2), ("env", 6), ("fmi", 6), ("twin", 6), ("twin-RK4", 8),
+            ("env/twin", 18), ("fmi/twin", 18), ("env/(twin-RK4)", 14), ("FMUGym", 6),
+            ("env/FMUGym", 20), ("fmi/FMUGym", 20)]
     line = "  ".join(f"{title:>{w}}" for title, w in cols)
     print(f"\nbench_speed (issue 7): CPU µs per env step, median of {args.repeats} interleaved repeats of "
-          f"{args.episodes} episode(s) each, resets included; python {platform.python_version()}, {os.cpu_count()} CPUs")
+          f"{args.episodes} episode(s) each, resets included; python {platform.python_version()}, "
+          f"{os.cpu_count()} CPUs; targets at N = {TARGET_HORIZON}")
     print(line)
     print("-" * len(line))
     for name in SCENARIOS:
         for n in HORIZONS:
             env, twin = med.get(("env", name, n)), med.get(("twin", name, n))
             fmi, peer = med.get(("fmi", name, n)), med.get(("peer", name, None))
+            rk4 = med.get(("rk4", name, None))
+            logic = None if rk4 is None else twin - calls[(name, n)] * rk4
             if n not in (0, TARGET_HORIZON):
                 peer = None  # FMUGym is compared at N = 0 and N = 3 only
-            cells = [name, str(n), f"{env:.1f}", f"{twin:.1f}", *ratio_cell(env, twin, ("env", "twin"), n),
-                     "n/a" if fmi is None else f"{fmi:.1f}", *ratio_cell(fmi, twin, ("fmi", "twin"), n),
-                     "" if peer is None else f"{peer:.1f}", *(("", "") if peer is None else
-                                                              ratio_cell(env, peer, ("env", "peer"), n)),
-                     *(("", "") if peer is None else ratio_cell(fmi, peer, ("fmi", "peer"), n))]
+            cells = [name, str(n), f"{env:.1f}", "n/a" if fmi is None else f"{fmi:.1f}", f"{twin:.1f}",
+                     "n/a" if logic is None else f"{logic:.1f}",
+                     ratio_cell(env, twin, ("env", "twin"), n), ratio_cell(fmi, twin, ("fmi", "twin"), n),
+                     ratio_cell(env, logic, None, n), "" if peer is None else f"{peer:.1f}",
+                     "" if peer is None else ratio_cell(env, peer, ("env", "peer"), n),
+                     "" if peer is None else ratio_cell(fmi, peer, ("fmi", "peer"), n)]
             print("  ".join(f"{cell:>{w}}" for cell, (_, w) in zip(cells, cols)))
     print("-" * len(line))
     print(f"{'training, first_order':<40}{train_rate:>12.0f} steps/s over {args.train_steps} steps "
@@ -250,7 +275,8 @@ def main() -> None:
             agreements[(name, n)] = agreement(env, twin, preset(name).episode_steps, args.seed)
     measure(contestants, args.repeats, args.seed)
     for c in contestants:
-        c.env.close()
+        if hasattr(c.env, "close"):
+            c.env.close()
     print("  training ...", file=sys.stderr, flush=True)
     train_rate = training_steps_per_s(args.train_steps)
     full = None

@@ -17,8 +17,9 @@ the scenario's TuningConfig is read, as data):
 - Observation, 4 features per loop: setpoint, measurement, error, error rate, divided by the loop's
   measurement scale and clipped to [-10, 10]; measurement and actuator noise; divergence ends the episode.
 
-Random draws (setpoints, noise) are made from `self.np_random` in the order the environment makes them,
-so with the same seed and actions a twin reproduces PidTuningEnv's trajectory (see `agreement`).
+Random draws are made from `self.np_random` in the order the environment makes them (at reset the
+episode's measurement noise, then its actuator noise, then the first setpoint; later setpoints as they
+come), so with the same seed and actions a twin reproduces PidTuningEnv's trajectory (see `agreement`).
 
 The twins hold vectors (action, gains, state, observation) in numpy, as a user would write them; the
 per-loop arithmetic of the PID, the reward and the plant's right-hand side runs on Python floats, because
@@ -67,7 +68,8 @@ class RK4Plant:
     """A plant integrated by fixed-step RK4: ceil(Ts / fixed_step) sub-steps of Ts / n per sample.
 
     `x` is the state, a numpy vector; `step(u)` takes the loop inputs (floats) and returns the loop
-    outputs (floats), NaN when a state became non-finite (the last finite state is kept).
+    outputs (floats), NaN when a state became non-finite (the last finite state is kept). `calls`
+    counts the steps (the benchmark uses it to split the twin's time into RK4 and the rest).
     """
 
     def __init__(self, values: dict[str, float], inputs: list[str], outputs: list[str],
@@ -76,12 +78,14 @@ class RK4Plant:
         self.inputs, self.outputs = inputs, outputs
         self.n_sub = max(1, math.ceil(sample_time_s / fixed_step_s - 1e-9))
         self.dt = sample_time_s / self.n_sub
+        self.calls = 0
         self.reset()
 
     def reset(self) -> None:
         self.x = np.array(self.initial_state(), dtype=float)
 
     def step(self, u) -> list[float]:
+        self.calls += 1
         for name, value in zip(self.inputs, u):
             self.v[name] = value
         x, dt = self.x.tolist(), self.dt
@@ -264,10 +268,16 @@ class TwinEnv(gym.Env):
         self.action_space = gym.spaces.Box(-1.0, 1.0, (len(ranges),), np.float32)
         self.observation_space = gym.spaces.Box(-OBS_LIMIT, OBS_LIMIT, (4 * n,), np.float32)
 
+    def _noise(self, table, std, k):
+        """Row k of a noise table drawn at reset (one row per sample), extended past the episode's end."""
+        if k >= len(table):
+            table.extend(self.np_random.normal(0.0, std, (k + 1 - len(table), self.n)))
+        return table[k]
+
     def _measure(self, y):
         y = np.array(y)
         if self.noise_y > 0:
-            y = y + self.np_random.normal(0.0, self.noise_y, self.n)
+            y = y + self._noise(self.noise_y_table, self.noise_y, self.k)
         return y
 
     def _gains(self, smoothed) -> list[float]:
@@ -312,6 +322,10 @@ class TwinEnv(gym.Env):
         self.plant.reset()
         self.pid.reset()
         self.smoothed = None
+        # Noise for the whole episode, measurement then actuator, drawn before the first setpoint.
+        steps = (self.episode_steps + 1, self.n)
+        self.noise_y_table = list(self.np_random.normal(0.0, self.noise_y, steps)) if self.noise_y > 0 else None
+        self.noise_u_table = list(self.np_random.normal(0.0, self.noise_u, steps)) if self.noise_u > 0 else None
         self._draw_setpoint()
         self.measurement = self._measure(self.plant.measure(self.plant.x.tolist()))
         self.previous_error = self.setpoint - self.measurement
@@ -327,7 +341,7 @@ class TwinEnv(gym.Env):
 
         u = np.array(self.pid(setpoint.tolist(), measurement.tolist(), gains))
         if self.noise_u > 0:
-            u = u + self.np_random.normal(0.0, self.noise_u, self.n)
+            u = u + self._noise(self.noise_u_table, self.noise_u, self.k)
         y = self.plant.step(np.clip(u, self.u_min, self.u_max).tolist())
 
         self.k += 1
