@@ -1,7 +1,9 @@
 """Typed configuration of one tuning problem: plant, prior, loops, controller, strategies, reward, episodes.
 
-These dataclasses are the single source of truth for every default. The YAML scenario loader
-builds them (validating at the edge); the environment, training and evaluation only read them.
+The environment, training and evaluation read these frozen dataclasses; the scenario loader builds
+them from a validated scenario file. Their defaults are NOT written here: each one is read from the
+scenario schema (prlpid_fmi/schema/model.py, one pydantic class per YAML section), where it sits
+with its unit and constraint. To change a default, change it there.
 Units: seconds for times, samples ("steps") for counts, plant units for setpoints and signals.
 """
 from __future__ import annotations
@@ -10,7 +12,9 @@ from dataclasses import dataclass, field
 from typing import Optional
 
 from .control.reward import RewardWeights
-from .control.smoothing import DEFAULT_WINDOW
+from .schema import model as _m
+from .schema.model import default as _d
+from .schema.types import Algorithm, AntiWindup, DisturbanceKind, GainMapping, GainScale, Smoothing, VecEnv
 
 INF = float("inf")
 
@@ -21,7 +25,11 @@ class GainRange:
 
     low: float
     high: float
-    scale: str = "log"
+    scale: GainScale = _d(_m.GainsModel, "Kp")[2]
+
+
+def _gain(name: str) -> GainRange:
+    return GainRange(*_d(_m.GainsModel, name))
 
 
 @dataclass(frozen=True)
@@ -30,19 +38,22 @@ class LoopConfig:
 
     measurement_scale (plant units) normalises errors for the observation and the reward, so that
     the reward's clip bounds and bonus band mean the same for a level in cm and an angle in rad.
+    control_scale [input units] normalises |u_k - u_{k-1}|; None: u_max - u_min when both are finite,
+    else Kp.high * measurement_scale. divergence_bound: |measurement - setpoint| / measurement_scale
+    past this ends the episode.
     """
 
     input: str
     output: str
-    setpoint_range: tuple[float, float] = (0.0, 1.0)
-    u_min: float = -INF
-    u_max: float = INF
-    Kp: GainRange = GainRange(0.1, 10.0, "log")
-    Ti: GainRange = GainRange(0.1, 100.0, "log")
-    Td: GainRange = GainRange(0.0, 1.0, "linear")
-    measurement_scale: float = 1.0
-    divergence_bound: float = 100.0  # |measurement - setpoint| / measurement_scale past this ends the episode
-    control_scale: Optional[float] = None  # [input units] normalises |u_k - u_{k-1}|; None: u_max - u_min if finite
+    setpoint_range: tuple[float, float] = _d(_m.LoopModel, "setpoint_range")
+    u_min: float = _d(_m.LoopModel, "u_limits")[0]
+    u_max: float = _d(_m.LoopModel, "u_limits")[1]
+    Kp: GainRange = _gain("Kp")
+    Ti: GainRange = _gain("Ti")
+    Td: GainRange = _gain("Td")
+    measurement_scale: float = _d(_m.LoopModel, "measurement_scale")
+    divergence_bound: float = _d(_m.LoopModel, "divergence_bound")
+    control_scale: Optional[float] = _d(_m.LoopModel, "control_scale")
 
 
 @dataclass(frozen=True)
@@ -54,7 +65,7 @@ class Disturbance:
     output (measured variable) is named `target`.
     """
 
-    kind: str
+    kind: DisturbanceKind
     target: str
     start_step: int
     value: float
@@ -70,7 +81,7 @@ class PriorConfig:
     whose state cannot be copied, the prior is re-initialised each step from these plant values.
     """
 
-    fmu: Optional[str] = None
+    fmu: Optional[str] = _d(_m.PriorModel, "fmu")
     parameters: dict = field(default_factory=dict)
     state_map: dict = field(default_factory=dict)
 
@@ -83,10 +94,10 @@ class AnchorBands:
     loop's Td range width; coupling: additive band for the coupling coefficients.
     """
 
-    Kp: float = 3.0
-    Ti: float = 3.0
-    Td: float = 0.1
-    coupling: float = 0.1
+    Kp: float = _d(_m.AnchorBandsModel, "Kp")
+    Ti: float = _d(_m.AnchorBandsModel, "Ti")
+    Td: float = _d(_m.AnchorBandsModel, "Td")
+    coupling: float = _d(_m.AnchorBandsModel, "coupling")
 
 
 @dataclass(frozen=True)
@@ -96,30 +107,30 @@ class TuningConfig:
     fmu: str
     loops: tuple[LoopConfig, ...]
     plant_parameters: dict = field(default_factory=dict)
-    sample_time_s: float = 0.1
-    fmi_version: int = 2  # for bundled plants only
+    sample_time_s: float = _d(_m.PlantModel, "sample_time")
+    fmi_version: int = _d(_m.PlantModel, "fmi_version")  # for bundled plants only
     prior: PriorConfig = PriorConfig()
     # controller
-    anti_windup: str = "clamping"
-    derivative_filter_N: Optional[float] = None
-    coupled: bool = False  # cross-axis coupled PID (paper eq. 26-27), needs 3 loops
-    coupling_range: float = 0.5  # coupling coefficients in [-c, c]
-    gain_mapping: str = "anchored"  # anchored (action 0 = tuned fixed PID) | absolute (paper: whole ranges)
+    anti_windup: AntiWindup = _d(_m.ControllerModel, "anti_windup")
+    derivative_filter_N: Optional[float] = _d(_m.ControllerModel, "derivative_filter_N")
+    coupled: bool = _d(_m.ControllerModel, "coupled")  # cross-axis coupled PID (paper eq. 26-27), needs 3 loops
+    coupling_range: float = _d(_m.ControllerModel, "coupling_range")  # coupling coefficients in [-c, c]
+    gain_mapping: GainMapping = _d(_m.ControllerModel, "gain_mapping")  # anchored (action 0 = tuned fixed PID) | absolute
     anchor_bands: AnchorBands = AnchorBands()
     # strategies
-    forecast_horizon: int = 3  # N; 0 = plain one-step reward
-    smoothing: str = "era"  # none | sma | lwma | era
-    smoothing_window: int = DEFAULT_WINDOW
-    smoothing_alpha: Optional[float] = None  # None: the method's default (LWMA 0.2, ERA 0.3)
+    forecast_horizon: int = _d(_m.StrategiesModel, "forecast_horizon")  # N; 0 = plain one-step reward
+    smoothing: Smoothing = _d(_m.StrategiesModel, "smoothing")
+    smoothing_window: int = _d(_m.StrategiesModel, "smoothing_window")
+    smoothing_alpha: Optional[float] = _d(_m.StrategiesModel, "smoothing_alpha")  # None: the method's default
     reward: RewardWeights = RewardWeights()
-    divergence_penalty: float = -100.0
+    divergence_penalty: float = _d(_m.RewardModel, "divergence_penalty")
     # episodes
-    episode_steps: int = 200
-    setpoint_hold_steps: int = 100
+    episode_steps: int = _d(_m.TrainingModel, "episode_steps")
+    setpoint_hold_steps: int = _d(_m.TrainingModel, "setpoint_hold_steps")
     setpoint_schedule: Optional[tuple[tuple[int, tuple[float, ...]], ...]] = None  # ((step, setpoints), ...)
     disturbances: tuple[Disturbance, ...] = ()
-    measurement_noise_std: float = 0.0  # plant units, Gaussian, every loop
-    actuator_noise_std: float = 0.0  # control-signal units, Gaussian, every loop
+    measurement_noise_std: float = _d(_m.TrainingModel, "measurement_noise_std")  # plant units, Gaussian
+    actuator_noise_std: float = _d(_m.TrainingModel, "actuator_noise_std")  # control-signal units, Gaussian
     randomize: dict = field(default_factory=dict)  # {FMU parameter: (low, high)} drawn uniformly per episode
 
     @property
@@ -127,31 +138,35 @@ class TuningConfig:
         return len(self.loops)
 
 
+def _agent(key: str):
+    return _d(_m.AgentModel, key)
+
+
 @dataclass(frozen=True)
 class AgentConfig:
-    """The RL agent and its training budget (paper Table 1 / Algorithm 1 defaults for PPO)."""
+    """The RL agent and its training budget (meaning and unit of each field: schema.model.AgentModel)."""
 
-    algorithm: str = "ppo"  # ppo | sac | td3
-    total_timesteps: int = 500_000
-    seed: int = 0
-    n_envs: int = 8  # parallel episodes in one process: batches the policy's forward pass (measured, architecture.md)
-    vec_env: str = "dummy"  # dummy (one process) | subproc (one process per env)
-    normalize: bool = False  # VecNormalize on observations and rewards
-    learning_rate: float = 3e-4
-    gamma: float = 0.99
-    net_arch: tuple[int, ...] = (64, 64)  # shared tanh MLP of the actor and the critic (Table 1)
+    algorithm: Algorithm = _agent("algorithm")
+    total_timesteps: int = _agent("total_timesteps")
+    seed: int = _agent("seed")
+    n_envs: int = _agent("n_envs")
+    vec_env: VecEnv = _agent("vec_env")
+    normalize: bool = _agent("normalize")
+    learning_rate: float = _agent("learning_rate")
+    gamma: float = _agent("gamma")
+    net_arch: tuple[int, ...] = _agent("net_arch")
     # PPO
-    n_steps: int = 256  # per env, per rollout: 8 x 256 = Table 1's 2048 samples per update
-    batch_size: int = 256
-    n_epochs: int = 10
-    gae_lambda: float = 0.95
-    clip_range: float = 0.2
-    ent_coef: float = 0.0
+    n_steps: int = _agent("n_steps")
+    batch_size: int = _agent("batch_size")
+    n_epochs: int = _agent("n_epochs")
+    gae_lambda: float = _agent("gae_lambda")
+    clip_range: float = _agent("clip_range")
+    ent_coef: float = _agent("ent_coef")
     # SAC / TD3
-    buffer_size: int = 200_000
-    learning_starts: int = 1_000
-    checkpoint_every: int = 50_000  # timesteps between checkpoints
-    torch_threads: int = 1  # 64-64 MLPs train fastest on one CPU thread; more only adds contention
+    buffer_size: int = _agent("buffer_size")
+    learning_starts: int = _agent("learning_starts")
+    checkpoint_every: int = _agent("checkpoint_every")
+    torch_threads: int = _agent("torch_threads")
     extra: dict = field(default_factory=dict)  # further keyword arguments for the SB3 algorithm
 
 
@@ -159,6 +174,13 @@ class AgentConfig:
 class BaselineConfig:
     """Search budget of the fixed-PID baseline (differential evolution over constant gains)."""
 
-    episodes: int = 3  # seeded training episodes per cost evaluation
-    maxiter: int = 20  # generations
-    popsize: int = 8  # population = popsize x number of parameters
+    episodes: int = _d(_m.BaselineModel, "episodes")  # seeded training episodes per cost evaluation
+    maxiter: int = _d(_m.BaselineModel, "maxiter")  # generations
+    popsize: int = _d(_m.BaselineModel, "popsize")  # population = popsize x number of parameters
+
+
+@dataclass(frozen=True)
+class DeployConfig:
+    """When a tuned controller may be deployed: its peak sensitivity Ms = max |S(jw)| stays <= max_sensitivity."""
+
+    max_sensitivity: float = _d(_m.DeployModel, "max_sensitivity")

@@ -190,7 +190,7 @@ def test_cli_bad_scenario_gives_one_line_and_exit_2(case, tmp_path, capsys):
 
 
 def test_cli_errors_in_a_real_process(tmp_path):
-    bad = _write(tmp_path, {"name": "x", "plant": {"fmu": "nowhere.fmu", "loops": []}})
+    bad = _write(tmp_path, {"name": "x", "plant": {"fmu": "nowhere.fmu", "loops": [{"input": "u", "output": "y"}]}})
     for args in (["validate", str(bad)], ["tune", str(bad)], ["init", str(tmp_path / "missing.fmu")],
                  ["inspect", str(bad)], ["evaluate", str(tmp_path)]):
         proc = subprocess.run([sys.executable, "-m", "prlpid_fmi.cli", *args], capture_output=True, text=True)

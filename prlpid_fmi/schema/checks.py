@@ -1,0 +1,137 @@
+"""Checks that need more than one value: the FMU behind a scenario, and what earlier sections said.
+
+A scenario is validated in one pass, in the order of its sections (plant first). ``State`` is passed
+in the pydantic validation context and collects what later checks need: the FMU's description,
+the number of loops and their outputs, the episode length in force, the chosen algorithm. A check
+whose inputs were themselves invalid is skipped, so one mistake gives one line. Without a context
+(a model built from Python values, e.g. to dump a resolved scenario) these checks are skipped.
+"""
+from __future__ import annotations
+
+import difflib
+import inspect
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+from typing import Any, Optional
+
+from pydantic import ValidationInfo
+
+from ..errors import PlantError
+from .types import problem
+
+REAL_TYPES = ("Real", "Float64")
+
+
+@dataclass
+class State:
+    """What the validation of one scenario file has learnt so far (see the module docstring)."""
+
+    base_dir: Path
+    fmi_version: int = 2
+    desc: Any = None  # FmuDescription of the plant, once plant.fmu is valid
+    prior_desc: Any = None  # of prior.fmu when given and valid
+    prior_fmu_given: Optional[bool] = None  # None: unknown (prior.fmu invalid)
+    n_loops: Optional[int] = None
+    loop_inputs: list = field(default_factory=list)
+    outputs: list = field(default_factory=list)
+    episode_steps: Optional[int] = None  # of the section being validated (training, then evaluation)
+    training_steps: Optional[int] = None
+    last_step: int = -1  # last at_step of the setpoint schedule being validated
+    algorithm: Optional[str] = None
+
+
+def state_of(info: ValidationInfo) -> Optional[State]:
+    """The State in the validation context, or None (structure-only validation)."""
+    return (info.context or {}).get("state") if isinstance(info.context, dict) else None
+
+
+def did_you_mean(word: str, choices) -> str:
+    close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=1)
+    return f"; did you mean {close[0]!r}?" if close else ""
+
+
+# ---------------------------------------------------------------------------------------------
+# FMU files
+
+def resolve_fmu(value: str, state: State) -> tuple[str, Path]:
+    """(value for the config: a bundled name, or an absolute path; the .fmu file). Raises problem()."""
+    from ..fmu import bundled_fmu, bundled_plant_names
+
+    names = bundled_plant_names()
+    if value in names:
+        try:
+            return value, bundled_fmu(value, state.fmi_version)
+        except PlantError as exc:
+            raise problem(f"cannot build the bundled plant: {exc}".splitlines()[0], "a buildable bundled plant")
+    path = Path(value).expanduser()
+    if not path.is_absolute():
+        path = (state.base_dir / path).resolve()
+    if not path.is_file():
+        raise problem(f"FMU file not found: {path}",
+                      "a path to a .fmu file (relative to the scenario's folder) or a bundled plant: "
+                      + (", ".join(names) or "none found"))
+    return str(path), path
+
+
+def describe(path: Path):
+    """The FmuDescription of an FMU whose archive passed check_archive; problem() otherwise."""
+    from ..fmu import describe_fmu
+    from ..fmu.archive import archive_problems
+
+    problems = archive_problems(path)
+    if problems:
+        raise problem("; ".join(problems), "an FMU: a ZIP archive with a modelDescription.xml and a binary for "
+                      "this platform")
+    try:
+        return describe_fmu(path)
+    except PlantError as exc:
+        text = str(exc).removeprefix(f"{path}: ").removeprefix(f"{path.resolve()}: ")
+        raise problem(text.split(" (expected")[0], "an FMU: a ZIP archive with a modelDescription.xml")
+
+
+def check_variable(desc, name: str, causalities: tuple[str, ...], role: str,
+                   variabilities: Optional[tuple[str, ...]] = None) -> None:
+    """`name` is a real variable of the FMU with one of `causalities` (and, for parameters, `variabilities`)."""
+    v = desc.variable(name)
+    wanted = " or ".join(causalities)
+    pool = [x.name for x in desc.variables if x.causality in causalities]
+    if v is None:
+        raise problem(f"the FMU {desc.path.name} has no variable {name!r}",
+                      f"{role} ({wanted}) of the FMU: {', '.join(pool) or 'none'}{did_you_mean(name, pool)}")
+    if v.causality not in causalities:
+        raise problem(f"causality mismatch: {name!r} is {v.causality!r} in the FMU, not {wanted}",
+                      f"{role}: {', '.join(pool) or 'none'}")
+    if v.type not in REAL_TYPES:
+        raise problem(f"{name!r} is a {v.type} variable", f"a real (Real/Float64) variable as {role}")
+    if variabilities is not None and v.causality == "parameter" and v.variability not in variabilities:
+        raise problem(f"{name!r} is a {v.variability} parameter and cannot change during a run",
+                      "an input or a tunable parameter")
+
+
+# ---------------------------------------------------------------------------------------------
+# agent.extra against the Stable-Baselines3 constructor
+
+# constructor arguments the tool sets itself (prlpid_fmi.train.build_model); agent.<key> covers the rest
+_SET_BY_THE_TOOL = ("policy", "env", "seed", "device", "tensorboard_log", "verbose", "policy_kwargs", "_init_setup_model")
+
+
+@lru_cache(maxsize=None)
+def algorithm_arguments(algorithm: str) -> tuple[str, ...]:
+    """Keyword arguments of the Stable-Baselines3 class for `algorithm` (ppo | sac | td3)."""
+    import stable_baselines3
+
+    cls = getattr(stable_baselines3, algorithm.upper())
+    return tuple(p for p in inspect.signature(cls.__init__).parameters if p != "self")
+
+
+def check_extra_key(key: str, algorithm: str, agent_keys: tuple[str, ...]) -> None:
+    """One agent.extra key: a constructor argument of the algorithm that no agent.<key> already sets."""
+    if key in agent_keys:
+        raise problem(f"{key!r} is set by agent.{key}", f"agent.{key} instead of agent.extra.{key}")
+    if key in _SET_BY_THE_TOOL:
+        raise problem(f"{key!r} is set by prlpid-fmi itself", "another constructor argument")
+    known = [a for a in algorithm_arguments(algorithm) if a not in _SET_BY_THE_TOOL and a not in agent_keys]
+    if key not in known:
+        raise problem(f"not an argument of stable_baselines3.{algorithm.upper()}",
+                      f"one of {', '.join(known)}{did_you_mean(key, known)}")

@@ -1,0 +1,90 @@
+"""Value types of the scenario schema: numbers, integers, flags, names, and the choice Literals.
+
+Every type here checks one value and raises ``problem(...)`` (a pydantic custom error that carries a
+short problem and, optionally, what was expected); ``messages.py`` turns those into the one-line
+``<file>: <key.path>: <problem> (got …; expected …)`` form. Bounds are pydantic ``Field`` constraints,
+so they show up in the JSON Schema (``exclusiveMinimum``, ``maximum``, …).
+
+Numbers: YAML 1.1 reads ``3e-4`` as a string, so numeric strings are accepted; booleans and NaN
+never are. ``number()`` is finite unless ``infinite=True`` (only the actuator limits allow ``.inf``).
+"""
+from __future__ import annotations
+
+import math
+import re
+from typing import Annotated, Any, Literal, Optional, get_args
+
+from pydantic import BeforeValidator, Field, Strict
+from pydantic_core import PydanticCustomError
+
+from ..control.pid import ANTI_WINDUP_MODES
+from ..control.smoothing import SMOOTHING_METHODS
+
+# choices (the tuples of names live where the behaviour lives; these Literals type the schema and config)
+AntiWindup = Literal[ANTI_WINDUP_MODES]  # clamping | back_calculation | none
+Smoothing = Literal[SMOOTHING_METHODS]  # none | sma | lwma | era
+GainScale = Literal["log", "linear"]
+GainMapping = Literal["anchored", "absolute"]
+Algorithm = Literal["ppo", "sac", "td3"]
+VecEnv = Literal["dummy", "subproc"]
+DisturbanceType = Literal["step", "pulse", "parameter_change"]
+DisturbanceKind = Literal["fmu", "actuator", "measurement"]  # config.Disturbance.kind
+LOOP_TARGETS = ("actuator", "measurement")  # disturbance targets that act on a loop, not on the FMU
+
+GAIN_SCALES: tuple[str, ...] = get_args(GainScale)
+GAIN_MAPPINGS: tuple[str, ...] = get_args(GainMapping)
+ALGORITHMS: tuple[str, ...] = get_args(Algorithm)
+VEC_ENVS: tuple[str, ...] = get_args(VecEnv)
+DISTURBANCE_TYPES: tuple[str, ...] = get_args(DisturbanceType)
+
+
+def problem(text: str, expected: Optional[str] = None, got: Optional[str] = None) -> PydanticCustomError:
+    """A validation error for one value: `text` is the problem; `expected` None = derived from the schema;
+    `got` None = the value as written in the file."""
+    ctx: dict[str, Any] = {"problem": text}
+    if expected is not None:
+        ctx["expected"] = expected
+    if got is not None:
+        ctx["got"] = got
+    return PydanticCustomError("scenario", "{problem}", ctx)
+
+
+_NUMBER_TEXT = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
+
+
+def _number(value: Any) -> Any:
+    if isinstance(value, str) and _NUMBER_TEXT.match(value.strip()):
+        return float(value)
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise problem("not a number")
+    if math.isnan(value):
+        raise problem("not a number (NaN)")
+    return value
+
+
+def _integer(value: Any) -> Any:
+    if isinstance(value, float) and value.is_integer():
+        return int(value)
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise problem("not an integer")
+    return value
+
+
+def number(infinite: bool = False, **bounds: float) -> Any:
+    """A float type with pydantic bounds (gt, ge, lt, le); finite unless `infinite`."""
+    return Annotated[float, Field(allow_inf_nan=infinite, **bounds), BeforeValidator(_number)]
+
+
+def integer(**bounds: int) -> Any:
+    """An int type with pydantic bounds; 200.0 is read as 200, true/false and 1.5 are refused."""
+    return Annotated[int, Field(**bounds), BeforeValidator(_integer)]
+
+
+Finite = number()
+Positive = number(gt=0)
+NonNegative = number(ge=0)
+Fraction = number(ge=0, le=1)
+Count = integer(ge=1)  # samples, sizes
+Steps = integer(ge=0)  # sample indices, horizons
+Flag = Annotated[bool, Strict()]
+Name = Annotated[str, Strict(), Field(min_length=1)]
