@@ -1,6 +1,7 @@
 """prlpid-fmi command line. Each command parses its arguments and calls one library function.
 
-Errors the user can fix (PrlPidError) are printed as one line on stderr with exit code 2.
+Errors the user can fix (PrlPidError, a bad argument, an OS error such as a full disk) are printed as
+one line on stderr with exit code 2. Results go to stdout, progress to stderr; -q keeps only results.
 """
 from __future__ import annotations
 
@@ -8,16 +9,42 @@ import argparse
 import sys
 import warnings
 
+from . import __version__
 from .errors import PrlPidError
+
+PROG = "prlpid-fmi"
+
+
+def _say(args: argparse.Namespace, text: str) -> None:
+    """Print informational output unless --quiet."""
+    if not args.quiet:
+        print(text)
+
+
+def _scenario(arg: str):
+    """A scenario argument: an existing path, else a bundled scenario's name."""
+    from .presets import resolve_scenario
+
+    return resolve_scenario(arg)
+
+
+def _plant_names(requested: list[str]) -> list[str]:
+    from .errors import PlantError
+    from .fmu.build import PLANT_SOURCES, bundled_plant_names
+
+    names = bundled_plant_names()
+    if not names:
+        raise PlantError(f"{PLANT_SOURCES}: no bundled plant sources found (expected folders with a model.yaml; "
+                         "is the package installed completely?)")
+    return requested or names
 
 
 def _build_fmus(args: argparse.Namespace) -> int:
-    from .fmu import build_fmu, bundled_plant_names
+    from .fmu import build_fmu
 
-    names = args.plants or bundled_plant_names()
-    for name in names:
+    for name in _plant_names(args.plants):
         path = build_fmu(name, args.fmi_version, args.out)
-        print(f"built {path}")
+        _say(args, f"built {path}")
     return 0
 
 
@@ -31,6 +58,7 @@ def _inspect(args: argparse.Namespace) -> int:
 def _check_plants(args: argparse.Namespace) -> int:
     from .fmu.check import step_response_report
 
+    _plant_names([])
     print(step_response_report(args.fmi_version))
     return 0
 
@@ -38,12 +66,13 @@ def _check_plants(args: argparse.Namespace) -> int:
 def _validate(args: argparse.Namespace) -> int:
     from .scenario import load_scenario
 
-    s = load_scenario(args.scenario)
+    path = _scenario(args.scenario)
+    s = load_scenario(path)
     t = s.tuning
-    print(f"{args.scenario}: ok: {s.name}: plant {t.fmu}, {t.n_loops} loop(s) "
-          f"({', '.join(f'{l.input} -> {l.output}' for l in t.loops)}), Ts = {t.sample_time_s:g} s, "
-          f"{s.agent.algorithm.upper()} for {s.agent.total_timesteps} steps, forecast N = {t.forecast_horizon}, "
-          f"smoothing {t.smoothing}")
+    _say(args, f"{path}: ok: {s.name}: plant {t.fmu}, {t.n_loops} loop(s) "
+               f"({', '.join(f'{l.input} -> {l.output}' for l in t.loops)}), Ts = {t.sample_time_s:g} s, "
+               f"{s.agent.algorithm.upper()} for {s.agent.total_timesteps} steps, forecast N = {t.forecast_horizon}, "
+               f"smoothing {t.smoothing}")
     return 0
 
 
@@ -57,9 +86,10 @@ def _init(args: argparse.Namespace) -> int:
 def _tune(args: argparse.Namespace) -> int:
     from .run import tune
 
-    run_dir = tune(args.scenario, timesteps=args.timesteps, seed=args.seed, out=args.out, resume=args.resume,
-                   progress_bar=not args.no_progress, baseline=not args.no_baseline)
-    print((run_dir / "report.md").read_text())
+    run_dir = tune(_scenario(args.scenario), timesteps=args.timesteps, seed=args.seed, out=args.out,
+                   resume=args.resume, progress_bar=not (args.no_progress or args.quiet),
+                   baseline=not args.no_baseline)
+    _say(args, (run_dir / "report.md").read_text())
     print(f"run directory: {run_dir}")
     return 0
 
@@ -67,8 +97,8 @@ def _tune(args: argparse.Namespace) -> int:
 def _evaluate(args: argparse.Namespace) -> int:
     from .run import evaluate_run
 
-    out_dir = evaluate_run(args.run_dir, args.scenario)
-    print((out_dir / "report.md").read_text())
+    out_dir = evaluate_run(args.run_dir, None if args.scenario is None else _scenario(args.scenario))
+    _say(args, (out_dir / "report.md").read_text())
     print(f"evaluation written to {out_dir}")
     return 0
 
@@ -76,9 +106,11 @@ def _evaluate(args: argparse.Namespace) -> int:
 def _export(args: argparse.Namespace) -> int:
     from .run import export_schedule
 
-    path, comparison = export_schedule(args.run_dir, args.output, args.schedule_by, args.points, args.replay)
+    scenario = None if args.scenario is None else _scenario(args.scenario)
+    path, comparison = export_schedule(args.run_dir, args.output, args.schedule_by, args.points, args.replay,
+                                       scenario_path=scenario, force=args.force)
     print(f"gain schedule written to {path}")
-    if comparison:
+    if comparison and not args.quiet:
         p, s = comparison["policy"]["overall"], comparison["schedule"]["overall"]
         print(f"{'metric':<24}{'live policy':>14}{'schedule (plain PID)':>22}")
         for k in p:
@@ -87,62 +119,87 @@ def _export(args: argparse.Namespace) -> int:
     return 0
 
 
-def make_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="prlpid-fmi", description=__doc__.splitlines()[0])
-    sub = parser.add_subparsers(dest="command", required=True)
+class _Parser(argparse.ArgumentParser):
+    """argparse with the tool's error convention: one line on stderr, exit code 2."""
 
-    p = sub.add_parser("build-fmus", help="build the bundled plants into fmus/<Name>.fmu")
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+SCENARIO_HELP = "scenario YAML file, or the name of a bundled scenario (first_order, two_tank, ...)"
+
+
+def make_parser() -> argparse.ArgumentParser:
+    parser = _Parser(prog=PROG, description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
+    parser.add_argument("-q", "--quiet", action="store_true", help="print only results and errors (no progress)")
+    # -q is also accepted after the command; SUPPRESS keeps it from resetting a -q given before it
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("-q", "--quiet", action="store_true", default=argparse.SUPPRESS,
+                        help="print only results and errors (no progress)")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    def command(name: str, func, help: str) -> argparse.ArgumentParser:
+        p = sub.add_parser(name, help=help, description=help, parents=[common])
+        p.set_defaults(func=func)
+        return p
+
+    p = command("build-fmus", _build_fmus, "build the bundled plants into FMUs (default: the per-user FMU cache)")
     p.add_argument("plants", nargs="*", help="plant names (default: all bundled plants)")
     p.add_argument("--fmi-version", type=int, choices=(2, 3), default=2,
-                   help="FMI version (2 writes fmus/<Name>.fmu, 3 writes fmus/fmi3/<Name>.fmu)")
-    p.add_argument("--out", default=None, help="output directory (default: the repository's fmus/)")
-    p.set_defaults(func=_build_fmus)
+                   help="FMI version (2 writes <out>/<Name>.fmu, 3 writes <out>/fmi3/<Name>.fmu)")
+    p.add_argument("--out", default=None,
+                   help="output directory (default: the per-user cache, e.g. ~/.cache/prlpid-fmi/<version>/fmus)")
 
-    p = sub.add_parser("inspect", help="show what an FMU offers and whether it can be a plant and a prior")
+    p = command("inspect", _inspect, "show what an FMU offers and whether it can be a plant and a prior")
     p.add_argument("fmu", help="path to a .fmu file")
-    p.set_defaults(func=_inspect)
 
-    p = sub.add_parser("validate", help="check a scenario file; one clear line per mistake")
-    p.add_argument("scenario", help="scenario YAML file")
-    p.set_defaults(func=_validate)
+    p = command("validate", _validate, "check a scenario file; one clear line per mistake")
+    p.add_argument("scenario", help=SCENARIO_HELP)
 
-    p = sub.add_parser("init", help="print a ready scenario for an FMU (redirect it to a .yaml file)")
+    p = command("init", _init, "print a ready scenario for an FMU (redirect it to a .yaml file)")
     p.add_argument("fmu", help="path to a .fmu file")
-    p.set_defaults(func=_init)
 
-    p = sub.add_parser("tune", help="train the adaptive PID, compare it with a tuned fixed PID, export the schedule")
-    p.add_argument("scenario", help="scenario YAML file")
-    p.add_argument("--timesteps", type=int, default=None, help="training steps (default: agent.total_timesteps)")
-    p.add_argument("--seed", type=int, default=None, help="seed (default: agent.seed)")
+    p = command("tune", _tune, "train the adaptive PID, compare it with a tuned fixed PID, export the schedule")
+    p.add_argument("scenario", help=SCENARIO_HELP)
+    p.add_argument("--timesteps", type=int, default=None, help="training steps >= 1 (default: agent.total_timesteps)")
+    p.add_argument("--seed", type=int, default=None, help="seed >= 0 (default: agent.seed)")
     p.add_argument("--out", default=None, help="run directory (default: runs/<name>-<UTC time>; never overwritten)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out from its latest checkpoint")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--no-progress", action="store_true", help="no progress on stderr")
     p.add_argument("--no-baseline", action="store_true", help="skip tuning the fixed-PID baseline")
-    p.set_defaults(func=_tune)
 
-    p = sub.add_parser("evaluate", help="re-evaluate a trained policy (into RUN_DIR/evaluations/<n>/)")
+    p = command("evaluate", _evaluate, "re-evaluate a trained policy (into RUN_DIR/evaluations/<n>/)")
     p.add_argument("run_dir")
-    p.add_argument("--scenario", default=None, help="use this scenario's evaluation (setpoints, disturbances)")
-    p.set_defaults(func=_evaluate)
+    p.add_argument("--scenario", default=None,
+                   help="use this scenario's evaluation (setpoints, disturbances); a file or a bundled name")
 
-    p = sub.add_parser("export", help="write the tuned gain schedule as CSV for a plain PID")
+    p = command("export", _export, "write the tuned gain schedule as CSV for a plain PID")
     p.add_argument("run_dir")
-    p.add_argument("-o", "--output", required=True, help="CSV file to write")
+    p.add_argument("-o", "--output", required=True,
+                   help="CSV file to write (a new file outside the run's own files)")
+    p.add_argument("--force", action="store_true", help="replace an existing output file (never a run's own file)")
     p.add_argument("--schedule-by", default="setpoint",
                    help="setpoint, measurement, or an FMU variable name (default: setpoint)")
     p.add_argument("--points", type=int, default=9, help="number of operating points (default: 9)")
     p.add_argument("--replay", action="store_true",
                    help="run the table as a plain gain-scheduled PID on the FMU and compare with the policy")
-    p.set_defaults(func=_export)
+    p.add_argument("--scenario", default=None,
+                   help="with --replay: replay on this scenario's evaluation instead of the run's own")
 
-    p = sub.add_parser("check-plants", help="build every bundled plant and check its open-loop step response")
+    p = command("check-plants", _check_plants, "build every bundled plant and check its open-loop step response")
     p.add_argument("--fmi-version", type=int, choices=(2, 3), default=2)
-    p.set_defaults(func=_check_plants)
     return parser
 
 
 def _one_line_warning(message, category, filename, lineno, line=None) -> str:
-    return f"prlpid-fmi: warning: {message}\n"
+    return f"{PROG}: warning: {message}\n"
+
+
+def _os_error_line(exc: OSError) -> str:
+    """'<file>: <reason>' for an OSError (disk full, permission, ...)."""
+    reason = exc.strerror or str(exc)
+    return f"{exc.filename}: {reason}" if exc.filename else reason
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -151,10 +208,13 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args)
     except PrlPidError as exc:
-        print(f"prlpid-fmi: error: {exc}", file=sys.stderr)
+        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"{PROG}: error: {_os_error_line(exc)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("prlpid-fmi: interrupted", file=sys.stderr)
+        print(f"\n{PROG}: interrupted", file=sys.stderr)
         return 130
 
 

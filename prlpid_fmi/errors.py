@@ -11,3 +11,7 @@ class ScenarioError(PrlPidError):
 
 class PlantError(PrlPidError):
     """An FMU cannot be loaded or used as a plant or prior."""
+
+
+class RunError(PrlPidError):
+    """A run directory or an output file cannot be used as asked (exists, missing files, owned by a run)."""

@@ -7,8 +7,6 @@ coupling: (n, 6)}. Signal names and units come from the config's loops (the FMU 
 from __future__ import annotations
 
 import csv
-import os
-import tempfile
 from pathlib import Path
 from typing import Optional
 
@@ -21,6 +19,7 @@ import numpy as np  # noqa: E402
 
 from .config import TuningConfig  # noqa: E402
 from .control import COUPLING_NAMES  # noqa: E402
+from .rundir import write_atomic  # noqa: E402
 
 DPI = 110
 
@@ -28,21 +27,11 @@ __all__ = ["plot_response", "plot_control_signal", "plot_gains", "plot_learning_
 
 
 def _save(fig, path) -> Path:
-    """Save fig as PNG via a temporary file in the same directory and os.replace (atomic); close fig."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".part", dir=path.parent)
-    os.close(fd)
+    """Save fig as PNG atomically (rundir.write_atomic); close fig."""
     try:
-        fig.savefig(tmp, format="png", dpi=DPI)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+        return write_atomic(path, lambda tmp: fig.savefig(tmp, format="png", dpi=DPI))
     finally:
         plt.close(fig)
-    return path
 
 
 def _units(config: TuningConfig) -> tuple[list[str], list[str]]:

@@ -1,6 +1,7 @@
-"""The paper's six experiments (§4.1-4.6): the training configs of the bundled scenarios/ files.
+"""The bundled scenarios: the paper's six experiments (§4.1-4.6) and the commented template.
 
-scenarios/<name>.yaml is the single source of truth; `preset(name)` is its TuningConfig.
+scenarios/<name>.yaml is the single source of truth; `preset(name)` is its TuningConfig. A bundled
+scenario can be named wherever a scenario file is expected (`prlpid-fmi tune first_order`).
 Gain ranges there were chosen so that the paper's plants are stabilisable inside them at
 Ts = 0.1 s (grid search of fixed PIDs on the ZOH-discretised plants: e.g. 1/(s-1) needs
 1 < Kp < 20 with P action alone; eq. 17 has a negative DC gain and needs Kp < 0).
@@ -10,23 +11,45 @@ from __future__ import annotations
 from functools import lru_cache
 from pathlib import Path
 
+from .bundled import data_dir
 from .config import TuningConfig
-from .errors import PrlPidError
+from .errors import PrlPidError, ScenarioError
 
-SCENARIO_DIR = Path(__file__).resolve().parents[1] / "scenarios"
+SCENARIO_DIR = data_dir("scenarios")
 PRESET_NAMES = ("first_order", "second_order", "first_order_1p5", "time_varying", "two_tank", "quadrotor")
 
 
+def bundled_scenario_names() -> list[str]:
+    """Names of the bundled scenario files (scenarios/<name>.yaml), sorted."""
+    return sorted(p.stem for p in SCENARIO_DIR.glob("*.yaml"))
+
+
 def scenario_path(name: str) -> Path:
-    """Path of a bundled paper scenario."""
-    if name not in PRESET_NAMES:
-        raise PrlPidError(f"unknown preset {name!r}; expected one of: {', '.join(PRESET_NAMES)}")
+    """Path of a bundled scenario (a paper experiment or "template")."""
+    names = bundled_scenario_names()
+    if name not in names:
+        raise PrlPidError(f"unknown preset {name!r}; expected one of: {', '.join(names) or 'none found'}")
     return SCENARIO_DIR / f"{name}.yaml"
+
+
+def resolve_scenario(arg: str | Path) -> Path:
+    """A scenario argument as a file: an existing path wins, else a bundled scenario's name.
+
+    Raises ScenarioError naming the argument and the bundled names when it is neither.
+    """
+    path = Path(arg)
+    if path.exists():
+        return path
+    if str(arg) in bundled_scenario_names():
+        return SCENARIO_DIR / f"{arg}.yaml"
+    names = ", ".join(bundled_scenario_names()) or "none found"
+    raise ScenarioError(f"{arg}: no such scenario file or bundled scenario "
+                        f"(expected a path to a .yaml file or one of: {names})")
 
 
 @lru_cache(maxsize=None)
 def preset(name: str) -> TuningConfig:
-    """The training TuningConfig of one paper experiment (see PRESET_NAMES)."""
+    """The training TuningConfig of one bundled scenario (see PRESET_NAMES)."""
     from .scenario import load_scenario
 
     return load_scenario(scenario_path(name)).tuning

@@ -1,107 +1,25 @@
-"""Run directories: tune a scenario end to end, re-evaluate a trained policy, export its gain schedule.
-
-A run directory holds everything needed to reproduce and judge a run:
-  scenario.yaml    the resolved scenario (every key, defaults filled in)
-  run.json         seed, timesteps, command, start/end time, package versions, platform
-  model.zip        the trained policy (+ vecnormalize.pkl), checkpoints/, tensorboard/, monitor/
-  metrics.json     adaptive policy vs the tuned fixed PID, overall and per interval
-  gains.csv        time, setpoint, measurement, control signal, Kp, Ti, Td, ... at every step
-  schedule.csv     the gain schedule (plain PID table, no neural network)
-  report.md        the comparison as a table
-  *.png            response, control signal, gains over time, learning curve
-Outputs are written atomically; an existing run directory is never overwritten silently.
+"""The three workflows on a run directory: tune a scenario end to end, re-evaluate a trained policy,
+export its gain schedule. The directory's layout and its atomic writes live in rundir.py; an existing
+run directory is never overwritten, and no command writes over a file a run owns.
 """
 from __future__ import annotations
 
 import csv
 import dataclasses
-import datetime as dt
 import io
 import json
-import os
-import platform
 import sys
-from importlib import metadata
 from pathlib import Path
 
 import numpy as np
 
-from .errors import PrlPidError
+from . import rundir as rd
+from .errors import PrlPidError, RunError
+from .rundir import write_atomic, write_json
 from .scenario import Scenario, load_scenario, scenario_to_yaml
 
-PACKAGES = ("prlpid-fmi", "fmpy", "numpy", "scipy", "torch", "stable-baselines3", "gymnasium", "pyyaml", "matplotlib")
 METRIC_COLUMNS = ("ISE", "IAE", "ITAE", "Overshoot", "SettlingTime", "RiseTime", "SteadyStateError",
                   "ControlEffort", "TotalVariation")
-
-
-class RunError(PrlPidError):
-    """A run directory cannot be used as asked (exists, missing files, ...)."""
-
-
-# -- small I/O helpers ---------------------------------------------------------------------------
-def write_text_atomic(path: Path, text: str) -> Path:
-    tmp = path.with_name(path.name + ".part")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
-    return path
-
-
-def write_json(path: Path, data) -> Path:
-    return write_text_atomic(path, json.dumps(data, indent=2, default=_json_default) + "\n")
-
-
-def _json_default(o):
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    raise TypeError(type(o).__name__)
-
-
-def package_versions() -> dict[str, str]:
-    out = {"python": platform.python_version(), "platform": platform.platform()}
-    for name in PACKAGES:
-        try:
-            out[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            out[name] = "not installed"
-    return out
-
-
-def _now() -> str:
-    return dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds")
-
-
-def prepare_run_dir(out: str | Path | None, scenario: Scenario, resume: bool) -> Path:
-    """The run directory: new (default runs/<name>-<UTC time>) or, with resume, an existing one."""
-    if out is None:
-        if resume:
-            raise RunError("--resume needs --out RUN_DIR naming the run to continue")
-        stamp = dt.datetime.now(dt.timezone.utc).strftime("%Y%m%d-%H%M%S")
-        out = Path("runs") / f"{scenario.name}-{stamp}"
-    run_dir = Path(out)
-    if resume:
-        if not (run_dir / "scenario.yaml").is_file():
-            raise RunError(f"{run_dir}: nothing to resume (no scenario.yaml; expected a run directory from `tune`)")
-        return run_dir
-    if run_dir.exists() and any(run_dir.iterdir()):
-        raise RunError(f"{run_dir}: run directory exists and is not empty (got --out {run_dir}; "
-                       "expected a new directory, or --resume to continue that run)")
-    run_dir.mkdir(parents=True, exist_ok=True)
-    return run_dir
-
-
-def latest_checkpoint(run_dir: Path, trained_timesteps: int = 0) -> tuple[Path | None, int]:
-    """(model file with the most timesteps, its timesteps): a checkpoint, or model.zip after a finished
-    training (run.json's trained_timesteps), or (None, 0)."""
-    best: tuple[Path | None, int] = (None, 0)
-    for p in (run_dir / "checkpoints").glob("model_*_steps.zip"):
-        steps = int(p.stem.split("_")[1])
-        if steps > best[1]:
-            best = (p, steps)
-    if (run_dir / "model.zip").is_file() and trained_timesteps >= best[1]:
-        best = (run_dir / "model.zip", trained_timesteps)
-    return best
 
 
 # -- trajectories to CSV ---------------------------------------------------------------------------
@@ -137,22 +55,34 @@ def _policy(run_dir: Path, algorithm: str):
     from .evaluate import model_policy
     from .train import load_model
 
-    model = load_model(run_dir / "model.zip", algorithm)
+    path = run_dir / rd.MODEL
+    try:
+        model = load_model(path, algorithm)
+    except Exception as exc:  # a damaged file can fail in zipfile, pickle or torch: all mean the same here
+        raise RunError(f"{path}: cannot load the trained policy ({type(exc).__name__}: {exc}; "
+                       f"expected a {algorithm.upper()} model.zip written by `tune`)") from None
     vecnorm = None
-    if (run_dir / "vecnormalize.pkl").is_file():
+    if (run_dir / rd.VECNORMALIZE).is_file():
         import pickle
 
-        with open(run_dir / "vecnormalize.pkl", "rb") as f:
-            vecnorm = pickle.load(f)
+        try:
+            with open(run_dir / rd.VECNORMALIZE, "rb") as f:
+                vecnorm = pickle.load(f)
+        except (pickle.UnpicklingError, EOFError, AttributeError, ValueError) as exc:
+            raise RunError(f"{run_dir / rd.VECNORMALIZE}: cannot load the observation statistics "
+                           f"({type(exc).__name__}: {exc}; expected the file written by `tune`)") from None
         vecnorm.training = False
     return model_policy(model, vecnorm)
 
 
-def _report(scenario: Scenario, policy_m: dict, fixed_m: dict | None, fixed_gains: dict | None) -> str:
+def _report(scenario: Scenario, policy_m: dict, fixed_m: dict | None, fixed_gains: dict | None,
+            source: Path | None = None) -> str:
     loops = policy_m["loops"]
     keys = [k for k in policy_m["overall"] if k.split("[")[0] in METRIC_COLUMNS]
-    lines = [f"# {scenario.name}: adaptive PRL-PID policy vs tuned fixed PID", "",
-             f"Evaluation: {scenario.evaluation_config().episode_steps} steps at Ts = "
+    lines = [f"# {scenario.name}: adaptive PRL-PID policy vs tuned fixed PID", ""]
+    if source is not None:
+        lines += [f"Scenario file: `{source}`.", ""]
+    lines += [f"Evaluation: {scenario.evaluation_config().episode_steps} steps at Ts = "
              f"{scenario.tuning.sample_time_s:g} s; loops: {', '.join(loops)}.", ""]
     if fixed_gains:
         lines += ["Fixed PID (differential evolution on the training distribution): " +
@@ -173,8 +103,12 @@ def _report(scenario: Scenario, policy_m: dict, fixed_m: dict | None, fixed_gain
     return "\n".join(lines) + "\n"
 
 
-def evaluate_into(run_dir: Path, scenario: Scenario, out_dir: Path, policy, fixed: dict | None) -> dict:
-    """Evaluate `policy` (and the fixed PID) on the scenario's evaluation; write metrics, CSV, plots, report."""
+def evaluate_into(run_dir: Path, scenario: Scenario, out_dir: Path, policy, fixed: dict | None,
+                  source: Path | None = None) -> dict:
+    """Evaluate `policy` (and the fixed PID) on the scenario's evaluation; write metrics, CSV, plots, report.
+
+    source: the scenario file the evaluation comes from, named in the report.
+    """
     from . import plots
     from .baseline import constant_policy
     from .evaluate import evaluate
@@ -188,14 +122,15 @@ def evaluate_into(run_dir: Path, scenario: Scenario, out_dir: Path, policy, fixe
         fixed_m, fixed_traj = evaluate(constant_policy(np.array(fixed["action"])), config, seed=seed,
                                        intervals=intervals)
     loop_names = [l.output for l in config.loops]
-    write_text_atomic(out_dir / "gains.csv", trajectory_csv(traj, loop_names))
+    write_atomic(out_dir / rd.GAINS, trajectory_csv(traj, loop_names))
     metrics = {"policy": policy_m, "fixed_pid": {"gains": fixed["gains"], "metrics": fixed_m} if fixed else None}
-    write_json(out_dir / "metrics.json", metrics)
-    plots.plot_response(traj, config, out_dir / "response.png", title=f"{scenario.name}: response",
+    write_json(out_dir / rd.METRICS, metrics)
+    plots.plot_response(traj, config, out_dir / rd.RESPONSE_PLOT, title=f"{scenario.name}: response",
                         baseline_traj=fixed_traj)
-    plots.plot_control_signal(traj, config, out_dir / "control_signal.png", baseline_traj=fixed_traj)
-    plots.plot_gains(traj, config, out_dir / "gains.png")
-    write_text_atomic(out_dir / "report.md", _report(scenario, policy_m, fixed_m, fixed["gains"] if fixed else None))
+    plots.plot_control_signal(traj, config, out_dir / rd.CONTROL_SIGNAL_PLOT, baseline_traj=fixed_traj)
+    plots.plot_gains(traj, config, out_dir / rd.GAINS_PLOT)
+    write_atomic(out_dir / rd.REPORT,
+                 _report(scenario, policy_m, fixed_m, fixed["gains"] if fixed else None, source))
     return metrics
 
 
@@ -205,19 +140,36 @@ def tune(scenario_path: str | Path, timesteps: int | None = None, seed: int | No
     """Train the scenario's agent, evaluate it against a tuned fixed PID, export the gain schedule.
 
     Returns the run directory. With resume, training continues from the run's latest checkpoint
-    (its scenario.yaml, not `scenario_path`, defines the run).
+    (its scenario.yaml, not `scenario_path`, defines the run). timesteps >= 1 and seed >= 0 are checked,
+    and the scenario loaded, before anything is created; a start refused before training produced a
+    model or a checkpoint leaves no directory behind. progress_bar: training and fixed-PID search
+    progress on stderr.
     """
+    if timesteps is not None and timesteps < 1:
+        raise RunError(f"--timesteps: must be at least 1 (got {timesteps}; expected a number of training steps >= 1)")
+    if seed is not None and seed < 0:
+        raise RunError(f"--seed: must not be negative (got {seed}; expected an integer >= 0)")
+    scenario = load_scenario(scenario_path)
+    run_dir, created = rd.prepare_run_dir(out, scenario.name, resume)
+    try:
+        return _tune(scenario, Path(scenario_path), run_dir, timesteps, seed, resume, progress_bar, baseline)
+    except BaseException:
+        rd.discard_if_empty(run_dir, created)
+        raise
+
+
+def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None, seed: int | None, resume: bool,
+          progress_bar: bool, baseline: bool) -> Path:
     from . import plots
     from .baseline import tune_fixed_pid
     from .schedule import extract_schedule, write_schedule_csv
     from .train import train
 
-    scenario = load_scenario(scenario_path)
-    run_dir = prepare_run_dir(out, scenario, resume)
-    info = {"command": sys.argv, "started": _now(), "versions": package_versions()}
+    info = {"command": sys.argv, "started": rd.now(), "versions": rd.package_versions()}
     if resume:
-        scenario = load_scenario(run_dir / "scenario.yaml")
-        info = {**json.loads((run_dir / "run.json").read_text()), "resumed": _now()}
+        scenario = load_scenario(run_dir / rd.SCENARIO)
+        source = run_dir / rd.SCENARIO
+        info = {**json.loads((run_dir / rd.RUN_INFO).read_text()), "resumed": rd.now()}
     agent = scenario.agent
     if seed is not None:
         agent = dataclasses.replace(agent, seed=seed)
@@ -226,17 +178,17 @@ def tune(scenario_path: str | Path, timesteps: int | None = None, seed: int | No
     if timesteps is not None or seed is not None:
         scenario = dataclasses.replace(scenario, agent=agent)
     if not resume:
-        write_text_atomic(run_dir / "scenario.yaml", scenario_to_yaml(scenario))
+        write_atomic(run_dir / rd.SCENARIO, scenario_to_yaml(scenario))
     info.update(seed=agent.seed, total_timesteps=agent.total_timesteps, algorithm=agent.algorithm)
-    write_json(run_dir / "run.json", info)
+    write_json(run_dir / rd.RUN_INFO, info)
 
-    resume_from, done = latest_checkpoint(run_dir, info.get("trained_timesteps", 0)) if resume else (None, 0)
+    resume_from, done = rd.latest_checkpoint(run_dir, info.get("trained_timesteps", 0)) if resume else (None, 0)
     remaining = max(agent.total_timesteps - done, 0)
     if remaining > 0:
         model = train(scenario.tuning, agent, run_dir, progress_bar=progress_bar, resume_from=resume_from,
                       total_timesteps=remaining)
         info["trained_timesteps"] = int(model.num_timesteps)
-        write_json(run_dir / "run.json", info)
+        write_json(run_dir / rd.RUN_INFO, info)
 
     policy = _policy(run_dir, agent.algorithm)
     fixed = None
@@ -246,70 +198,95 @@ def tune(scenario_path: str | Path, timesteps: int | None = None, seed: int | No
                                 popsize=b.popsize)
         fixed = {"action": result.action.tolist(), "gains": result.gains.as_dict(), "cost": result.cost,
                  "evaluations": result.evaluations}
-        write_json(run_dir / "fixed_pid.json", fixed)
-    evaluate_into(run_dir, scenario, run_dir, policy, fixed)
+        write_json(run_dir / rd.FIXED_PID, fixed)
+    evaluate_into(run_dir, scenario, run_dir, policy, fixed, source)
     try:
         schedule = extract_schedule(policy, scenario.tuning, seed=agent.seed)
-        write_schedule_csv(schedule, run_dir / "schedule.csv")
+        write_schedule_csv(schedule, run_dir / rd.SCHEDULE)
         note = ("" if not schedule.excluded else "\nThe closed loop diverged at setpoint(s) "
                 + ", ".join(f"{v:g}" for v in schedule.excluded) + ": left out of schedule.csv.\n")
     except PrlPidError as exc:
         note = f"\nNo gain schedule: {exc}\n"
         info["schedule_error"] = str(exc)
     if note:
-        write_text_atomic(run_dir / "report.md", (run_dir / "report.md").read_text(encoding="utf-8") + note)
-    plots.plot_learning_curve(run_dir / "monitor", run_dir / "learning_curve.png")
-    info["finished"] = _now()
-    write_json(run_dir / "run.json", info)
+        write_atomic(run_dir / rd.REPORT, (run_dir / rd.REPORT).read_text(encoding="utf-8") + note)
+    plots.plot_learning_curve(run_dir / rd.MONITOR, run_dir / rd.LEARNING_CURVE_PLOT)
+    info["finished"] = rd.now()
+    write_json(run_dir / rd.RUN_INFO, info)
     return run_dir
 
 
 def _load_run(run_dir: Path) -> Scenario:
-    if not (run_dir / "scenario.yaml").is_file() or not (run_dir / "model.zip").is_file():
-        raise RunError(f"{run_dir}: not a finished run directory (expected scenario.yaml and model.zip from `tune`)")
-    return load_scenario(run_dir / "scenario.yaml")
+    if not (run_dir / rd.SCENARIO).is_file() or not (run_dir / rd.MODEL).is_file():
+        raise RunError(f"{run_dir}: not a finished run directory (expected {rd.SCENARIO} and {rd.MODEL} from `tune`)")
+    return load_scenario(run_dir / rd.SCENARIO)
+
+
+def _on_other_evaluation(trained: Scenario, scenario_path: str | Path) -> Scenario:
+    """Another scenario's evaluation (setpoints, disturbances, ...) around the trained run's loops."""
+    other = load_scenario(scenario_path)
+    if [(l.input, l.output) for l in other.tuning.loops] != [(l.input, l.output) for l in trained.tuning.loops] \
+            or other.tuning.coupled != trained.tuning.coupled:
+        raise RunError(f"{scenario_path}: plant.loops differ from the trained run's "
+                       f"(got {[l.output for l in other.tuning.loops]}; expected the same loops and coupling)")
+    return dataclasses.replace(other, tuning=dataclasses.replace(
+        other.tuning, loops=trained.tuning.loops, coupled=trained.tuning.coupled,
+        coupling_range=trained.tuning.coupling_range))
 
 
 def evaluate_run(run_dir: str | Path, scenario_path: str | Path | None = None) -> Path:
     """Re-evaluate a trained policy (optionally on another scenario's evaluation); a new evaluations/<n>/."""
     run_dir = Path(run_dir)
     trained = _load_run(run_dir)
-    scenario = trained
-    if scenario_path is not None:
-        other = load_scenario(scenario_path)
-        if [(l.input, l.output) for l in other.tuning.loops] != [(l.input, l.output) for l in trained.tuning.loops] \
-                or other.tuning.coupled != trained.tuning.coupled:
-            raise RunError(f"{scenario_path}: plant.loops differ from the trained run's "
-                           f"(got {[l.output for l in other.tuning.loops]}; expected the same loops and coupling)")
-        scenario = dataclasses.replace(other, tuning=dataclasses.replace(
-            other.tuning, loops=trained.tuning.loops, coupled=trained.tuning.coupled,
-            coupling_range=trained.tuning.coupling_range))
-    base = run_dir / "evaluations"
+    scenario = trained if scenario_path is None else _on_other_evaluation(trained, scenario_path)
+    policy = _policy(run_dir, trained.agent.algorithm)
+    base = run_dir / rd.EVALUATIONS
     base.mkdir(exist_ok=True)
     n = 1 + max((int(p.name) for p in base.iterdir() if p.name.isdigit()), default=0)
     out_dir = base / str(n)
     out_dir.mkdir()
-    fixed = json.loads((run_dir / "fixed_pid.json").read_text()) if (run_dir / "fixed_pid.json").is_file() else None
-    write_text_atomic(out_dir / "scenario.yaml", scenario_to_yaml(scenario))
-    evaluate_into(run_dir, scenario, out_dir, _policy(run_dir, trained.agent.algorithm), fixed)
+    fixed = json.loads((run_dir / rd.FIXED_PID).read_text()) if (run_dir / rd.FIXED_PID).is_file() else None
+    write_atomic(out_dir / rd.SCENARIO, scenario_to_yaml(scenario))
+    source = Path(scenario_path) if scenario_path is not None else run_dir / rd.SCENARIO
+    evaluate_into(run_dir, scenario, out_dir, policy, fixed, source)
     return out_dir
 
 
+def check_output(run_dir: Path, output: Path, force: bool = False) -> None:
+    """Refuse an output file that is a directory, a file the run owns (even with force), or an existing
+    file without force. Raises RunError."""
+    owned = rd.owned_name(run_dir, output)
+    if output.is_dir():
+        raise RunError(f"{output}: is a directory (expected a file name for the gain schedule CSV)")
+    if owned is not None:
+        raise RunError(f"{output}: belongs to the run directory {run_dir} (its {owned}; expected a file outside "
+                       f"the run's own files, e.g. {run_dir.name}_schedule.csv)")
+    if output.exists() and not force:
+        raise RunError(f"{output}: exists (expected a new file name, or --force to replace it)")
+
+
 def export_schedule(run_dir: str | Path, output: str | Path, schedule_by: str = "setpoint", points: int = 9,
-                    replay: bool = False) -> tuple[Path, dict | None]:
+                    replay: bool = False, scenario_path: str | Path | None = None,
+                    force: bool = False) -> tuple[Path, dict | None]:
     """Write the tuned gain schedule CSV; with replay, run it as a plain PID and compare with the policy.
 
+    output: a new file (an existing one only with force), never one of the run's own files.
+    scenario_path: with replay, replay on this scenario's evaluation instead of the run's own.
     Returns (csv path, comparison or None): comparison = {"policy": metrics, "schedule": metrics}.
     """
     from .evaluate import evaluate
     from .schedule import extract_schedule, replay_schedule, write_schedule_csv
 
-    run_dir = Path(run_dir)
-    scenario = _load_run(run_dir)
-    policy = _policy(run_dir, scenario.agent.algorithm)
-    schedule = extract_schedule(policy, scenario.tuning, schedule_by=schedule_by, points=points,
-                                seed=scenario.agent.seed)
-    path = write_schedule_csv(schedule, Path(output))
+    run_dir, output = Path(run_dir), Path(output)
+    trained = _load_run(run_dir)
+    check_output(run_dir, output, force)
+    if scenario_path is not None and not replay:
+        raise RunError(f"--scenario {scenario_path}: only used with --replay (expected --replay, or no --scenario)")
+    scenario = trained if scenario_path is None else _on_other_evaluation(trained, scenario_path)
+    policy = _policy(run_dir, trained.agent.algorithm)
+    schedule = extract_schedule(policy, trained.tuning, schedule_by=schedule_by, points=points,
+                                seed=trained.agent.seed)
+    path = write_schedule_csv(schedule, output)
     if not replay:
         return path, None
     config = scenario.evaluation_config()

@@ -25,9 +25,7 @@ import csv
 import dataclasses
 import io
 import math
-import os
 import re
-import tempfile
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,6 +36,7 @@ import numpy as np
 from . import __version__
 from .actions import Gains
 from .config import TuningConfig
+from .rundir import write_atomic
 from .control import COUPLING_NAMES, make_smoother, parallel_gains
 from .errors import PrlPidError
 
@@ -357,18 +356,7 @@ def write_schedule_csv(schedule: GainSchedule, path) -> Path:
         if s.coupling is not None:
             row += [_f(c) for c in s.coupling[j]]
         w.writerow(row)
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".part", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", newline="") as f:
-            f.write(buf.getvalue())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    return path
+    return write_atomic(path, buf.getvalue())
 
 
 def read_schedule_metadata(path) -> dict[str, str]:

@@ -15,6 +15,8 @@ from torch import nn
 from .config import AgentConfig, TuningConfig
 from .env import PidTuningEnv
 from .errors import PrlPidError
+from .progress import training_progress
+from .rundir import write_atomic
 
 ALGORITHMS = ("ppo", "sac", "td3")
 
@@ -102,18 +104,13 @@ def train(config: TuningConfig, agent: AgentConfig, run_dir: Path, progress_bar:
     checkpoint = CheckpointCallback(save_freq=max(agent.checkpoint_every // agent.n_envs, 1),
                                     save_path=str(run_dir / "checkpoints"), name_prefix="model",
                                     save_vecnormalize=agent.normalize)
+    callbacks = [checkpoint, training_progress()] if progress_bar else [checkpoint]
     try:
-        model.learn(total_timesteps=steps, callback=checkpoint, progress_bar=progress_bar,
-                    reset_num_timesteps=resume_from is None, tb_log_name=agent.algorithm)
+        model.learn(total_timesteps=steps, callback=callbacks, reset_num_timesteps=resume_from is None,
+                    tb_log_name=agent.algorithm)
     finally:
-        _save_atomic(model, run_dir / "model.zip")
+        write_atomic(run_dir / "model.zip", lambda tmp: model.save(str(tmp)))
         if agent.normalize:
-            env.save(str(run_dir / "vecnormalize.pkl"))
+            write_atomic(run_dir / "vecnormalize.pkl", lambda tmp: env.save(str(tmp)))
         env.close()
     return model
-
-
-def _save_atomic(model, path: Path) -> None:
-    tmp = path.with_name(path.stem + ".part.zip")
-    model.save(str(tmp))
-    tmp.replace(path)

@@ -4,13 +4,15 @@ Each plant directory holds model.yaml (its variables: the one source of truth), 
 equations) and <Name>.mo (the same equations in Modelica). The build generates variables.h and
 modelDescription.xml from model.yaml, puts the shared FMI layer (plant_sources/common/) and the
 model into sources/, compiles the binary for this platform with FMPy's CMake support
-(``fmpy.build.build_platform_binary``) and zips the result atomically into fmus/.
+(``fmpy.build.build_platform_binary``) and zips the result atomically into the per-user FMU cache
+(prlpid_fmi.bundled.fmu_cache_dir) or a folder given by the caller.
 
 The instantiation token is a hash of every source file and of the generated files, so an FMU whose
 token differs from the sources' is stale and gets rebuilt.
 """
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import hashlib
 import math
@@ -26,11 +28,11 @@ from xml.etree import ElementTree as ET
 
 import yaml
 
+from ..bundled import data_dir, fmu_cache_dir
 from ..errors import PlantError
+from ..rundir import write_atomic
 
-REPO_ROOT = Path(__file__).resolve().parents[2]
-PLANT_SOURCES = REPO_ROOT / "plant_sources"
-FMU_DIR = REPO_ROOT / "fmus"
+PLANT_SOURCES = data_dir("plant_sources")
 COMMON_SOURCES = ("plant_model.h", "instance.h", "instance.c")
 API_SOURCE = {2: "fmi2_api.c", 3: "fmi3_api.c"}
 DEFAULT_FMI_VERSION = 2
@@ -237,18 +239,35 @@ def _write_xml(element: ET.Element, path: Path) -> None:
 
 
 def fmu_path(name: str, fmi_version: int = DEFAULT_FMI_VERSION, out_dir: Path | None = None) -> Path:
-    """Where the bundled FMU lives: fmus/<Name>.fmu for FMI 2.0, fmus/fmi3/<Name>.fmu for FMI 3.0."""
-    base = Path(out_dir) if out_dir is not None else FMU_DIR
+    """Where the bundled FMU lives: <out_dir>/<Name>.fmu for FMI 2.0, <out_dir>/fmi3/<Name>.fmu for FMI 3.0
+    (out_dir default: the per-user FMU cache)."""
+    base = Path(out_dir) if out_dir is not None else fmu_cache_dir()
     return base / f"{name}.fmu" if fmi_version == 2 else base / "fmi3" / f"{name}.fmu"
+
+
+@contextlib.contextmanager
+def _build_lock():
+    """Serialise builds across processes: an exclusive lock on <FMU cache>/.build.lock."""
+    cache = fmu_cache_dir()
+    cache.mkdir(parents=True, exist_ok=True)
+    with open(cache / ".build.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        yield
 
 
 def build_fmu(name: str, fmi_version: int = DEFAULT_FMI_VERSION, out_dir: Path | None = None,
               source_dir: Path | None = None) -> Path:
     """Build one plant into an FMU (binary for this platform + sources). Returns its path.
 
-    source_dir: a directory with model.yaml and model.c written like plant_sources/<Name>/ (default:
-    the bundled plant `name`), so a user's own C model builds with the same shared FMI layer.
+    out_dir: where to write (default: the per-user FMU cache). source_dir: a directory with model.yaml
+    and model.c written like plant_sources/<Name>/ (default: the bundled plant `name`), so a user's own
+    C model builds with the same shared FMI layer.
     """
+    with _build_lock():
+        return _build(name, fmi_version, out_dir, source_dir)
+
+
+def _build(name: str, fmi_version: int, out_dir: Path | None, source_dir: Path | None) -> Path:
     if fmi_version not in API_SOURCE:
         raise PlantError(f"--fmi-version must be 2 or 3, got {fmi_version!r}")
     from fmpy.build import build_platform_binary
@@ -282,12 +301,13 @@ def build_fmu(name: str, fmi_version: int = DEFAULT_FMI_VERSION, out_dir: Path |
                 _quiet_call(build_platform_binary, unzipdir, build_dir, out)
         except (subprocess.CalledProcessError, OSError) as exc:
             raise PlantError(f"building {name} (FMI {fmi_version}.0) failed: {exc}\n{log.read_text()[-3000:]}") from None
-        partial = target.with_name(target.name + ".part")
-        with zipfile.ZipFile(partial, "w", zipfile.ZIP_DEFLATED) as zf:
-            for path in sorted(unzipdir.rglob("*")):
-                if path.is_file():
-                    zf.write(path, path.relative_to(unzipdir).as_posix())
-        os.replace(partial, target)
+        def write_zip(tmp: Path) -> None:
+            with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zf:
+                for path in sorted(unzipdir.rglob("*")):
+                    if path.is_file():
+                        zf.write(path, path.relative_to(unzipdir).as_posix())
+
+        write_atomic(target, write_zip)
     return target
 
 
@@ -322,16 +342,12 @@ def is_current(name: str, fmi_version: int = DEFAULT_FMI_VERSION, out_dir: Path 
 def bundled_fmu(name: str, fmi_version: int = DEFAULT_FMI_VERSION, out_dir: Path | None = None) -> Path:
     """Path of a bundled plant's FMU, built first when it is missing or older than its sources.
 
-    Safe to call from several processes at once (a file lock serialises the builds).
+    Safe to call from several processes at once (a file lock in the FMU cache serialises the builds).
     """
-    if is_current(name, fmi_version, out_dir):
-        return fmu_path(name, fmi_version, out_dir)
-    base = Path(out_dir) if out_dir is not None else FMU_DIR
-    base.mkdir(parents=True, exist_ok=True)
-    with open(base / ".build.lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        if not is_current(name, fmi_version, out_dir):
-            build_fmu(name, fmi_version, out_dir)
+    if not is_current(name, fmi_version, out_dir):
+        with _build_lock():
+            if not is_current(name, fmi_version, out_dir):
+                _build(name, fmi_version, out_dir, None)
     return fmu_path(name, fmi_version, out_dir)
 
 

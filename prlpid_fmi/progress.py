@@ -1,0 +1,126 @@
+"""Progress of long work (training, the fixed-PID search) on stderr, with an honest total and an ETA.
+
+On a terminal: one line redrawn in place (a bar). Otherwise (`nohup ... > log`): a plain line when the
+work starts, about every 30 s, and when it ends, so a log shows where a long run is. The count never
+passes the total: PPO collects whole rollouts, so SB3's own bar ends at 51,200/50,000.
+"""
+from __future__ import annotations
+
+import sys
+import time
+from typing import Callable, TextIO
+
+TTY_INTERVAL_S = 0.2
+LOG_INTERVAL_S = 30.0
+BAR_WIDTH = 24
+
+
+def format_duration(seconds: float) -> str:
+    """'42 s', '3 min 05 s', '1 h 02 min'."""
+    s = int(round(max(seconds, 0.0)))
+    if s < 60:
+        return f"{s} s"
+    if s < 3600:
+        return f"{s // 60} min {s % 60:02d} s"
+    return f"{s // 3600} h {s % 3600 // 60:02d} min"
+
+
+class Progress:
+    """Count `done` of `total` units of work and show it on `stream` (default stderr).
+
+    total may be given later, with the first `update`. `start` is work already done before this
+    session (a resumed training): it counts toward done, not toward the rate.
+    """
+
+    def __init__(self, label: str, unit: str, total: int | None = None, start: int = 0,
+                 stream: TextIO | None = None, interval_s: float | None = None,
+                 clock: Callable[[], float] = time.monotonic):
+        self.label, self.unit, self.total = label, unit, total
+        self.stream = stream if stream is not None else sys.stderr
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.interval_s = interval_s if interval_s is not None else (TTY_INTERVAL_S if self.tty else LOG_INTERVAL_S)
+        self.clock = clock
+        self.start = self.done = start
+        self.t0 = clock()
+        self._last_shown: float | None = None
+        self._closed = False
+        if total is not None:
+            self._show(self.t0)
+
+    def update(self, done: int, total: int | None = None) -> None:
+        """Set the amount done (clamped to [0, total]); shown at most every interval_s."""
+        if total is not None and self.total is None:
+            self.total = int(total)
+        self.done = max(0, int(done)) if self.total is None else min(max(0, int(done)), self.total)
+        now = self.clock()
+        if self._last_shown is None or now - self._last_shown >= self.interval_s:
+            self._show(now)
+
+    def close(self) -> None:
+        """Show the final count and the elapsed time (once)."""
+        if self._closed or self.total is None:
+            return
+        self._closed = True
+        elapsed = self.clock() - self.t0
+        if self.tty:
+            self.stream.write("\r" + self._bar_line(elapsed) + "\n")
+        else:
+            early = "" if self.done >= self.total else f" (stopped before {self.total:,}: done early)"
+            self.stream.write(f"prlpid-fmi: {self.label}: {self.done:,} {self.unit} in "
+                              f"{format_duration(elapsed)}{early}\n")
+        self.stream.flush()
+
+    # -- rendering ---------------------------------------------------------------------------------
+    def _rate_eta(self, elapsed: float) -> tuple[str, str]:
+        rate = (self.done - self.start) / elapsed if elapsed > 0 else 0.0
+        if rate <= 0:
+            return "", ""
+        eta = format_duration((self.total - self.done) / rate) if self.total is not None else ""
+        return f"{rate:,.1f} {self.unit}/s" if rate < 10 else f"{rate:,.0f} {self.unit}/s", eta
+
+    def _bar_line(self, elapsed: float) -> str:
+        frac = self.done / self.total if self.total else 1.0
+        filled = int(round(frac * BAR_WIDTH))
+        rate, eta = self._rate_eta(elapsed)
+        tail = f"  {rate}" if rate else ""
+        if eta and self.done < self.total:
+            tail += f"  ETA {eta}"
+        elif self.done >= self.total:
+            tail += f"  {format_duration(elapsed)}"
+        return (f"{self.label} [{'#' * filled}{'.' * (BAR_WIDTH - filled)}] {self.done:,}/{self.total:,} "
+                f"{self.unit} {100 * frac:3.0f} %{tail}").ljust(79)
+
+    def _show(self, now: float) -> None:
+        if self.total is None or self._closed:
+            return
+        self._last_shown = now
+        elapsed = now - self.t0
+        if self.tty:
+            self.stream.write("\r" + self._bar_line(elapsed))
+        else:
+            rate, eta = self._rate_eta(elapsed)
+            pct = 100 * self.done / self.total if self.total else 100.0
+            extra = "".join(f", {s}" for s in (rate, f"ETA {eta}" if eta else "") if s)
+            self.stream.write(f"prlpid-fmi: {self.label}: {self.done:,}/{self.total:,} {self.unit} "
+                              f"({pct:.0f} %){extra}\n")
+        self.stream.flush()
+
+
+def training_progress(stream: TextIO | None = None):
+    """An SB3 callback that shows training steps done of the target (resumed steps included) on stderr."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class TrainingProgress(BaseCallback):
+        def _on_training_start(self) -> None:
+            # learn() has already added the resumed steps to its local total_timesteps
+            self.progress = Progress("training", "steps", total=int(self.locals["total_timesteps"]),
+                                     start=int(self.model.num_timesteps), stream=stream)
+
+        def _on_step(self) -> bool:
+            self.progress.update(self.num_timesteps)
+            return True
+
+        def _on_training_end(self) -> None:
+            self.progress.close()
+
+    return TrainingProgress()
