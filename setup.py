@@ -9,7 +9,7 @@ from pathlib import Path
 from setuptools import setup
 from setuptools.command.build_py import build_py
 
-BUNDLED = {"plant_sources": ("*.c", "*.h", "*.yaml", "*.mo"), "scenarios": ("*.yaml",)}
+BUNDLED = {"plant_sources": ("*.c", "*.h", "*.yaml", "*.mo"), "scenarios": ("*.yaml", "*.json")}
 
 
 class BuildPyWithBundledData(build_py):

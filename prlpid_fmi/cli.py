@@ -76,6 +76,13 @@ def _validate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _schema(args: argparse.Namespace) -> int:
+    from .schema import json_schema_text
+
+    sys.stdout.write(json_schema_text())
+    return 0
+
+
 def _init(args: argparse.Namespace) -> int:
     from .scenario import init_scenario
 
@@ -157,6 +164,8 @@ def make_parser() -> argparse.ArgumentParser:
     p = command("validate", _validate, "check a scenario file; one clear line per mistake")
     p.add_argument("scenario", help=SCENARIO_HELP)
 
+    command("schema", _schema, "print the JSON Schema of scenario files (for editors and other tools)")
+
     p = command("init", _init, "print a ready scenario for an FMU (redirect it to a .yaml file)")
     p.add_argument("fmu", help="path to a .fmu file")
 
@@ -208,7 +217,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args)
     except PrlPidError as exc:
-        print(f"{PROG}: error: {exc}", file=sys.stderr)
+        for line in str(exc).splitlines():  # a scenario with several mistakes: one line each
+            print(f"{PROG}: error: {line}", file=sys.stderr)
         return 2
     except OSError as exc:
         print(f"{PROG}: error: {_os_error_line(exc)}", file=sys.stderr)
