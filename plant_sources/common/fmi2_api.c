@@ -3,6 +3,7 @@
 #include <string.h>
 
 #include "fmi2Functions.h"
+#include "forecast.h"
 #include "instance.h"
 
 typedef struct {
@@ -214,4 +215,11 @@ fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boo
 }
 fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value) {
     (void)c; (void)s; (void)value; return fmi2Discard;
+}
+
+/* The reward forecast beside the FMI API (forecast.h): unwrap both instances to the shared core. */
+int prlpid_forecast(void *plant, void *prior, const PrlpidForecastSetup *setup, const PrlpidForecastInput *input,
+                    PrlpidForecastResult *result) {
+    if (!plant || !prior) return PRLPID_EINVAL;
+    return prlpid_forecast_core(CORE(plant), CORE(prior), setup, input, result);
 }

@@ -3,6 +3,7 @@
 #include <string.h>
 
 #include "fmi3Functions.h"
+#include "forecast.h"
 #include "instance.h"
 
 typedef struct {
@@ -289,4 +290,11 @@ fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 currentCommunicationPoint, fmi
 fmi3Status fmi3ActivateModelPartition(fmi3Instance c, fmi3ValueReference clockReference, fmi3Float64 activationTime) {
     (void)clockReference; (void)activationTime;
     return unsupported(c, "scheduled execution");
+}
+
+/* The reward forecast beside the FMI API (forecast.h): unwrap both instances to the shared core. */
+int prlpid_forecast(void *plant, void *prior, const PrlpidForecastSetup *setup, const PrlpidForecastInput *input,
+                    PrlpidForecastResult *result) {
+    if (!plant || !prior) return PRLPID_EINVAL;
+    return prlpid_forecast_core(CORE(plant), CORE(prior), setup, input, result);
 }

@@ -1,123 +1,112 @@
 """Reward forecast (paper eq. 12-14): roll the prior model N steps ahead with the current gains.
 
-The prior receives the plant's state, a copy of the PID's internal state drives it with fixed gains
-(eq. 13) toward the current setpoint, and the mean of the N predicted rewards (eq. 14) is returned.
-The plant itself is never stepped, reset or perturbed; the PID's state is restored afterwards.
+Before the plant moves, the prior receives the plant's state, a copy of the PID's internal state
+drives it with fixed gains (eq. 13) toward the current setpoint, and the mean of the N predicted
+rewards (eq. 14) is returned. Per predicted step k = 1..N::
+
+    u_k    = PID(setpoint, y_{k-1})            eq. 2 (or eq. 26-27 when coupled), saturated
+    y_k    = prior.step(u_k)                   a discarded step ends the roll-out with the penalty
+    e_k    = (setpoint - y_k) / scale          ends the roll-out with the penalty if |e_k| > bound (or NaN)
+    r_k    = mean over loops of eq. 10-11 on (e_k, e_{k-1}) + control variation on (u_k, u_{k-1})
+
+with y_0 = the measurement, e_0 its normalised error and u_0 = `u_prev`; the result is
+sum(r_k) / (number of r_k), summed left to right. The plant is never stepped, reset or perturbed and
+the PID's state is the same afterwards.
+
+Two implementations of one interface, `mean_reward(setpoint, measurement, Kp, Ti, Td, coupling,
+u_prev) -> float` on lists of n_loops floats (coupling: 6 floats or None):
+
+- FmiForecast: the standard FMI path for any FMU that can serialize its state (get, serialize,
+  deserialize, set), or, for a different prior FMU, a re-initialisation from `state_map`.
+- NativeForecast (prlpid_fmi.fmu.native_forecast): one C call for the bundled plants; bit for bit the
+  same result (tests/test_native_forecast.py).
+
+`make_forecast` picks one.
 """
 from __future__ import annotations
 
-from typing import Callable, Protocol
+import math
 
-import numpy as np
-
-
-class PriorModel(Protocol):
-    def step(self, u: np.ndarray) -> np.ndarray: ...
+from .reward import RewardWeights, mean_loop_reward
 
 
-class RewardForecast:
-    """Mean predicted reward over `horizon` steps of a prior model.
+class _Forecast:
+    """What both implementations are built from, validated once.
 
     Args:
-        horizon: N >= 1, number of predicted steps.
-        reward: reward(error (n_loops,), previous_error (n_loops,)) -> float, errors already normalised.
-        measurement_scale: (n_loops,) divisor that normalises errors before the reward.
-        divergence_bound: |normalised error| past which the prediction stops with `divergence_penalty`.
-        rejected: exception type(s) the prior raises when it discards a step (counts as divergence).
+        plant, prior: FmuPlant instances; prior.inputs / prior.outputs are the loops' control inputs
+            and measured outputs (n_loops each).
+        pid: the loop's PID or CoupledPID; only read (its state is the same after a call).
+        horizon: N >= 1 predicted samples.
+        scale, bound: per loop, measurement scale (> 0) and divergence bound on |error| / scale.
+        penalty: reward of the step that diverges or that the prior discards; the roll-out stops there.
+        weights: RewardWeights of eq. 10-11 and the control-variation term.
+        u_scale: per loop, control span (> 0) that normalises |u_k - u_{k-1}|.
+        overrides: {prior variable: value} set on the prior after each state copy (the nominal values
+            of disturbed FMU inputs/parameters and of randomised parameters, prior parameters).
     """
 
-    def __init__(self, horizon: int, reward: Callable[[np.ndarray, np.ndarray], float],
-                 measurement_scale: np.ndarray, divergence_bound: np.ndarray, divergence_penalty: float, rejected=()):
-        if horizon < 1:
-            raise ValueError(f"forecast horizon must be >= 1, got {horizon}")
-        self.horizon = horizon
-        self.reward = reward
-        self.scale = np.asarray(measurement_scale, float)
-        self.bound = np.asarray(divergence_bound, float)
-        self.bound_list = self.bound.tolist()
-        self.penalty = float(divergence_penalty)
-        self.rejected = rejected
-        self.last_rewards: list[float] = []
-        self.last_measurements: list[np.ndarray] = []
-
-    def mean_reward(self, prior: PriorModel, pid, setpoint: np.ndarray, measurement: np.ndarray,
-                    control_law: Callable[[np.ndarray], np.ndarray]) -> float:
-        """Predict N steps from the current measurement; return the mean predicted reward (eq. 14).
-
-        `prior` must already hold the plant's state. `control_law(measurement) -> u` runs the PID
-        with the fixed current gains (eq. 13) and returns the saturated u; its internal state is saved before and restored after.
-        """
-        saved = pid.get_state()
-        rewards = self.last_rewards = []
-        self.last_measurements = []
-        previous_error = (setpoint - measurement) / self.scale
-        y = measurement
-        try:
-            for _ in range(self.horizon):
-                u = control_law(y)  # the PID saturates u itself
-                try:
-                    y = prior.step(u)
-                except self.rejected:
-                    rewards.append(self.penalty)
-                    break
-                error = (setpoint - y) / self.scale
-                if not all(abs(e) <= b for e, b in zip(error.tolist(), self.bound_list)):  # also catches NaN
-                    rewards.append(self.penalty)
-                    break
-                rewards.append(self.reward(error, previous_error))
-                self.last_measurements.append(y)
-                previous_error = error
-        finally:
-            pid.set_state(saved)
-        return sum(rewards) / len(rewards)
-
-
-class FmiForecast:
-    """The reward forecast through the standard FMI path (any FMU that can serialize its state).
-
-    Each call: copy the plant's state into the prior (get, serialize, deserialize, set) — or, for a
-    different prior FMU, re-initialise it from `state_map` — apply `overrides` (nominal values of
-    disturbed inputs and randomised parameters, prior parameters), roll N steps with the PID's
-    current state and the given gains, restore the PID state. Signals are lists of n_loops floats.
-
-    Args:
-        plant, prior: FmuPlant instances. pid: the loop's PID or CoupledPID (its state is restored).
-        horizon: N >= 1. scale, bound: per-loop measurement scale and divergence bound.
-        penalty: reward of a step that diverges or is rejected (the prediction stops there).
-        reward: reward(error, previous_error, u, u_prev) -> float on normalised errors.
-        overrides: {name: value} set on the prior after each copy. state_map: {prior parameter: plant variable}.
-    """
-
-    def __init__(self, plant, prior, pid, horizon: int, scale, bound, penalty: float, reward,
-                 overrides: dict | None = None, state_map: dict | None = None):
-        if horizon < 1:
-            raise ValueError(f"forecast horizon must be >= 1, got {horizon}")
+    def __init__(self, plant, prior, pid, horizon: int, scale, bound, penalty: float, weights: RewardWeights,
+                 u_scale, overrides: dict | None = None):
+        if isinstance(horizon, bool) or int(horizon) != horizon or horizon < 1:
+            raise ValueError(f"forecast horizon must be an integer >= 1, got {horizon!r}")
+        n = pid.n_loops
         self.plant, self.prior, self.pid = plant, prior, pid
-        self.horizon = horizon
-        self.scale, self.bound = list(scale), list(bound)
+        self.n_loops, self.horizon = n, int(horizon)
+        self.scale, self.bound, self.u_scale = ([float(v) for v in x] for x in (scale, bound, u_scale))
+        for name, values in (("scale", self.scale), ("bound", self.bound), ("u_scale", self.u_scale)):
+            if len(values) != n:
+                raise ValueError(f"forecast {name} needs {n} values (one per loop), got {len(values)}")
+        if not all(s > 0 and math.isfinite(s) for s in self.scale + self.u_scale):
+            raise ValueError(f"measurement and control scales must be finite and > 0, got {self.scale}, {self.u_scale}")
+        if len(prior.inputs) != n or len(prior.outputs) != n:
+            raise ValueError(f"the prior needs {n} inputs and {n} outputs (one per loop), "
+                             f"got {list(prior.inputs)} and {list(prior.outputs)}")
         self.penalty = float(penalty)
-        self.reward = reward
-        self.overrides = dict(overrides or {})
+        self.weights = weights
+        self.overrides = {name: float(value) for name, value in (overrides or {}).items()}
+        self.coupled = hasattr(pid, "pid")  # CoupledPID wraps a PID
+
+
+class FmiForecast(_Forecast):
+    """The forecast through the standard FMI calls (any FMU); arguments as _Forecast plus
+
+    state_map: {prior parameter: plant variable}; when given, the prior is reset each call with these
+        parameters taken from the plant instead of receiving its state (a prior FMU that differs from
+        the plant), and the overrides are not applied (the reset prior is nominal already).
+
+    After a call, `last_rewards` (list of floats) and `last_measurements` (list of n_loops-float lists,
+    one per step the prior took) describe the roll-out.
+    """
+
+    def __init__(self, plant, prior, pid, horizon: int, scale, bound, penalty: float, weights: RewardWeights,
+                 u_scale, overrides: dict | None = None, state_map: dict | None = None):
+        super().__init__(plant, prior, pid, horizon, scale, bound, penalty, weights, u_scale, overrides)
         self.state_map = dict(state_map or {})
-        self.coupled = hasattr(pid, "pid")
         self.last_rewards: list[float] = []
         self.last_measurements: list[list[float]] = []
 
     def _sync(self) -> None:
         if self.state_map:
             values = self.plant.get(list(self.state_map.values()))
-            self.prior.reset(parameters=dict(zip(self.state_map.keys(), values)))
+            self.prior.reset(parameters=dict(zip(self.state_map.keys(), values.tolist())))
         else:
             self.plant.copy_state_to(self.prior)
             if self.overrides:
                 self.prior.set(self.overrides)
 
-    def mean_reward(self, setpoint, measurement, Kp, Ti, Td, coupling, u_prev) -> float:
-        """Mean predicted reward over N steps from (setpoint, measurement) with fixed gains (eq. 12-14)."""
+    def mean_reward(self, setpoint: list, measurement: list, Kp: list, Ti: list, Td: list, coupling: list | None,
+                    u_prev: list) -> float:
+        """Mean predicted reward over N steps from (setpoint, measurement) with fixed gains (eq. 12-14).
+
+        All arguments are lists of n_loops floats (coupling: 6 floats, or None when not coupled);
+        u_prev is the control signal of the previous sample.
+        """
         from ..fmu import StepRejected
 
         self._sync()
-        pid, n, scale, bound = self.pid, len(setpoint), self.scale, self.bound
+        pid, prior, n, scale, bound = self.pid, self.prior, self.n_loops, self.scale, self.bound
+        weights, u_scale = self.weights, self.u_scale
         saved = pid.get_state()
         rewards = self.last_rewards = []
         measurements = self.last_measurements = []
@@ -130,28 +119,49 @@ class FmiForecast:
                 else:
                     u = pid.step_values([setpoint[i] - y[i] for i in range(n)], Kp, Ti, Td)
                 try:
-                    y = self.prior.step_values(u)
+                    y = prior.step_values(u)
                 except StepRejected:
                     rewards.append(self.penalty)
                     break
+                measurements.append(y)
                 error = [(setpoint[i] - y[i]) / scale[i] for i in range(n)]
                 if not all(abs(error[i]) <= bound[i] for i in range(n)):  # also catches NaN
                     rewards.append(self.penalty)
                     break
-                rewards.append(self.reward(error, previous_error, u, u_prev))
-                measurements.append(y)
+                rewards.append(mean_loop_reward(error, previous_error, weights, u, u_prev, u_scale))
                 previous_error, u_prev = error, u
         finally:
             pid.set_state(saved)
-        return sum(rewards) / len(rewards)
+        total = 0.0
+        for r in rewards:
+            total += r
+        return total / len(rewards)
 
 
-def make_forecast(plant, prior, pid, *, horizon: int, scale, bound, penalty: float, weights, u_scale,
+def make_forecast(plant, prior, pid, *, horizon: int, scale, bound, penalty: float, weights: RewardWeights, u_scale,
                   overrides: dict | None = None, state_map: dict | None = None, path: str = "auto", reward=None):
-    """The reward forecast for plant + prior: one C call for bundled plants (path "auto"), else the FMI path.
+    """The reward forecast for this plant and prior.
 
-    reward(error, previous_error, u, u_prev) -> float is the loop's step reward (LoopCore.reward).
+    path: "auto" = one C call (NativeForecast) when plant and prior are instances of the same FMU file
+    loaded once, without a state_map, and its binary exports prlpid_forecast with the ABI this package
+    knows (the bundled plants); the FMI path otherwise. "fmi" forces the FMI path (as for a third-party
+    FMU); "native" requires the C call (PlantError when it is not available).
+    reward: ignored. Both paths compute the reward from `weights` and `u_scale` with control.reward,
+    so that they agree bit for bit; the argument is accepted for callers that still pass their own.
+    Other arguments: see _Forecast and FmiForecast.
     """
-    if path not in ("auto", "fmi"):
-        raise ValueError(f"forecast path must be 'auto' or 'fmi', got {path!r}")
-    return FmiForecast(plant, prior, pid, horizon, scale, bound, penalty, reward, overrides, state_map)
+    del reward
+    if path not in ("auto", "fmi", "native"):
+        raise ValueError(f"forecast path must be 'auto', 'fmi' or 'native', got {path!r}")
+    args = (plant, prior, pid, horizon, scale, bound, penalty, weights, u_scale, overrides)
+    if path != "fmi":
+        from ..fmu.native_forecast import NativeForecast, native_unavailable
+
+        reason = "a state_map re-initialises the prior" if state_map else native_unavailable(plant, prior)
+        if reason is None:
+            return NativeForecast(*args)
+        if path == "native":
+            from ..errors import PlantError
+
+            raise PlantError(f"{prior.path.name}: the one-call forecast is not available: {reason}")
+    return FmiForecast(*args, state_map=state_map)

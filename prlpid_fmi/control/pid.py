@@ -168,6 +168,13 @@ class PID:
         return PIDState(np.array(self._integral), np.array(self._last_error), np.array(self._derivative),
                         self._initialized)
 
+    def raw_state(self) -> tuple[list, list, list, bool]:
+        """(integral, last_error, derivative, initialized) WITHOUT copying: the live lists of n_loops floats.
+
+        For readers that copy the values out at once (the C forecast); never mutate them.
+        """
+        return self._integral, self._last_error, self._derivative, self._initialized
+
     def set_state(self, state: PIDState) -> None:
         """Restore a state from ``get_state`` (copied in, so ``state`` stays reusable)."""
         n = self.n_loops
@@ -314,6 +321,9 @@ class CoupledPID:
 
     def get_state(self) -> PIDState:
         return self.pid.get_state()
+
+    def raw_state(self) -> tuple[list, list, list, bool]:
+        return self.pid.raw_state()
 
     def set_state(self, state: PIDState) -> None:
         self.pid.set_state(state)

@@ -33,7 +33,7 @@ from ..errors import PlantError
 from ..rundir import write_atomic
 
 PLANT_SOURCES = data_dir("plant_sources")
-COMMON_SOURCES = ("plant_model.h", "instance.h", "instance.c")
+COMMON_SOURCES = ("plant_model.h", "instance.h", "instance.c", "forecast.h", "forecast.c")
 API_SOURCE = {2: "fmi2_api.c", 3: "fmi3_api.c"}
 DEFAULT_FMI_VERSION = 2
 DEFAULT_FIXED_STEP_S = 1e-3  # internal RK4 step of a plant whose model.yaml declares none (bundled plants do)
@@ -311,13 +311,22 @@ def _build(name: str, fmi_version: int, out_dir: Path | None, source_dir: Path |
     return target
 
 
+def _cmake_options() -> dict[str, str]:
+    """No fused multiply-add: the C forecast must round exactly like Python's float arithmetic.
+
+    GCC contracts a*b + c into an FMA by default in GNU C modes, clang in any mode, wherever the
+    target has FMA (aarch64, x86-64-v3). MSVC does not contract under its default /fp:precise.
+    """
+    return {} if os.name == "nt" else {"CMAKE_C_FLAGS:STRING": "-ffp-contract=off"}
+
+
 def _quiet_call(build, unzipdir: Path, build_dir: Path, out) -> None:
     """Run FMPy's CMake build with the compiler's output sent to `out` instead of the terminal."""
     saved = os.dup(1), os.dup(2)
     try:
         os.dup2(out.fileno(), 1)
         os.dup2(out.fileno(), 2)
-        build(unzipdir, build_dir=build_dir)
+        build(unzipdir, build_dir=build_dir, cmake_options=_cmake_options())
     finally:
         os.dup2(saved[0], 1)
         os.dup2(saved[1], 2)

@@ -1,0 +1,268 @@
+"""The one-call C forecast equals the FMI-path forecast bit for bit, and neither moves the plant.
+
+Truth: FmiForecast, which runs the Python PID (control/pid.py), the Python reward (control/reward.py)
+and the FMU through the standard FMI calls. Every comparison is `==` on floats (no tolerance): the
+mean reward, every step's reward, every predicted measurement and the prior's full serialized state
+afterwards. States, gains, setpoints and overrides are random; the anti-windup modes, the derivative
+filter, the coupled PID, divergence, a discarded step and the error paths are all covered.
+"""
+import math
+
+import numpy as np
+import pytest
+
+from prlpid_fmi.control import PID, CoupledPID, RewardWeights
+from prlpid_fmi.control.forecast import FmiForecast, make_forecast
+from prlpid_fmi.errors import PlantError
+from prlpid_fmi.fmu import FmuPlant
+from prlpid_fmi.fmu.native_forecast import NativeForecast, native_unavailable
+from conftest import PLANTS, fmu
+
+TS = 0.1
+
+
+class Plant:
+    """A bundled plant's loops as a scenario would set them up, plus how to randomise and override it."""
+
+    def __init__(self, inputs, outputs, u_limits, scale, bound, setpoints, gains, parameters, overrides,
+                 input_range, extra_inputs=()):
+        self.inputs, self.outputs = inputs, outputs
+        self.u_limits, self.scale, self.bound = u_limits, scale, bound
+        self.setpoints, self.gains = setpoints, gains  # (low, high); gains: Kp, Ti, Td (low, high) each
+        self.parameters = parameters        # plant's (randomised / disturbed) values
+        self.overrides = overrides          # the prior's nominal values of those
+        self.input_range = input_range      # random inputs while warming the plant up
+        self.extra_inputs = extra_inputs    # disturbance inputs set on the plant: (name, value)
+
+
+SPECS = {
+    "FirstOrderUnstable": Plant(["u"], ["y"], (-10.0, 10.0), [1.0], [5.0], (-1.0, 1.0),
+                                ((0.5, 30.0), (0.2, 20.0), (0.0, 0.2)), {"a": 1.3, "b": 0.9},
+                                {"a": 1.0, "b": 1.0}, (-1.0, 1.0)),
+    "SecondOrderUnstable": Plant(["u"], ["y"], (-5.0, 5.0), [1.0], [10.0], (-1.0, 1.0),
+                                 ((-1.0, -0.01), (1.0, 200.0), (0.0, 60.0)), {"K": -0.3}, {"K": -0.2679},
+                                 (-1.0, 1.0)),
+    "TimeVaryingFirstOrder": Plant(["u"], ["y"], (-10.0, 10.0), [1.0], [5.0], (-1.0, 1.0),
+                                   ((0.5, 30.0), (0.2, 20.0), (0.0, 0.2)), {"a_offset": 0.6}, {"a_offset": 0.5},
+                                   (-1.0, 1.0)),
+    "TwoTank": Plant(["q_in"], ["h2"], (0.0, 50.0), [10.0], [10.0], (5.0, 15.0),
+                     ((0.5, 50.0), (1.0, 200.0), (0.0, 5.0)), {"h1_0": 15.4, "h2_0": 10.0, "k1": 11.5},
+                     {"k1": 10.74, "q_d": 0.0, "valve_factor": 1.0}, (20.0, 30.0),
+                     extra_inputs=(("q_d", 4.0), ("valve_factor", 0.8))),
+    "QuadrotorAttitude": Plant(["U_phi", "U_theta", "U_psi"], ["phi", "theta", "psi"], (-2.0, 2.0), [0.5] * 3,
+                               [6.0] * 3, (-0.5, 0.5), ((0.1, 20.0), (0.5, 100.0), (0.05, 2.0)),
+                               {"Ix": 0.45, "Iz": 0.7}, {"Ix": 0.4, "Iz": 0.8}, (-0.3, 0.3)),
+}
+
+
+def _log_uniform(rng, lo, hi, n):
+    if lo > 0:
+        return np.exp(rng.uniform(math.log(lo), math.log(hi), n)).tolist()
+    return rng.uniform(lo, hi, n).tolist()
+
+
+def _pair(name, version, pid, horizon, weights, overrides=True, prior_parameters=None):
+    """plant, prior, native and FMI-path forecasts over the same objects."""
+    spec = SPECS[name]
+    path = fmu(name, version)
+    plant = FmuPlant(path, spec.inputs, spec.outputs, TS, spec.parameters, "plant")
+    prior = FmuPlant(path, spec.inputs, spec.outputs, TS, prior_parameters or spec.parameters, "prior")
+    n = len(spec.inputs)
+    kw = dict(horizon=horizon, scale=spec.scale, bound=spec.bound, penalty=-100.0, weights=weights,
+              u_scale=[spec.u_limits[1] - spec.u_limits[0]] * n, overrides=spec.overrides if overrides else None)
+    native = make_forecast(plant, prior, pid, **kw)
+    fmi = make_forecast(plant, prior, pid, path="fmi", **kw)
+    assert isinstance(native, NativeForecast) and isinstance(fmi, FmiForecast)
+    return plant, prior, native, fmi
+
+
+def _warm_up(plant, pid, spec, rng, steps, coupling=None):
+    """Random inputs for a few samples, with the PID stepping too (its state becomes non-trivial)."""
+    n = len(spec.inputs)
+    for name, value in spec.extra_inputs:
+        plant.set({name: value})
+    y = plant.read_outputs().tolist()
+    for _ in range(steps):
+        r = rng.uniform(*spec.setpoints, n).tolist()
+        gains = [_log_uniform(rng, lo, hi, n) for lo, hi in spec.gains]
+        if coupling is not None:
+            pid.step_values(r, y, *gains, coupling)
+        else:
+            pid.step_values([r[i] - y[i] for i in range(n)], *gains)
+        y = plant.step_values(rng.uniform(*spec.input_range, n).tolist())
+    return y
+
+
+def _pid_state(pid):
+    s = pid.get_state()
+    return s.integral.tolist(), s.last_error.tolist(), s.derivative.tolist(), s.initialized
+
+
+def _compare(plant, prior, native, fmi, args):
+    """Both forecasts from the same plant state: equal bit for bit; the plant and the PID untouched."""
+    before = plant.get_state(), plant.time, plant.read_outputs().tolist()
+    pid_before = _pid_state(native.pid)
+    a = native.mean_reward(*args)
+    native_prior = prior.get_state(), prior.time
+    native_rewards, native_measurements = native.last_rewards, native.last_measurements
+    b = fmi.mean_reward(*args)
+    assert a == b or (math.isnan(a) and math.isnan(b))
+    assert native_rewards == fmi.last_rewards
+    assert native_measurements == fmi.last_measurements
+    assert native_prior == (prior.get_state(), prior.time)  # the prior ends in the same state, time included
+    assert (plant.get_state(), plant.time, plant.read_outputs().tolist()) == before
+    assert _pid_state(native.pid) == pid_before
+    return a, native_rewards
+
+
+@pytest.mark.parametrize("filter_N", [None, 8.0], ids=["unfiltered", "filtered"])
+@pytest.mark.parametrize("anti_windup", ["clamping", "back_calculation", "none"])
+@pytest.mark.parametrize("name", PLANTS)
+def test_native_equals_fmi_path_bit_for_bit(name, fmi_version, anti_windup, filter_N):
+    spec = SPECS[name]
+    n = len(spec.inputs)
+    rng = np.random.default_rng([PLANTS.index(name), fmi_version, len(anti_windup), filter_N is None])
+    pid = PID(TS, n, spec.u_limits[0], spec.u_limits[1], anti_windup, derivative_filter_N=filter_N)
+    weights = RewardWeights(control_variation_weight=0.3)
+    plant, prior, native, fmi = _pair(name, fmi_version, pid, 10, weights)
+    saturated = []
+    step_values = pid.step_values
+
+    def counting(*args):  # the Python PID of the FMI path: record whether u hit a limit
+        u = step_values(*args)
+        saturated.append(any(v in spec.u_limits for v in u))
+        return u
+
+    with plant, prior:
+        y = _warm_up(plant, pid, spec, rng, 5)
+        pid.step_values = counting
+        lengths = set()
+        for call in range(8):
+            r = rng.uniform(*spec.setpoints, n).tolist()
+            Kp, Ti, Td = [_log_uniform(rng, lo, hi, n) for lo, hi in spec.gains]
+            if call == 0:
+                Ti = [math.inf] * n  # no integral action
+            u_prev = rng.uniform(*spec.u_limits, n).tolist()
+            _, rewards = _compare(plant, prior, native, fmi, (r, y, Kp, Ti, Td, None, u_prev))
+            lengths.add(len(rewards))
+            y = _warm_up(plant, pid, spec, rng, 1)
+        assert 10 in lengths  # at least one full roll-out
+        assert any(saturated) and not all(saturated)  # the anti-windup mode mattered
+
+
+def test_quadrotor_coupled_pid(fmi_version):
+    spec = SPECS["QuadrotorAttitude"]
+    rng = np.random.default_rng(11)
+    pid = CoupledPID(TS, -2.0, 2.0, "back_calculation", Tt=[0.3, 0.5, 0.7], derivative_filter_N=10.0)
+    plant, prior, native, fmi = _pair("QuadrotorAttitude", fmi_version, pid, 10, RewardWeights(control_variation_weight=1.0))
+    with plant, prior:
+        coupling = rng.uniform(-0.5, 0.5, 6).tolist()
+        y = _warm_up(plant, pid, spec, rng, 4, coupling)
+        for _ in range(10):
+            r = rng.uniform(-0.5, 0.5, 3).tolist()
+            Kp, Ti, Td = [_log_uniform(rng, lo, hi, 3) for lo, hi in spec.gains]
+            coupling = rng.uniform(-0.5, 0.5, 6).tolist()
+            _compare(plant, prior, native, fmi, (r, y, Kp, Ti, Td, coupling, rng.uniform(-2, 2, 3).tolist()))
+            y = _warm_up(plant, pid, spec, rng, 1, coupling)
+
+
+def test_fresh_pid_and_no_overrides_and_zero_control_weight(fmi_version):
+    """First step after reset (no derivative kick), prior without overrides, reward without the u term."""
+    pid = PID(TS, 1, -10.0, 10.0)
+    plant, prior, native, fmi = _pair("FirstOrderUnstable", fmi_version, pid, 3, RewardWeights(), overrides=False)
+    with plant, prior:
+        assert not pid.raw_state()[3]
+        for y0 in ([0.0], [0.2], [-0.4]):
+            reward, rewards = _compare(plant, prior, native, fmi, ([1.0], y0, [2.0], [1.5], [0.1], None, [0.0]))
+            assert len(rewards) == 3 and math.isfinite(reward)
+            plant.step_values([1.0])
+
+
+def test_divergence_ends_the_roll_out_with_the_penalty(fmi_version):
+    pid = PID(TS, 1, -0.5, 0.5)  # too weak to hold the unstable pole
+    plant, prior, native, fmi = _pair("FirstOrderUnstable", fmi_version, pid, 10, RewardWeights(), overrides=False,
+                                      prior_parameters={"a": 1.3, "b": 0.9})
+    with plant, prior:
+        for _ in range(3):
+            y = plant.step_values([10.0])  # x = 9/1.3 (e^(1.3*0.3) - 1) = 3.3 (a = 1.3, b = 0.9)
+        assert 3.0 < y[0] < 4.0
+        reward, rewards = _compare(plant, prior, native, fmi, ([0.0], y, [1.0], [5.0], [0.0], None, [0.0]))
+        assert 1 < len(rewards) < 10 and rewards[-1] == -100.0
+        assert native._result.stopped == 1
+        assert abs(native.last_measurements[-1][0]) > 5.0  # the step that crossed the bound is recorded
+
+
+def test_discarded_step_ends_the_roll_out_with_the_penalty(fmi_version):
+    pid = PID(TS, 1, -1e308, 1e308)  # u near 1e308 overflows the RK4 stages: the FMU discards the step
+    plant, prior, native, fmi = _pair("FirstOrderUnstable", fmi_version, pid, 5, RewardWeights(), overrides=False)
+    with plant, prior:
+        plant.step_values([0.1])
+        reward, rewards = _compare(plant, prior, native, fmi, ([1.0], [0.1], [1e308], [1.0], [0.0], None, [0.0]))
+        assert rewards == [-100.0] and reward == -100.0
+        assert native._result.stopped == 2 and native.last_measurements == []
+
+
+def test_errors_are_the_same_on_both_paths(fmi_version):
+    pid = PID(TS, 1, -10.0, 10.0)
+    plant, prior, native, fmi = _pair("FirstOrderUnstable", fmi_version, pid, 3, RewardWeights())
+    with plant, prior:
+        for forecast in (native, fmi):  # Ti = 0: Python's float division raises
+            with pytest.raises(ZeroDivisionError):
+                forecast.mean_reward([1.0], [0.0], [1.0], [0.0], [0.0], None, [0.0])
+        assert pid.raw_state()[3] is False
+    # back-calculation with Ti*Td < 0 while saturated: math.sqrt raises ValueError
+    pid = PID(TS, 1, -0.1, 0.1, "back_calculation")
+    plant, prior, native, fmi = _pair("FirstOrderUnstable", fmi_version, pid, 3, RewardWeights())
+    with plant, prior:
+        for forecast in (native, fmi):
+            with pytest.raises(ValueError, match="math domain error"):
+                forecast.mean_reward([1.0], [0.0], [1.0], [-2.0], [0.5], None, [0.0])
+    # an override the prior cannot take once initialised (a fixed parameter): PlantError on both
+    pid = PID(TS, 1, -10.0, 10.0)
+    path = fmu("FirstOrderUnstable", fmi_version)
+    with FmuPlant(path, ["u"], ["y"], TS) as plant, FmuPlant(path, ["u"], ["y"], TS, instance_name="prior") as prior:
+        for where in ("auto", "fmi"):
+            forecast = make_forecast(plant, prior, pid, horizon=2, scale=[1.0], bound=[5.0], penalty=-100.0,
+                                     weights=RewardWeights(), u_scale=[20.0], overrides={"x0": 0.5}, path=where)
+            with pytest.raises(PlantError):
+                forecast.mean_reward([1.0], [0.0], [1.0], [1.0], [0.0], None, [0.0])
+
+
+def test_native_keeps_prior_time_for_later_fmi_calls(fmi_version):
+    """After a native roll-out, the prior's Python time matches its C time: FMI calls on it still work."""
+    pid = PID(TS, 1, -10.0, 10.0)
+    plant, prior, native, fmi = _pair("FirstOrderUnstable", fmi_version, pid, 4, RewardWeights())
+    with plant, prior:
+        plant.step_values([0.5])
+        native.mean_reward([1.0], [0.05], [2.0], [1.0], [0.0], None, [0.0])
+        assert prior.time == plant.time + 4 * TS
+        prior.step_values([0.0])  # doStep at prior.time is accepted only if it is the FMU's time
+
+
+def test_raw_state_is_the_live_state():
+    pid = PID(TS, 2, -1.0, 1.0)
+    pid.step_values([0.5, -2.0], [1.0, 3.0], [2.0, 1.0], [0.1, 0.0])
+    integral, last_error, derivative, initialized = pid.raw_state()
+    state = pid.get_state()
+    assert (integral, last_error, derivative, initialized) == (state.integral.tolist(), state.last_error.tolist(),
+                                                               state.derivative.tolist(), True)
+    coupled = CoupledPID(TS)
+    assert coupled.raw_state() == coupled.pid.raw_state()
+
+
+def test_make_forecast_picks_native_only_for_the_same_bundled_fmu():
+    path2, path3 = fmu("FirstOrderUnstable", 2), fmu("FirstOrderUnstable", 3)
+    pid = PID(TS, 1)
+    kw = dict(horizon=2, scale=[1.0], bound=[5.0], penalty=-100.0, weights=RewardWeights(), u_scale=[1.0])
+    with FmuPlant(path2, ["u"], ["y"]) as plant, FmuPlant(path2, ["u"], ["y"]) as prior, \
+            FmuPlant(path3, ["u"], ["y"]) as other:
+        assert native_unavailable(plant, prior) is None
+        assert isinstance(make_forecast(plant, prior, pid, **kw), NativeForecast)
+        assert isinstance(make_forecast(plant, prior, pid, path="fmi", **kw), FmiForecast)
+        assert isinstance(make_forecast(plant, prior, pid, state_map={"x0": "y"}, **kw), FmiForecast)
+        assert "not the plant's FMU" in native_unavailable(plant, other)
+        assert isinstance(make_forecast(plant, other, pid, **kw), FmiForecast)
+        with pytest.raises(PlantError, match="not available"):
+            make_forecast(plant, other, pid, path="native", **kw)
+        with pytest.raises(ValueError, match="path"):
+            make_forecast(plant, prior, pid, path="fast", **kw)
