@@ -1,0 +1,311 @@
+"""Closed-loop frequency response of an FMU plant: multisine at the plant input, the PID in the loop.
+
+The plant FMU runs with the scenario's PID (gains fixed) at an operating point (one setpoint per
+loop); the loop is never opened, so open-loop unstable plants can be measured. A periodic multisine
+d is added to one loop's controller output, u = C(r - y) + d, and the plant response at each excited
+frequency is the ratio of the discrete Fourier transforms of the measured y and u over whole periods
+of the periodic steady state:
+
+    P(e^{j w Ts}) = Y(w) / U(w)
+
+Timing (the env's): u_k is computed from y_k, held over [k Ts, (k+1) Ts) and y_{k+1} is measured
+after the step, so the ratio of y_k to u_k is the ZOH discretisation of the plant (one sample of
+delay included). No measurement noise and no scenario disturbances: the experiment is deterministic.
+
+With several loops ("loop-at-a-time"), the other loops stay closed; the response reported for loop i
+is the *effective* plant its PID sees, (Y_i - sum_j c_ij Y_j) / U_i (the coupled error of eq. 27;
+c = 0 without coupling), so that L_i = C_i * P_i is loop i's loop transfer broken at its plant input.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Callable, Sequence
+
+import numpy as np
+
+from .config import TuningConfig
+from .control import CoupledPID, PID
+from .control.pid import coupling_matrix
+from .env import resolve_fmu
+from .fmu import FmuPlant, StepRejected
+
+SETTLE_WINDOW = 50          # samples over which the closed loop must be still to count as settled
+SETTLE_TOLERANCE = 1e-7     # per-sample change of y [measurement_scale] and u [amplitude scale] counted as still
+MAX_SETTLE_STEPS = 20_000   # give up settling after this many samples (the experiment still checks convergence)
+CONVERGENCE_TOLERANCE = 1e-3  # max |L_p - L_{p-1}| / |1 + L_p| between the last two periods
+MAX_PERIODS = 6             # measured periods at most (after the transient wait)
+MIN_WAIT = 200              # samples waited after the multisine starts, at least (at most one period)
+AMPLITUDE_FRACTION = 0.02   # default multisine peak: 2 % of the u range (or of Kp * measurement_scale)
+AMPLITUDE_RETRIES = 4       # halvings of the amplitude when the control signal hits a limit
+
+
+def multisine(bins: Sequence[int], period: int, amplitude: float, iterations: int = 20) -> np.ndarray:
+    """One period (shape (period,)) of a sum of cosines at DFT bins `bins` (1 <= bin <= period/2).
+
+    Equal amplitudes, Schroeder phases, then a few clip-and-restore iterations to lower the crest
+    factor; scaled so that max |d| = amplitude. A Nyquist bin keeps a real (0 or pi) phase.
+    """
+    bins = np.asarray(bins, dtype=int)
+    K = len(bins)
+    k = np.arange(1, K + 1)
+    spectrum = np.zeros(period // 2 + 1, complex)
+    spectrum[bins] = np.exp(-1j * np.pi * k * (k - 1) / K)
+    nyquist = period % 2 == 0 and bins[-1] == period // 2
+    if nyquist:
+        spectrum[period // 2] = 1.0
+    x = np.fft.irfft(spectrum, n=period)
+    for _ in range(iterations):
+        peak = np.max(np.abs(x))
+        X = np.fft.rfft(np.clip(x, -0.8 * peak, 0.8 * peak))
+        spectrum[bins] = np.exp(1j * np.angle(X[bins]))
+        if nyquist:
+            spectrum[period // 2] = 1.0 if X[period // 2].real >= 0 else -1.0
+        x = np.fft.irfft(spectrum, n=period)
+    return x * (amplitude / np.max(np.abs(x)))
+
+
+@dataclass(frozen=True, eq=False)
+class Settling:
+    """How the closed loop reached the operating point.
+
+    steps: samples run from t = 0; settled: still within SETTLE_TOLERANCE over SETTLE_WINDOW samples;
+    diverged: left the divergence bound, non-finite, or the FMU rejected a step; saturated: a control
+    signal sits at a limit at the end; measurement, control_signal (n_loops,): the final values.
+    """
+
+    steps: int
+    settled: bool
+    diverged: bool
+    saturated: bool
+    measurement: np.ndarray
+    control_signal: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class PlantResponse:
+    """Estimated effective plant response of one loop at the excited frequencies.
+
+    frequencies_rad_s (K,), response (K,) complex P(e^{j w Ts}); period: samples per multisine period;
+    periods: measured periods; change: max |L_p - L_{p-1}| / |1 + L_p| between the last two;
+    distortion: RMS |Y| per non-excited bin / RMS |Y| per excited bin (0 for a linear plant in steady
+    state; nonlinearity, time variation and leftover transients raise it); amplitude: multisine peak
+    [u units] finally used; saturated / diverged: a control signal hit a limit / the loop diverged.
+    """
+
+    frequencies_rad_s: np.ndarray
+    response: np.ndarray
+    period: int
+    periods: int
+    change: float
+    distortion: float
+    amplitude: float
+    saturated: bool
+    diverged: bool
+
+
+class ClosedLoopRig:
+    """The scenario's plant FMU in closed loop with its PID (fixed gains) at an operating point.
+
+    Args:
+        config: the tuning problem (plant, loops, limits, anti-windup, derivative filter, coupling).
+        Kp, Ti, Td: gains per loop (n_loops,); coupling: (6,) for the coupled PID, else None.
+        setpoint: the operating point, one setpoint per loop (plant units).
+    """
+
+    def __init__(self, config: TuningConfig, Kp: Sequence[float], Ti: Sequence[float], Td: Sequence[float],
+                 setpoint: Sequence[float], coupling: Sequence[float] | None = None):
+        c = config
+        n = c.n_loops
+        for name, values in (("Kp", Kp), ("Ti", Ti), ("Td", Td), ("operating_point", setpoint)):
+            if len(values) != n:
+                raise ValueError(f"{name} needs one value per loop ({n}), got {list(values)!r}")
+        self.config = c
+        self.n_loops = n
+        self.Kp, self.Ti, self.Td = [float(v) for v in Kp], [float(v) for v in Ti], [float(v) for v in Td]
+        self.setpoint = np.array(setpoint, float)
+        self.u_min = np.array([l.u_min for l in c.loops], float)
+        self.u_max = np.array([l.u_max for l in c.loops], float)
+        self.scale = np.array([l.measurement_scale for l in c.loops], float)
+        self.bound = np.array([l.divergence_bound for l in c.loops], float)
+        pid_args = dict(sample_time_s=c.sample_time_s, u_min=self.u_min, u_max=self.u_max,
+                        anti_windup=c.anti_windup, derivative_filter_N=c.derivative_filter_N)
+        if c.coupled:
+            if coupling is None or len(coupling) != 6:
+                raise ValueError(f"the coupled PID needs 6 coupling coefficients, got {coupling!r}")
+            self.coupling = [float(v) for v in coupling]
+            self.pid = CoupledPID(**pid_args)
+            self.coupling_matrix = coupling_matrix(self.coupling)
+        else:
+            self.coupling = None
+            self.pid = PID(n_loops=n, **pid_args)
+            self.coupling_matrix = np.zeros((n, n))
+        path = resolve_fmu(c.fmu, c.fmi_version)
+        self.plant = FmuPlant(path, [l.input for l in c.loops], [l.output for l in c.loops], c.sample_time_s,
+                              c.plant_parameters, "margins")
+        self._snapshot = None
+        self._settle_steps = 0
+        self.y = self.plant.read_outputs()
+
+    def close(self) -> None:
+        self.plant.close()
+
+    def _control(self, y: np.ndarray) -> np.ndarray:
+        if self.coupling is not None:
+            return self.pid.step(self.setpoint, y, self.Kp, self.Ti, self.Td, self.coupling)
+        return self.pid.step(self.setpoint, y, self.Kp, self.Ti, self.Td)
+
+    def _outside(self, y: np.ndarray) -> bool:
+        return not (np.all(np.isfinite(y)) and np.all(np.abs(y - self.setpoint) / self.scale <= self.bound))
+
+    def settle(self) -> Settling:
+        """From t = 0, run the closed loop until it is still (or MAX_SETTLE_STEPS); remember that state."""
+        self.plant.reset()
+        self.pid.reset()
+        y = self.plant.read_outputs()
+        u_scale = np.where(np.isfinite(self.u_max - self.u_min), self.u_max - self.u_min, 1.0)
+        still, u_prev, y_prev = 0, None, y
+        diverged = settled = False
+        u = np.zeros(self.n_loops)
+        k = 0
+        while k < MAX_SETTLE_STEPS:
+            u = self._control(y)
+            try:
+                y = self.plant.step(u)
+            except StepRejected:
+                diverged = True
+                break
+            k += 1
+            if self._outside(y):
+                diverged = True
+                break
+            if u_prev is not None and np.all(np.abs(y - y_prev) <= SETTLE_TOLERANCE * self.scale) and \
+                    np.all(np.abs(u - u_prev) <= SETTLE_TOLERANCE * np.maximum(u_scale, np.abs(u))):
+                still += 1
+                if still >= SETTLE_WINDOW:
+                    settled = True
+                    break
+            else:
+                still = 0
+            u_prev, y_prev = u, y
+        self._settle_steps = k
+        self.y = y
+        saturated = bool(np.any((u <= self.u_min) | (u >= self.u_max)))
+        if not diverged and self.plant.description.can_serialize_state:
+            self._snapshot = (self.plant.get_state(), self.pid.get_state(), y.copy())
+        return Settling(k, settled, diverged, saturated, y.copy(), np.array(u, float))
+
+    def restore(self) -> None:
+        """Back to the settled state (state snapshot, or a deterministic replay from t = 0)."""
+        if self._snapshot is not None:
+            state, pid_state, y = self._snapshot
+            self.plant.set_state(state)
+            self.pid.set_state(pid_state)
+            self.y = y.copy()
+            return
+        self.plant.reset()
+        self.pid.reset()
+        y = self.plant.read_outputs()
+        for _ in range(self._settle_steps):
+            y = self.plant.step(self._control(y))
+        self.y = y
+
+    def simulate(self, loop: int, d: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool, bool]:
+        """Continue the closed loop for len(d) samples with d added to loop `loop`'s control signal.
+
+        Returns (u, y, saturated, diverged): u (n_loops, len(d)) the applied control signals and
+        y (n_loops, len(d)) the measurements they were computed from (u_k from y_k); saturated: some
+        u reached a limit (then it is clipped there); diverged: the loop left the divergence bound.
+        """
+        n, K = self.n_loops, len(d)
+        us, ys = np.zeros((K, n)), np.zeros((K, n))
+        lo, hi = self.u_min.tolist(), self.u_max.tolist()
+        r, scale, bound = self.setpoint.tolist(), self.scale.tolist(), self.bound.tolist()
+        y = self.y
+        saturated = diverged = False
+        k = 0
+        while k < K:
+            u = self._control(y)
+            u[loop] += d[k]
+            for i in range(n):
+                if not lo[i] < u[i] < hi[i]:
+                    saturated = True
+                    u[i] = min(max(u[i], lo[i]), hi[i])
+            us[k] = u
+            ys[k] = y
+            k += 1
+            try:
+                y = self.plant.step(u)
+            except StepRejected:
+                diverged = True
+                break
+            if not all(abs(y[i] - r[i]) <= bound[i] * scale[i] for i in range(n)):  # NaN fails too
+                diverged = True
+                break
+        self.y = y
+        return us[:k].T, ys[:k].T, saturated, diverged
+
+
+def default_amplitude(config: TuningConfig, Kp: Sequence[float]) -> list[float]:
+    """Multisine peak per loop [u units]: AMPLITUDE_FRACTION of the u range, or of |Kp| * measurement_scale
+    where the range is unbounded (the u a proportional action gives for that fraction of the scale)."""
+    out = []
+    for loop, kp in zip(config.loops, Kp):
+        span = loop.u_max - loop.u_min
+        out.append(AMPLITUDE_FRACTION * (span if math.isfinite(span) else abs(kp) * loop.measurement_scale))
+    return out
+
+
+def measure_response(rig: ClosedLoopRig, loop: int, bins: Sequence[int], period: int, amplitude: float,
+                     controller: Callable[[np.ndarray], np.ndarray], wait: int) -> PlantResponse:
+    """Effective plant response of loop `loop` at DFT bins `bins` of a `period`-sample multisine.
+
+    Starts from the settled state (rig.restore()), waits `wait` samples (at least MIN_WAIT, at most one
+    period), then measures whole periods until the loop transfer L = C * P changes by at most
+    CONVERGENCE_TOLERANCE * |1 + L| between consecutive periods (MAX_PERIODS at most). When a control
+    signal hits a limit or the loop diverges, the amplitude is halved and the experiment repeated
+    (AMPLITUDE_RETRIES times).
+    `controller(w)` gives the loop's PID response C(e^{j w Ts}) at w [rad/s].
+    """
+    bins = np.unique(np.asarray(bins, dtype=int))
+    Ts = rig.config.sample_time_s
+    omega = 2 * np.pi * bins / (period * Ts)
+    C = controller(omega)
+    coupling_row = rig.coupling_matrix[loop]
+    excited = np.zeros(period // 2 + 1, bool)
+    excited[bins] = True
+    excited[0] = False
+    others = ~excited
+    others[0] = False
+    wait = int(min(period, max(MIN_WAIT, wait)))
+    for attempt in range(AMPLITUDE_RETRIES + 1):
+        rig.restore()
+        d = multisine(bins, period, amplitude)
+        _, _, saturated, diverged = rig.simulate(loop, d[:wait])
+        estimates, change, periods, distortion = [], math.inf, 0, math.nan
+        start = wait
+        while not diverged:
+            uu, yy, sat, diverged = rig.simulate(loop, np.roll(d, -(start % period)))
+            saturated |= sat
+            if diverged:
+                break
+            U = np.fft.rfft(uu[loop])
+            Y = np.fft.rfft(yy, axis=1)
+            Y_eff = Y[loop] - coupling_row @ Y
+            estimates.append(Y_eff[bins] / U[bins])
+            periods += 1
+            start += period
+            excited_rms = np.sqrt(np.mean(np.abs(Y_eff[excited]) ** 2))
+            distortion = float(np.sqrt(np.mean(np.abs(Y_eff[others]) ** 2)) / excited_rms) if others.any() else 0.0
+            if len(estimates) >= 2:
+                L1, L0 = C * estimates[-1], C * estimates[-2]
+                change = float(np.max(np.abs(L1 - L0) / np.abs(1 + L1)))
+                if change <= CONVERGENCE_TOLERANCE or periods >= MAX_PERIODS:
+                    break
+        if not (saturated or diverged) or attempt == AMPLITUDE_RETRIES:
+            break
+        amplitude /= 2  # a saturated unstable plant can escape: smaller is the cure for both
+    response = estimates[-1] if estimates else np.full(len(bins), np.nan + 0j)
+    if period % 2 == 0 and bins[-1] == period // 2:
+        response[-1] = response[-1].real  # exactly real at Nyquist for a real system
+    return PlantResponse(omega, response, period, periods, change, distortion, amplitude, saturated, diverged)

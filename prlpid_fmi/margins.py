@@ -1,0 +1,346 @@
+"""Robustness margins of a deployable PID, measured on the FMU at an operating point.
+
+``loop_margins`` estimates the plant's frequency response on the FMU with the loop closed by the PID
+(prlpid_fmi.identification: a small multisine at the plant input), forms the loop transfer
+L = C * P at the sample time Ts with C the discrete PID of eq. 2 exactly as prlpid_fmi/control/pid.py
+computes it, and reads through python-control (``frd``, ``stability_margins``):
+
+- Ms = max |1 / (1 + L)| over the frequency grid (and between grid points by python-control's
+  interpolation), the peak sensitivity; 1/Ms is the smallest distance from L to -1.
+- gain margin (ratio and dB) at the phase crossover, phase margin (deg) at the gain crossover. With
+  several crossings python-control keeps the gain margin closest to 1 (0 dB) and the smallest phase
+  margin. A gain margin below 1 (negative dB) is a *lower* margin: an open-loop unstable plant loses
+  stability when the gain drops by that factor.
+
+The PID's transfer function (positional form, e = r - y)::
+
+    u_k = Kp * (e_k + (Ts/Ti) * sum_{i<=k} e_i + Td * Df_k),  Df = backward-Euler low pass (Td/N) of (e_k - e_{k-1})/Ts
+    C(z) = Kp * (1 + (Ts/Ti) * z/(z - 1) + Td * (z - 1) / ((Tf + Ts) z - Tf)),   Tf = Td/N (0 without a filter)
+
+Frequency grid: the DFT bins of a multisine period of N samples, log-spaced from 2 pi/(N Ts) up to
+the Nyquist frequency pi/Ts, then every bin of that period around the |S| peak and the crossovers.
+N starts at DEFAULT_PERIOD and grows (up to MAX_PERIOD) while a point of interest lies below bin
+MIN_RESOLUTION_BIN, so the grid is fine enough near the peak for Ms to 1 %.
+
+Several loops: loop-at-a-time margins. Each loop is broken at its plant input in turn with the other
+loops closed; the returned Margins is the loop with the largest Ms, and ``per_loop`` holds every
+loop's own Margins.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import warnings
+from dataclasses import dataclass
+from typing import Sequence
+
+import control
+import numpy as np
+
+from .config import TuningConfig
+from .identification import CONVERGENCE_TOLERANCE, ClosedLoopRig, PlantResponse, default_amplitude, measure_response
+
+DEFAULT_PERIOD = 4096        # samples per multisine period: lowest frequency 2 pi/(N Ts), 3 decades below Nyquist
+MAX_PERIOD = 32768           # longest period the grid refinement may choose
+GRID_POINTS = 120            # log-spaced bins of the first multisine (fewer after rounding to distinct bins)
+MIN_RESOLUTION_BIN = 32      # a peak or crossover below this bin gets a longer period (finer grid)
+REFINE_POINTS = 24           # bins added around each peak or crossover, at most
+CROSSING_RANGE = 20.0        # phase crossings with 1/20 < |L| < 20 count as points of interest
+DC_PEAK_GAP = 0.003          # an |S| peak at the lowest grid point may sit this far (relative) below |S(0)|
+DISTORTION_LIMIT = 0.02      # relative response at non-excited bins above which the estimate is flagged
+
+
+def pid_transfer_function(Kp: float, Ti: float, Td: float, sample_time_s: float,
+                          derivative_filter_N: float | None = None) -> control.TransferFunction:
+    """C(z) of the positional PID of eq. 2 (see the module docstring), dt = sample_time_s.
+
+    Ti = inf drops the integral term, Td = 0 the derivative term.
+    """
+    Ts = float(sample_time_s)
+    terms = [(np.array([1.0]), np.array([1.0]))]
+    if math.isfinite(Ti):
+        terms.append((np.array([Ts / Ti, 0.0]), np.array([1.0, -1.0])))
+    if Td != 0:
+        Tf = Td / derivative_filter_N if derivative_filter_N else 0.0
+        terms.append((np.array([Td, -Td]), np.array([Tf + Ts, -Tf])))
+    num, den = np.array([0.0]), np.array([1.0])
+    for n, d in terms:
+        num, den = np.polyadd(np.polymul(num, d), np.polymul(n, den)), np.polymul(den, d)
+    return control.tf(Kp * num, den, Ts)
+
+
+def pid_frequency_response(Kp: float, Ti: float, Td: float, sample_time_s: float, omega,
+                           derivative_filter_N: float | None = None) -> np.ndarray:
+    """C(e^{j w Ts}) at w = omega [rad/s], complex array of omega's shape (exactly real at Nyquist, w = pi/Ts)."""
+    C = pid_transfer_function(Kp, Ti, Td, sample_time_s, derivative_filter_N)
+    wT = np.asarray(omega, float) * sample_time_s
+    z = np.where(np.isclose(wT, np.pi, rtol=1e-12, atol=0), -1.0 + 0j, np.exp(1j * wT))
+    return np.polyval(C.num[0][0], z) / np.polyval(C.den[0][0], z)
+
+
+@dataclass(frozen=True, eq=False)
+class Margins:
+    """Robustness margins of one loop (or the worst loop) at one operating point.
+
+    Ms: peak sensitivity max |1/(1 + L)| (inf: the loop cannot be held at the operating point);
+    Ms_frequency_rad_s: where it peaks. gain_margin: ratio (inf: no phase crossover; < 1: a lower
+    margin) at phase_crossover_rad_s; phase_margin_deg at gain_crossover_rad_s (inf: no gain crossover).
+    frequencies_rad_s (K,): the grid; plant_response (K,) complex: the estimated P(e^{j w Ts}) (with
+    several loops, the effective plant the loop's PID sees with the other loops closed);
+    controller_response (K,): C(e^{j w Ts}). amplitude: multisine peak [u units] used.
+    reliable: False when the estimate or the margins should not be trusted, with the reason in note.
+    loop: the loop's measured output name; per_loop: every loop's Margins (several loops only).
+    """
+
+    Ms: float
+    Ms_frequency_rad_s: float
+    gain_margin: float
+    phase_crossover_rad_s: float
+    phase_margin_deg: float
+    gain_crossover_rad_s: float
+    frequencies_rad_s: np.ndarray
+    plant_response: np.ndarray
+    controller_response: np.ndarray
+    amplitude: float
+    reliable: bool
+    note: str
+    loop: str
+    per_loop: tuple = ()
+
+    @property
+    def gain_margin_db(self) -> float:
+        return 20 * math.log10(self.gain_margin) if self.gain_margin > 0 else -math.inf
+
+    @property
+    def loop_response(self) -> np.ndarray:
+        """L = C * P at frequencies_rad_s."""
+        return self.controller_response * self.plant_response
+
+    @property
+    def sensitivity(self) -> np.ndarray:
+        """S = 1 / (1 + L) at frequencies_rad_s."""
+        return 1 / (1 + self.loop_response)
+
+
+def margins_from_loop_response(omega: np.ndarray, L: np.ndarray, finite_dc_gain: bool = False
+                               ) -> tuple[float, float, float, float, float, float]:
+    """(Ms, w_Ms, gain margin, w_pc, phase margin [deg], w_gc) of a loop response L at omega [rad/s].
+
+    Ms is the larger of the grid maximum of |1/(1+L)| and python-control's interpolated stability
+    margin 1/sm (which only finds interior minima of |1 + L|). Of several crossings, the gain margin
+    closest to 1 and the smallest |phase margin| are kept (python-control's rule). finite_dc_gain:
+    L has no pole at z = 1 (no integral action and a plant with a finite DC gain), so its DC value,
+    extrapolated from the two lowest grid points, is a phase crossover when it is negative.
+    """
+    S = np.abs(1 / (1 + L))
+    i = int(np.argmax(S))
+    Ms, w_ms = float(S[i]), float(omega[i])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        gm, pm, sm, wpc, wgc, wms = control.stability_margins(control.frd(L, omega), returnall=True)
+    gm, wpc = list(np.atleast_1d(gm)), list(np.atleast_1d(wpc))
+    if finite_dc_gain and len(L) > 1:
+        L_dc = L[0].real - (L[1].real - L[0].real) * omega[0] ** 2 / (omega[1] ** 2 - omega[0] ** 2)
+        if L_dc < 0:
+            gm.append(1 / abs(L_dc))
+            wpc.append(0.0)
+    if len(sm) and np.min(sm) > 0 and 1 / np.min(sm) > Ms:
+        Ms, w_ms = 1 / float(np.min(sm)), float(np.asarray(wms)[np.argmin(sm)])
+    g = int(np.argmin(np.abs(np.log(gm)))) if gm else -1
+    p = int(np.argmin(np.abs(pm))) if len(pm) else -1
+    return (Ms, w_ms, float(gm[g]) if gm else math.inf, float(wpc[g]) if gm else math.nan,
+            float(pm[p]) if len(pm) else math.inf, float(np.asarray(wgc)[p]) if len(pm) else math.nan)
+
+
+def _log_bins(period: int, points: int) -> np.ndarray:
+    """Distinct integer bins, log-spaced from 1 to period/2 (Nyquist included)."""
+    return np.unique(np.round(np.geomspace(1, period // 2, points)).astype(int))
+
+
+def _bins_for(frequencies, period: int, Ts: float) -> np.ndarray:
+    bins = np.round(np.asarray(frequencies, float) * period * Ts / (2 * np.pi)).astype(int)
+    return np.unique(np.clip(bins, 1, period // 2))
+
+
+def _points_of_interest(L: np.ndarray) -> list[int]:
+    """Indices of the |S| peak and of the grid intervals where |L| crosses 1 or L crosses the negative real axis."""
+    points = {int(np.argmax(np.abs(1 / (1 + L))))}
+    mag = np.abs(L)
+    for i in range(len(L) - 1):
+        if (mag[i] - 1) * (mag[i + 1] - 1) <= 0:
+            points.update((i, i + 1))
+        if L[i].imag * L[i + 1].imag <= 0 and min(L[i].real, L[i + 1].real) < 0 and \
+                1 / CROSSING_RANGE < mag[i] < CROSSING_RANGE:
+            points.update((i, i + 1))
+    return sorted(points)
+
+
+def _period_factor(omega: np.ndarray, bins: np.ndarray, L: np.ndarray, points: list[int]) -> int:
+    """How many times longer the multisine period must be for a fine enough grid at the points of interest.
+
+    A point below bin MIN_RESOLUTION_BIN needs that bin. An |S| peak at the lowest grid point (a peak
+    at DC, e.g. P control of an unstable plant) needs |S| flat there: |S| is even in w, so
+    |S(0)| - |S(w0)| ~ (|S(w0)| - |S(w1)|) w0^2 / (w1^2 - w0^2), which must be below DC_PEAK_GAP * |S(w0)|.
+    """
+    S = np.abs(1 / (1 + L))
+    factor = 1
+    for j in points:
+        if j == 0 and int(np.argmax(S)) == 0 and len(S) > 1:
+            gap = (S[0] - S[1]) / S[0] * omega[0] ** 2 / (omega[1] ** 2 - omega[0] ** 2)
+            if gap > DC_PEAK_GAP:
+                factor = max(factor, 2 ** math.ceil(0.5 * math.log2(gap / DC_PEAK_GAP)))
+        elif bins[j] < MIN_RESOLUTION_BIN:
+            factor = max(factor, 2 ** math.ceil(math.log2(MIN_RESOLUTION_BIN / bins[j])))
+    return factor
+
+
+def _refinement_bins(bins: np.ndarray, points: list[int]) -> np.ndarray:
+    """Bins strictly between the grid neighbours of each point of interest (REFINE_POINTS per point at most)."""
+    extra = set()
+    for j in points:
+        lo, hi = bins[max(j - 1, 0)], bins[min(j + 1, len(bins) - 1)]
+        inside = np.arange(lo + 1, hi)
+        if len(inside) > REFINE_POINTS:
+            inside = np.unique(np.round(np.geomspace(lo + 1, hi - 1, REFINE_POINTS)).astype(int))
+        extra.update(int(b) for b in inside)
+    return np.array(sorted(extra - set(int(b) for b in bins)), dtype=int)
+
+
+def _no_margins(loop: str, amplitude: float, note: str) -> Margins:
+    empty = np.zeros(0)
+    return Margins(math.inf, math.nan, math.nan, math.nan, math.nan, math.nan, empty, empty.astype(complex),
+                   empty.astype(complex), amplitude, False, note, loop)
+
+
+def _measure_loop(rig: ClosedLoopRig, loop: int, frequencies, amplitude: float) -> list[PlantResponse]:
+    """The multisine experiments of one loop: a log grid (period grown while too coarse), then refinement."""
+    c = rig.config
+    Ts = c.sample_time_s
+
+    def controller(w):
+        return pid_frequency_response(rig.Kp[loop], rig.Ti[loop], rig.Td[loop], Ts, w, c.derivative_filter_N)
+
+    wait = rig._settle_steps
+    if frequencies is None:
+        period = DEFAULT_PERIOD
+    else:
+        w_min = float(np.min(frequencies))
+        if not 0 < w_min or np.max(frequencies) > np.pi / Ts * (1 + 1e-9):
+            raise ValueError(f"frequencies must lie in (0, pi/Ts = {np.pi / Ts:g}] rad/s, got {frequencies!r}")
+        period = int(2 ** math.ceil(math.log2(max(2 * np.pi * MIN_RESOLUTION_BIN / (w_min * Ts), 16))))
+    bins = _log_bins(period, GRID_POINTS) if frequencies is None else _bins_for(frequencies, period, Ts)
+    responses = [measure_response(rig, loop, bins, period, amplitude, controller, wait)]
+    while not responses[-1].diverged:
+        omega, P = _merged(responses)
+        L = controller(omega) * P
+        points = _points_of_interest(L)
+        grid = np.round(omega * period * Ts / (2 * np.pi)).astype(int)
+        factor = 1 if frequencies is not None else _period_factor(omega, grid, L, points)
+        grown = min(MAX_PERIOD, period * factor) > period
+        if grown:  # every measured frequency is also a bin of the longer period
+            period = min(MAX_PERIOD, period * factor)
+            grid = np.round(omega * period * Ts / (2 * np.pi)).astype(int)
+        extra = _refinement_bins(grid, points)
+        if grown:
+            extra = np.union1d(extra, [b for b in _log_bins(period, GRID_POINTS) if b < grid[0]])
+        if len(extra) == 0:
+            break
+        responses.append(measure_response(rig, loop, extra, period, responses[-1].amplitude, controller, wait))
+        if not grown:
+            break
+    return responses
+
+
+def _merged(responses: list[PlantResponse]) -> tuple[np.ndarray, np.ndarray]:
+    """All measured (frequencies [rad/s], responses), sorted by frequency."""
+    omega = np.concatenate([r.frequencies_rad_s for r in responses])
+    P = np.concatenate([r.response for r in responses])
+    order = np.argsort(omega)
+    return omega[order], P[order]
+
+
+def _loop_result(rig: ClosedLoopRig, loop: int, responses: list[PlantResponse]) -> Margins:
+    c = rig.config
+    name = c.loops[loop].output
+    amplitude = min(r.amplitude for r in responses)
+    if any(r.diverged for r in responses):
+        return _no_margins(name, amplitude, "the closed loop diverged during the frequency-response experiment "
+                                            f"(multisine peak {amplitude:.3g})")
+    omega, P = _merged(responses)
+    C = pid_frequency_response(rig.Kp[loop], rig.Ti[loop], rig.Td[loop], c.sample_time_s, omega,
+                               c.derivative_filter_N)
+    L = C * P
+    no_integrator = not math.isfinite(rig.Ti[loop]) and len(L) > 1 and abs(abs(L[1]) / abs(L[0]) - 1) < 0.1
+    Ms, w_ms, gm, wpc, pm, wgc = margins_from_loop_response(omega, L, finite_dc_gain=no_integrator)
+    problems = []
+    if any(r.saturated for r in responses):
+        problems.append(f"the control signal reached a limit even with a multisine peak of {amplitude:.3g}")
+    change = max(r.change for r in responses)
+    if change > 10 * CONVERGENCE_TOLERANCE:
+        problems.append(f"the response did not reach a periodic steady state (change {change:.2g} between periods)")
+    distortion = max(r.distortion for r in responses)
+    if distortion > DISTORTION_LIMIT:
+        problems.append(f"the plant does not respond linearly around this operating point "
+                        f"(distortion {distortion:.1%}: nonlinear or time-varying)")
+    return Margins(Ms, w_ms, gm, wpc, pm, wgc, omega, P, C, amplitude, not problems, "; ".join(problems), name)
+
+
+def loop_margins(config: TuningConfig, Kp: Sequence[float], Ti: Sequence[float], Td: Sequence[float],
+                 operating_point: Sequence[float], coupling: Sequence[float] | None = None,
+                 frequencies: Sequence[float] | None = None,
+                 amplitude: Sequence[float] | None = None) -> Margins:
+    """Robustness margins of the PID (Kp, Ti, Td per loop [, coupling (6,)]) on config's FMU plant.
+
+    operating_point: one setpoint per loop (plant units); the closed loop settles there before the
+    experiment. frequencies: grid [rad/s] in (0, pi/Ts] (rounded to DFT bins; refined around the peak
+    and the crossovers), None for the automatic grid. amplitude: multisine peak per loop [u units]
+    (halved while the control signal hits a limit), None for identification.default_amplitude.
+    Several loops: loop-at-a-time, the loop with the largest Ms is returned (per_loop: all loops).
+    """
+    c = config
+    n = c.n_loops
+    amplitudes = list(default_amplitude(c, Kp) if amplitude is None else amplitude)
+    if len(amplitudes) != n or not all(a > 0 for a in amplitudes):
+        raise ValueError(f"amplitude needs one positive value per loop ({n}), got {amplitude!r}")
+    rig = ClosedLoopRig(c, Kp, Ti, Td, operating_point, coupling)
+    try:
+        settling = rig.settle()
+        results = []
+        for i in range(n):
+            name = c.loops[i].output
+            if settling.diverged:
+                results.append(_no_margins(name, amplitudes[i], "the closed loop diverges at this operating point"))
+            elif settling.saturated:
+                results.append(_no_margins(name, amplitudes[i], "the control signal is at a limit at this operating "
+                                           f"point (u = {np.array2string(settling.control_signal, precision=4)})"))
+            else:
+                responses = _measure_loop(rig, i, frequencies, amplitudes[i])
+                results.append(_loop_result(rig, i, responses))
+    finally:
+        rig.close()
+    if not settling.settled and not settling.diverged:
+        results = [dataclasses.replace(m, note="; ".join(filter(None, [m.note, "the loop had not settled "
+                   f"after {settling.steps} samples"]))) for m in results]
+    if n == 1:
+        return results[0]
+    worst = max(results, key=lambda m: (m.Ms, -m.phase_margin_deg if math.isfinite(m.phase_margin_deg) else 0))
+    notes = [f"{m.loop}: {m.note}" for m in results if m.note]
+    return dataclasses.replace(worst, reliable=all(m.reliable for m in results), note="; ".join(notes),
+                               per_loop=tuple(results))
+
+
+def format_margins(m: Margins) -> str:
+    """One line for reports, e.g. "Ms 1.42, GM 8.3 dB at 12.1 rad/s, PM 52° at 3.4 rad/s"."""
+    if not math.isfinite(m.Ms):
+        text = f"Ms inf ({m.note})"
+    else:
+        gm = "GM inf" if not math.isfinite(m.gain_margin) else \
+            f"GM {m.gain_margin_db:.1f} dB at {m.phase_crossover_rad_s:.3g} rad/s"
+        pm = "PM inf" if not math.isfinite(m.phase_margin_deg) else \
+            f"PM {m.phase_margin_deg:.0f}° at {m.gain_crossover_rad_s:.3g} rad/s"
+        text = f"Ms {m.Ms:.2f}, {gm}, {pm}"
+        if not m.reliable:
+            text += f" (unreliable: {m.note})"
+    if m.per_loop:
+        text += f" [worst loop: {m.loop}]"
+    return text

@@ -1,0 +1,219 @@
+"""Robustness margins measured on the FMU against exact references.
+
+References come from outside the code under test: the plant's exact ZOH discretisation
+(python-control c2d) or a hand linearisation of the Modelica equations, times the PID of eq. 2
+written out by hand below, evaluated by python-control on a fine frequency grid.
+"""
+import dataclasses
+import math
+
+import control
+import numpy as np
+import pytest
+from scipy.signal import lfilter
+
+from prlpid_fmi.control.pid import PID
+from prlpid_fmi.margins import Margins, format_margins, loop_margins, pid_transfer_function
+from prlpid_fmi.presets import preset
+
+TS = 0.1
+
+
+def pid_by_hand(Kp, Ti, Td, Ts=TS, N=None):
+    """Eq. 2: u = Kp (e + Ts/Ti sum e + Td Df), Df = backward-Euler low pass (Td/N) of the backward difference."""
+    z = control.tf([1, 0], [1], Ts)
+    Tf = Td / N if N else 0.0
+    C = 1 + Td * (z - 1) / ((Tf + Ts) * z - Tf)
+    if math.isfinite(Ti):
+        C = C + (Ts / Ti) * z / (z - 1)
+    return Kp * C
+
+
+def first_order_zoh(a, Ts=TS):
+    return control.c2d(control.tf([1.0], [1.0, -a]), Ts, "zoh")
+
+
+def two_tank_zoh(h2, Ts=TS):
+    """TwoTank.mo linearised at level h2 [cm] (steady inflow k2 sqrt(h2)), input q_in, output h2."""
+    A1 = A2 = 15.52
+    k1, k2 = 10.74, 7.89
+    q = k2 * math.sqrt(h2)
+    g1 = k1 / (2 * (q / k1))         # d q12 / d(h1 - h2) = k1 / (2 sqrt(h1 - h2)), sqrt(h1 - h2) = q / k1
+    g2 = k2 / (2 * math.sqrt(h2))
+    A = [[-g1 / A1, g1 / A1], [g1 / A2, -(g1 + g2) / A2]]
+    return control.c2d(control.ss2tf(control.ss(A, [[1 / A1], [0.0]], [[0.0, 1.0]], [[0.0]])), Ts, "zoh")
+
+
+def reference_margins(L, Ts=TS):
+    """(Ms, gain margin, phase margin) of a discrete loop transfer function on a fine grid.
+
+    Ms: max |1/(1+L)| on 40 000 log-spaced points; margins: python-control's frequency-data margins
+    on 4 000 of them (they agree with its exact polynomial method to 1e-8 here); the crossings at DC
+    and at Nyquist (where L is real) are added by hand; as python-control does, the gain margin
+    closest to 1 and the smallest |phase margin| are kept.
+    """
+    w = np.geomspace(1e-5, np.pi / Ts, 40_000)
+    Lw = L(np.exp(1j * w * Ts))
+    Ms = float(np.max(np.abs(1 / (1 + Lw))))
+    gm, pm, *_ = control.stability_margins(control.frd(Lw[::10], w[::10]), returnall=True)
+    gms = list(np.atleast_1d(gm))
+    for z in (1.0, -1.0):
+        value = complex(L(z, warn_infinite=False))  # inf/nan at z = 1 with integral action
+        if np.isfinite(value) and value.real < 0:
+            gms.append(1 / abs(value.real))
+            if z == 1.0:
+                Ms = max(Ms, abs(1 / (1 + value.real)))
+    gm = gms[int(np.argmin(np.abs(np.log(gms))))] if gms else math.inf
+    pm = float(np.atleast_1d(pm)[np.argmin(np.abs(pm))]) if len(np.atleast_1d(pm)) else math.inf
+    return Ms, gm, pm
+
+
+def assert_close_margins(m, ref, gm_rel=0.01, pm_deg=1.0):
+    Ms, gm, pm = ref
+    assert m.reliable, m.note
+    assert m.Ms == pytest.approx(Ms, rel=0.01)
+    assert m.gain_margin == pytest.approx(gm, rel=gm_rel)
+    assert abs(m.phase_margin_deg - pm) <= pm_deg
+
+
+@pytest.mark.parametrize("Kp, Ti, Td, N", [(3.0, 2.0, 0.05, None), (2.0, math.inf, 0.3, 8.0), (1.5, 0.7, 0.0, None)])
+def test_pid_transfer_function_is_the_implemented_pid(Kp, Ti, Td, N):
+    """C(z) reproduces pid.py sample by sample on an arbitrary error sequence starting at 0."""
+    rng = np.random.default_rng(0)
+    e = np.concatenate([[0.0], rng.normal(size=300)])
+    pid = PID(TS, derivative_filter_N=N)
+    u = [pid.step_error(ek, Kp, Ti, Td)[0] for ek in e]
+    C = pid_transfer_function(Kp, Ti, Td, TS, N)
+    np.testing.assert_allclose(lfilter(C.num[0][0], C.den[0][0], e), u, rtol=1e-10, atol=1e-10)
+    w = np.geomspace(1e-3, np.pi / TS, 50)
+    z = np.exp(1j * w * TS)
+    np.testing.assert_allclose(C(z), pid_by_hand(Kp, Ti, Td, N=N)(z), rtol=1e-12)
+
+
+@pytest.mark.parametrize("scenario, a, gains", [
+    ("first_order", 1.0, (3.0, 2.0, 0.05)),
+    ("first_order", 1.0, (12.0, 3.0, 0.0)),       # upper gain margin at Nyquist
+    ("first_order_1p5", 1.5, (3.0, 2.0, 0.05)),
+    ("first_order_1p5", 1.5, (4.0, 1.5, 0.1)),
+])
+def test_unstable_first_order_matches_exact_zoh_loop(scenario, a, gains):
+    Kp, Ti, Td = gains
+    m = loop_margins(preset(scenario), [Kp], [Ti], [Td], [1.0])
+    L = pid_by_hand(Kp, Ti, Td) * first_order_zoh(a)
+    assert_close_margins(m, reference_margins(L))
+    # the measured plant is the ZOH discretisation (u_k from y_k, held one sample, then y_{k+1})
+    P = first_order_zoh(a)(np.exp(1j * m.frequencies_rad_s * TS))
+    np.testing.assert_allclose(m.plant_response, P, rtol=1e-6)
+    assert m.frequencies_rad_s[-1] == pytest.approx(np.pi / TS)
+
+
+def test_derivative_filter_is_in_the_loop_transfer():
+    config = dataclasses.replace(preset("first_order_1p5"), derivative_filter_N=5.0)
+    m = loop_margins(config, [4.0], [1.5], [0.15], [0.5])
+    L = pid_by_hand(4.0, 1.5, 0.15, N=5.0) * first_order_zoh(1.5)
+    assert_close_margins(m, reference_margins(L))
+    unfiltered = loop_margins(preset("first_order_1p5"), [4.0], [1.5], [0.15], [0.5])
+    assert abs(unfiltered.Ms - m.Ms) > 0.05 * m.Ms  # the filter changes the answer measurably
+
+
+def test_nearly_unstable_gain_has_large_ms_and_ordering_holds():
+    """Kp just above the stabilising minimum of 1/(s - 1): Ms ~ 7, against Ms ~ 1.4 for a good PID."""
+    config = preset("first_order")
+    weak = loop_margins(config, [1.15], [12.0], [0.0], [0.5])
+    good = loop_margins(config, [3.0], [2.0], [0.05], [0.5])
+    ref_weak = reference_margins(pid_by_hand(1.15, 12.0, 0.0) * first_order_zoh(1.0))
+    assert ref_weak[0] > 5
+    assert_close_margins(weak, ref_weak)
+    assert weak.Ms > 3 * good.Ms
+
+
+def test_peak_at_dc_and_lower_gain_margin_of_p_control():
+    """P control of 1/(s - 1): |S| peaks at DC (1/(Kp - 1)) and the gain margin 1/Kp is at w = 0."""
+    m = loop_margins(preset("first_order"), [1.1], [math.inf], [0.0], [0.0])
+    assert_close_margins(m, reference_margins(pid_by_hand(1.1, math.inf, 0.0) * first_order_zoh(1.0)))
+    assert m.Ms == pytest.approx(10.0, rel=0.01)
+    assert m.gain_margin == pytest.approx(1 / 1.1, rel=1e-3)
+    assert m.phase_crossover_rad_s == 0.0
+
+
+@pytest.mark.parametrize("gains, level", [((5.0, 20.0, 0.0), 10.0), ((20.0, 10.0, 1.0), 10.0), ((2.0, 50.0, 0.0), 5.0)])
+def test_two_tank_matches_its_linearisation(gains, level):
+    Kp, Ti, Td = gains
+    m = loop_margins(preset("two_tank"), [Kp], [Ti], [Td], [level])
+    assert_close_margins(m, reference_margins(pid_by_hand(Kp, Ti, Td) * two_tank_zoh(level)))
+
+
+def test_loop_at_a_time_on_the_coupled_quadrotor():
+    """Each loop broken at its plant input with the other two closed by the coupled PID (eq. 26-27).
+
+    Around a still attitude the plant is three double integrators 1/(I s^2); the reference solves the
+    closed other loops at every frequency: u_j = C_j (-y_j + sum_k c_jk y_k), y = G u, u_i = 1.
+    """
+    config = preset("quadrotor")
+    Kp, Ti, Td = [2.0, 1.5, 3.0], [5.0, 6.0, 8.0], [0.6, 0.5, 0.7]
+    coupling = [0.1, -0.05, 0.0, 0.1, 0.05, 0.0]
+    m = loop_margins(config, Kp, Ti, Td, [0.1, -0.1, 0.2], coupling=coupling)
+    c_rp, c_ry, c_pr, c_py, c_yr, c_yp = coupling
+    Cm = np.array([[0, c_rp, c_ry], [c_pr, 0, c_py], [c_yr, c_yp, 0]])
+    inertia = [0.4, 0.4, 0.8]
+    w = np.geomspace(1e-3, np.pi / TS, 20_000)
+    z = np.exp(1j * w * TS)
+    G = [control.c2d(control.tf([1.0], [I, 0, 0]), TS, "zoh")(z) for I in inertia]
+    C = [pid_by_hand(Kp[j], Ti[j], Td[j])(z) for j in range(3)]
+    Ms_ref = []
+    for i in range(3):
+        j, k = [x for x in range(3) if x != i]
+        # unknowns u_j, u_k (u_i = 1): u_j = C_j (-G_j u_j + sum_l c_jl G_l u_l)
+        a11 = 1 + C[j] * G[j]
+        a12 = -C[j] * Cm[j, k] * G[k]
+        a21 = -C[k] * Cm[k, j] * G[j]
+        a22 = 1 + C[k] * G[k]
+        b1, b2 = C[j] * Cm[j, i] * G[i], C[k] * Cm[k, i] * G[i]
+        det = a11 * a22 - a12 * a21
+        u = np.zeros((3, len(w)), complex)
+        u[i], u[j], u[k] = 1, (b1 * a22 - a12 * b2) / det, (a11 * b2 - a21 * b1) / det
+        Y = np.array(G) * u
+        L = C[i] * (Y[i] - Cm[i] @ Y)
+        Ms_ref.append(np.max(np.abs(1 / (1 + L))))
+    assert len(m.per_loop) == 3
+    for loop, ref in zip(m.per_loop, Ms_ref):
+        assert loop.reliable, loop.note
+        assert loop.Ms == pytest.approx(ref, rel=0.01)
+    worst = int(np.argmax(Ms_ref))
+    assert m.loop == config.loops[worst].output
+    assert m.Ms == pytest.approx(Ms_ref[worst], rel=0.01)
+
+
+def test_amplitude_is_halved_until_the_control_signal_stays_inside_its_limits():
+    # u_op = -1 at y = 1; a peak of 12 would drive u far past the +-10 limits
+    m = loop_margins(preset("first_order"), [3.0], [2.0], [0.05], [1.0], amplitude=[12.0])
+    assert m.amplitude < 12.0 and m.reliable, m.note
+    assert_close_margins(m, reference_margins(pid_by_hand(3.0, 2.0, 0.05) * first_order_zoh(1.0)))
+
+
+def test_operating_point_at_a_limit_has_no_margins():
+    # 45 cm needs q_in = 7.89 sqrt(45) = 53 cm3/s > 50: the pump sits at its limit
+    m = loop_margins(preset("two_tank"), [5.0], [20.0], [0.0], [45.0])
+    assert m.Ms == math.inf and not m.reliable
+    assert "limit" in m.note
+
+
+def test_unstable_closed_loop_has_no_margins():
+    m = loop_margins(preset("first_order"), [0.5], [2.0], [0.0], [1.0])  # Kp < 1 cannot stabilise 1/(s - 1)
+    assert m.Ms == math.inf and not m.reliable
+    assert "diverge" in m.note
+    assert format_margins(m).startswith("Ms inf (")
+
+
+def test_time_varying_plant_is_flagged():
+    m = loop_margins(preset("time_varying"), [5.0], [2.0], [0.05], [1.0])
+    assert not m.reliable
+    assert "time-varying" in m.note
+
+
+def test_format_margins_one_line():
+    empty = np.zeros(0)
+    m = Margins(1.4249, 3.0, 10 ** (8.3 / 20), 12.1, 52.2, 3.4, empty, empty, empty, 0.4, True, "", "y")
+    assert format_margins(m) == "Ms 1.42, GM 8.3 dB at 12.1 rad/s, PM 52° at 3.4 rad/s"
+    flagged = dataclasses.replace(m, reliable=False, note="the control signal reached a limit")
+    assert format_margins(flagged).endswith("(unreliable: the control signal reached a limit)")
