@@ -10,6 +10,11 @@ parameter randomisation as training, forecast off), per loop in normalised units
 
 with w_cv = reward.control_variation_weight, the same weight the agent's reward uses, so the search
 does not buy ISE with a chattering actuator. A diverging episode costs DIVERGED_COST.
+
+Robustness: with `max_sensitivity` given, the result must have a peak sensitivity Ms (measured on the
+FMU at the middle of the setpoint range, prlpid_fmi.margins) at most that limit. The final DE
+population is tried in order of cost; if no member qualifies, the best one is detuned (Kp / lambda,
+Ti * lambda, lambda = 1.15, 1.15^2, ...: a slower loop) until it does.
 """
 from __future__ import annotations
 
@@ -48,7 +53,7 @@ def episode_cost(traj: dict, core: LoopCore) -> float:
     scale = np.asarray(core.scale)
     e = (traj["setpoint"] - traj["measurement"]) / scale
     cost = float(np.sum(e ** 2) * config.sample_time_s)
-    weight = getattr(config.reward, "control_variation_weight", 0.0)
+    weight = config.reward.control_variation_weight
     if weight:
         du = np.abs(np.diff(traj["pid_output"], axis=0)) / np.asarray(core.u_scale)
         cost += weight * float(np.sum(np.minimum(du, 1.0)) * config.sample_time_s) / config.n_loops
@@ -58,18 +63,42 @@ def episode_cost(traj: dict, core: LoopCore) -> float:
 
 
 def _cost(vector: np.ndarray, core: LoopCore, gain_map: ActionMap, seeds: list[int]) -> float:
-    gains = gain_map.values(vector.tolist())
-    total = 0.0
-    for seed in seeds:
-        total += episode_cost(gains_rollout(lambda c: gains, core.config, seed=seed, core=core), core)
-    return total / len(seeds)
+    return _cost_of(gain_map.values(vector.tolist()), core, seeds)
+
+
+DETUNE_STEP = 1.15
+DETUNE_STEPS = 30
+
+
+def _robust(config: TuningConfig, gain_map: ActionMap, population, energies, limit: float):
+    """(vector, gains tuple, Ms) of the cheapest population member with Ms <= limit, else the detuned best."""
+    from .margins import loop_margins
+
+    point = [0.5 * (l.setpoint_range[0] + l.setpoint_range[1]) for l in config.loops]
+
+    def ms(g):
+        return loop_margins(config, g[0], g[1], g[2], point, coupling=g[3]).Ms
+
+    order = np.argsort(energies)
+    for i in order:
+        g = gain_map.values(population[i].tolist())
+        if ms(g) <= limit:
+            return population[i], g
+    Kp, Ti, Td, coupling = gain_map.values(population[order[0]].tolist())
+    for k in range(1, DETUNE_STEPS + 1):
+        lam = DETUNE_STEP ** k
+        g = ([x / lam for x in Kp], [x * lam for x in Ti], Td, coupling)
+        if ms(g) <= limit:
+            return population[order[0]], g
+    return population[order[0]], gain_map.values(population[order[0]].tolist())
 
 
 def tune_fixed_pid(config: TuningConfig, seed: int = 0, episodes: int = 3, maxiter: int = 20,
-                   popsize: int = 8, callback=None) -> FixedPid:
+                   popsize: int = 8, callback=None, max_sensitivity: float | None = None) -> FixedPid:
     """Search constant gains minimising J (module docstring) over `episodes` seeded training episodes.
 
     callback(evaluations_done, evaluations_expected): progress, called after every generation.
+    max_sensitivity: the Ms limit the result must meet (None: no robustness requirement).
     """
     search = dataclasses.replace(config, forecast_horizon=0)
     gain_map = ActionMap(config.loops, config.coupled, config.coupling_range)
@@ -88,7 +117,16 @@ def tune_fixed_pid(config: TuningConfig, seed: int = 0, episodes: int = 3, maxit
         result = differential_evolution(_cost, [(-1.0, 1.0)] * n, args=(core, gain_map, seeds),
                                         maxiter=maxiter, popsize=popsize, seed=seed, polish=False, tol=1e-6,
                                         callback=progress)
+        vector, gains = result.x, gain_map.values(result.x.tolist())
+        cost = float(result.fun)
+        if max_sensitivity is not None:
+            vector, gains = _robust(search, gain_map, result.population, result.population_energies, max_sensitivity)
+            cost = _cost_of(gains, core, seeds)
     finally:
         core.close()
-    return FixedPid(result.x, gains_from_values(*gain_map.values(result.x.tolist())), float(result.fun),
-                    int(result.nfev))
+    return FixedPid(vector, gains_from_values(*gains), cost, int(result.nfev))
+
+
+def _cost_of(gains: tuple, core: LoopCore, seeds: list[int]) -> float:
+    return sum(episode_cost(gains_rollout(lambda c: gains, core.config, seed=s, core=core), core)
+               for s in seeds) / len(seeds)

@@ -42,7 +42,7 @@ def control_scales(config: TuningConfig) -> list[float]:
     loop.control_scale, else u_max - u_min when both are finite, else Kp.high * measurement_scale."""
     out = []
     for l in config.loops:
-        scale = getattr(l, "control_scale", None)
+        scale = l.control_scale
         if scale is None:
             span = l.u_max - l.u_min
             scale = span if np.isfinite(span) and span > 0 else l.Kp.high * l.measurement_scale
@@ -52,7 +52,7 @@ def control_scales(config: TuningConfig) -> list[float]:
 
 def randomized_parameters(config: TuningConfig) -> list[tuple[str, float, float]]:
     """training/evaluation `randomize` as (parameter, low, high) triples."""
-    spec = getattr(config, "randomize", None) or ()
+    spec = config.randomize or ()
     if isinstance(spec, dict):
         return [(name, float(lo), float(hi)) for name, (lo, hi) in spec.items()]
     return [(name, float(lo), float(hi)) for name, lo, hi in spec]
@@ -201,7 +201,7 @@ class LoopCore:
     def reward(self, error: list[float], previous_error: list[float], u: list[float], u_prev: list[float]) -> float:
         """Eq. 10-11 plus the control-variation term, mean over loops; errors normalised."""
         w, n = self.weights, self.n_loops
-        cv = getattr(w, "control_variation_weight", 0.0)
+        cv = w.control_variation_weight
         total = 0.0
         for i in range(n):
             r = _loop_reward(error[i], previous_error[i], w)

@@ -64,10 +64,11 @@ class _Recorder:
 
 
 def rollout(policy: Policy, config: TuningConfig, seed: int = 0, forecast: bool = False,
-            env: PidTuningEnv | None = None) -> dict[str, np.ndarray]:
+            env: PidTuningEnv | None = None, anchor=None) -> dict[str, np.ndarray]:
     """One episode of `policy` on `config` (forecast off unless asked: it does not change the plant).
 
-    env: an open PidTuningEnv built from this config to reuse (it is not closed); default: a new one.
+    env: an open PidTuningEnv built from this config to reuse (it is not closed); default: a new one,
+    with the anchored gain map centred on `anchor` (the fixed-PID Gains the policy was trained around).
 
     Returns arrays: time_s (n+1,), setpoint, measurement, control_signal (n+1, n_loops) — row k is the
     signal at t = k·Ts (control_signal's last row repeats; it is what the plant received, actuator
@@ -78,7 +79,7 @@ def rollout(policy: Policy, config: TuningConfig, seed: int = 0, forecast: bool 
     if own_env:
         if not forecast:
             config = dataclasses.replace(config, forecast_horizon=0)
-        env = PidTuningEnv(config, info=False)
+        env = PidTuningEnv(config, info=False, anchor=anchor)
     try:
         obs, _ = env.reset(seed=seed)
         record = _Recorder(env.core)
@@ -135,11 +136,11 @@ def measure(traj: dict, config: TuningConfig, intervals=None) -> dict:
 
 
 def evaluate(policy: Policy, config: TuningConfig, seed: int = 0, intervals=None,
-             env: PidTuningEnv | None = None) -> tuple[dict, dict]:
-    """Roll out (on `env` if given) and compute metrics (prlpid_fmi.metrics.compute_metrics).
+             env: PidTuningEnv | None = None, anchor=None) -> tuple[dict, dict]:
+    """Roll out (on `env` if given; anchor as in rollout) and compute metrics (compute_metrics).
 
     Returns (metrics, trajectory)."""
-    traj = rollout(policy, config, seed, env=env)
+    traj = rollout(policy, config, seed, env=env, anchor=anchor)
     return measure(traj, config, intervals), traj
 
 

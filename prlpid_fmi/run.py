@@ -104,22 +104,23 @@ def _report(scenario: Scenario, policy_m: dict, fixed_m: dict | None, fixed_gain
 
 
 def evaluate_into(run_dir: Path, scenario: Scenario, out_dir: Path, policy, fixed: dict | None,
-                  source: Path | None = None) -> dict:
+                  source: Path | None = None, anchor=None) -> dict:
     """Evaluate `policy` (and the fixed PID) on the scenario's evaluation; write metrics, CSV, plots, report.
 
     source: the scenario file the evaluation comes from, named in the report.
     """
     from . import plots
-    from .baseline import constant_policy
+    from .evaluate import constant_gains, evaluate_gains
     from .evaluate import evaluate
 
     config = scenario.evaluation_config()
     intervals = list(scenario.evaluation.intervals) or None
     seed = scenario.evaluation.seed
-    policy_m, traj = evaluate(policy, config, seed=seed, intervals=intervals)
+    policy_m, traj = evaluate(policy, config, seed=seed, intervals=intervals, anchor=anchor)
     fixed_m = fixed_traj = None
     if fixed is not None:
-        fixed_m, fixed_traj = evaluate(constant_policy(np.array(fixed["action"])), config, seed=seed,
+        g = fixed["gains"]
+        fixed_m, fixed_traj = evaluate_gains(constant_gains(g["Kp"], g["Ti"], g["Td"], g.get("coupling")), config, seed=seed,
                                        intervals=intervals)
     loop_names = [l.output for l in config.loops]
     write_atomic(out_dir / rd.GAINS, trajectory_csv(traj, loop_names))
@@ -162,7 +163,10 @@ def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None
           progress_bar: bool, baseline: bool) -> Path:
     from . import plots
     from .baseline import tune_fixed_pid
-    from .schedule import extract_schedule, write_schedule_csv
+    from .progress import Progress
+    from .assess import assess, candidate_summary, max_sensitivity
+    from .deliver import verdict
+    from .schedule import extract_schedule, fixed_schedule, write_schedule_csv
     from .train import train
 
     info = {"command": sys.argv, "started": rd.now(), "versions": rd.package_versions()}
@@ -182,38 +186,104 @@ def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None
     info.update(seed=agent.seed, total_timesteps=agent.total_timesteps, algorithm=agent.algorithm)
     write_json(run_dir / rd.RUN_INFO, info)
 
+    # 1. the fixed PID first: the baseline, and the anchor the agent's gains move around
+    fixed = None
+    if (run_dir / rd.FIXED_PID).is_file():  # resume: the search is done already
+        fixed = json.loads((run_dir / rd.FIXED_PID).read_text())
+    elif baseline or scenario.tuning.gain_mapping == "anchored":
+        b = scenario.baseline
+        search = Progress("fixed-PID search", "evaluations") if progress_bar else None
+        result = tune_fixed_pid(scenario.tuning, seed=agent.seed, episodes=b.episodes, maxiter=b.maxiter,
+                                popsize=b.popsize, callback=search.update if search else None,
+                                max_sensitivity=max_sensitivity(scenario))
+        if search:
+            search.close()
+        fixed = {"action": result.action.tolist(), "gains": result.gains.as_dict(), "cost": result.cost,
+                 "evaluations": result.evaluations}
+        write_json(run_dir / rd.FIXED_PID, fixed)
+        write_schedule_csv(fixed_schedule(result.gains, scenario.tuning), run_dir / rd.FIXED_PID_CSV)
+    anchor = _anchor(scenario, fixed)
+
+    # 2. train around it
     resume_from, done = rd.latest_checkpoint(run_dir, info.get("trained_timesteps", 0)) if resume else (None, 0)
     remaining = max(agent.total_timesteps - done, 0)
     if remaining > 0:
         model = train(scenario.tuning, agent, run_dir, progress_bar=progress_bar, resume_from=resume_from,
-                      total_timesteps=remaining)
+                      total_timesteps=remaining, anchor=anchor)
         info["trained_timesteps"] = int(model.num_timesteps)
         write_json(run_dir / rd.RUN_INFO, info)
 
+    # 3. evaluate the policy, read its gain schedule, choose what to deploy
     policy = _policy(run_dir, agent.algorithm)
-    fixed = None
-    if baseline:
-        b = scenario.baseline
-        result = tune_fixed_pid(scenario.tuning, seed=agent.seed, episodes=b.episodes, maxiter=b.maxiter,
-                                popsize=b.popsize)
-        fixed = {"action": result.action.tolist(), "gains": result.gains.as_dict(), "cost": result.cost,
-                 "evaluations": result.evaluations}
-        write_json(run_dir / rd.FIXED_PID, fixed)
-    evaluate_into(run_dir, scenario, run_dir, policy, fixed, source)
+    evaluate_into(run_dir, scenario, run_dir, policy, fixed, source, anchor=anchor)
+    schedule, note = None, ""
     try:
-        schedule = extract_schedule(policy, scenario.tuning, seed=agent.seed)
-        write_schedule_csv(schedule, run_dir / rd.SCHEDULE)
-        note = ("" if not schedule.excluded else "\nThe closed loop diverged at setpoint(s) "
-                + ", ".join(f"{v:g}" for v in schedule.excluded) + ": left out of schedule.csv.\n")
+        schedule = extract_schedule(policy, scenario.tuning, seed=agent.seed, anchor=anchor)
+        if schedule.excluded:
+            note = ("The closed loop diverged at setpoint(s) " + ", ".join(f"{v:g}" for v in schedule.excluded)
+                    + ": left out of the schedule.\n")
     except PrlPidError as exc:
-        note = f"\nNo gain schedule: {exc}\n"
+        note = f"No gain schedule: {exc}\n"
         info["schedule_error"] = str(exc)
+    report = (run_dir / rd.REPORT).read_text(encoding="utf-8")
+    if fixed is not None:
+        decision, sched_c, fixed_c = assess(scenario, schedule, gains_from_dict(fixed["gains"]))
+        limit = max_sensitivity(scenario)
+        deployed = {"gain schedule": schedule, "fixed PID": fixed_schedule(gains_from_dict(fixed["gains"]),
+                                                                           scenario.tuning)}.get(decision.deploy)
+        if deployed is not None:
+            write_schedule_csv(deployed, run_dir / rd.SCHEDULE)
+        metrics = json.loads((run_dir / rd.METRICS).read_text())
+        metrics["deployed"] = decision.deploy
+        metrics["decision"] = list(decision.reasons)
+        metrics["schedule_replay"] = candidate_summary(sched_c) if sched_c is not None else None
+        metrics["fixed_pid_assessment"] = candidate_summary(fixed_c)
+        write_json(run_dir / rd.METRICS, metrics)
+        title, _, body = report.partition("\n")
+        report = "\n".join([title, "", verdict(decision, sched_c, fixed_c, limit).rstrip(), "",
+                             _candidates_table(sched_c, fixed_c), body.lstrip("\n")])
+    elif schedule is not None:
+        write_schedule_csv(schedule, run_dir / rd.SCHEDULE)
     if note:
-        write_atomic(run_dir / rd.REPORT, (run_dir / rd.REPORT).read_text(encoding="utf-8") + note)
+        report += "\n" + note
+    write_atomic(run_dir / rd.REPORT, report)
     plots.plot_learning_curve(run_dir / rd.MONITOR, run_dir / rd.LEARNING_CURVE_PLOT)
     info["finished"] = rd.now()
     write_json(run_dir / rd.RUN_INFO, info)
     return run_dir
+
+
+def _anchor(scenario: Scenario, fixed: dict | None):
+    """The fixed PID's Gains when the scenario's gain map is anchored (None: absolute map)."""
+    if fixed is None or scenario.tuning.gain_mapping != "anchored":
+        return None
+    return gains_from_dict(fixed["gains"])
+
+
+def gains_from_dict(g: dict):
+    from .actions import gains_from_values
+
+    return gains_from_values(g["Kp"], g["Ti"], g["Td"], g.get("coupling"))
+
+
+def _candidates_table(sched, fixed) -> str:
+    """Both deployable controllers side by side (plain PIDs, no neural network)."""
+    from .deliver import overall_metric
+
+    rows = [("ISE", "ISE", ""), ("IAE", "IAE", ""), ("Overshoot", "Overshoot", "%"),
+            ("SettlingTime", "settling time", "s"), ("TotalVariation", "total variation of u", "")]
+    cands = [c for c in (sched, fixed) if c is not None]
+    lines = ["| metric (evaluation) | " + " | ".join(c.name for c in cands) + " |",
+             "|---|" + "---|" * len(cands)]
+    for key, label, unit in rows:
+        cells = [f"{overall_metric(c.metrics['overall'], key):.4g}" for c in cands]
+        lines.append(f"| {label}{f' [{unit}]' if unit else ''} | " + " | ".join(cells) + " |")
+    lines.append("| worst Ms (limit in the verdict) | " + " | ".join(f"{c.worst_Ms:.3g}" for c in cands) + " |")
+    if any(c.monte_carlo for c in cands):
+        lines.append("| mean ISE, Monte-Carlo set | " + " | ".join(
+            f"{sum(overall_metric(m['overall'], 'ISE') for m in c.monte_carlo) / max(len(c.monte_carlo), 1):.4g}"
+            for c in cands) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def _load_run(run_dir: Path) -> Scenario:
@@ -248,7 +318,7 @@ def evaluate_run(run_dir: str | Path, scenario_path: str | Path | None = None) -
     fixed = json.loads((run_dir / rd.FIXED_PID).read_text()) if (run_dir / rd.FIXED_PID).is_file() else None
     write_atomic(out_dir / rd.SCENARIO, scenario_to_yaml(scenario))
     source = Path(scenario_path) if scenario_path is not None else run_dir / rd.SCENARIO
-    evaluate_into(run_dir, scenario, out_dir, policy, fixed, source)
+    evaluate_into(run_dir, scenario, out_dir, policy, fixed, source, anchor=_anchor(trained, fixed))
     return out_dir
 
 
@@ -284,14 +354,16 @@ def export_schedule(run_dir: str | Path, output: str | Path, schedule_by: str = 
         raise RunError(f"--scenario {scenario_path}: only used with --replay (expected --replay, or no --scenario)")
     scenario = trained if scenario_path is None else _on_other_evaluation(trained, scenario_path)
     policy = _policy(run_dir, trained.agent.algorithm)
+    fixed = json.loads((run_dir / rd.FIXED_PID).read_text()) if (run_dir / rd.FIXED_PID).is_file() else None
+    anchor = _anchor(trained, fixed)
     schedule = extract_schedule(policy, trained.tuning, schedule_by=schedule_by, points=points,
-                                seed=trained.agent.seed)
+                                seed=trained.agent.seed, anchor=anchor)
     path = write_schedule_csv(schedule, output)
     if not replay:
         return path, None
     config = scenario.evaluation_config()
     intervals = list(scenario.evaluation.intervals) or None
     seed = scenario.evaluation.seed
-    policy_m, _ = evaluate(policy, config, seed=seed, intervals=intervals)
+    policy_m, _ = evaluate(policy, config, seed=seed, intervals=intervals, anchor=anchor)
     schedule_m, _ = replay_schedule(schedule, config, seed=seed, intervals=intervals)
     return path, {"policy": policy_m, "schedule": schedule_m}

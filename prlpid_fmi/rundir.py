@@ -37,6 +37,7 @@ RUN_INFO = "run.json"
 MODEL = "model.zip"
 VECNORMALIZE = "vecnormalize.pkl"
 FIXED_PID = "fixed_pid.json"
+FIXED_PID_CSV = "fixed_pid.csv"
 METRICS = "metrics.json"
 GAINS = "gains.csv"
 SCHEDULE = "schedule.csv"
@@ -49,7 +50,7 @@ CHECKPOINTS = "checkpoints"
 TENSORBOARD = "tensorboard"
 MONITOR = "monitor"
 EVALUATIONS = "evaluations"
-OWNED_FILES = frozenset({SCENARIO, RUN_INFO, MODEL, VECNORMALIZE, FIXED_PID, METRICS, GAINS, SCHEDULE, REPORT,
+OWNED_FILES = frozenset({SCENARIO, RUN_INFO, MODEL, VECNORMALIZE, FIXED_PID, FIXED_PID_CSV, METRICS, GAINS, SCHEDULE, REPORT,
                          RESPONSE_PLOT, CONTROL_SIGNAL_PLOT, GAINS_PLOT, LEARNING_CURVE_PLOT})
 OWNED_DIRS = frozenset({CHECKPOINTS, TENSORBOARD, MONITOR, EVALUATIONS})
 PACKAGES = ("prlpid-fmi", "fmpy", "numpy", "scipy", "torch", "stable-baselines3", "gymnasium", "pyyaml", "matplotlib")

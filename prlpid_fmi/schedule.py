@@ -37,7 +37,8 @@ from . import __version__
 from .actions import Gains
 from .config import TuningConfig
 from .rundir import write_atomic
-from .control import COUPLING_NAMES, make_smoother, parallel_gains
+from .control import COUPLING_NAMES, parallel_gains
+from .evaluate import GAIN_NAMES
 from .errors import PrlPidError
 
 Policy = Callable[[np.ndarray], np.ndarray]
@@ -162,7 +163,7 @@ def _variable_name(schedule_by: str, loop_names: list[str]) -> str:
 
 
 class _Probe:
-    """Reads the scheduling variable from a PidTuningEnv (before a step, as the lookup would)."""
+    """Reads the scheduling variable from a LoopCore (before a step, as the lookup would)."""
 
     def __init__(self, variable: str, env):
         self.env = env
@@ -197,9 +198,16 @@ def _exact_mean(x: np.ndarray) -> np.ndarray:
     return x[0] + np.mean(x - x[0], axis=0)
 
 
+def _nominal(config: TuningConfig) -> TuningConfig:
+    """`config` without parameter randomisation (schedules are read at nominal parameters)."""
+    if config.randomize:
+        return dataclasses.replace(config, randomize=type(config.randomize)())
+    return config
+
+
 def extract_schedule(policy: Policy, config: TuningConfig, schedule_by: str = "setpoint",
                      points: int | Sequence[float] = 9, settle_steps: int | None = None, seed: int = 0,
-                     hold_setpoints: Sequence[float] | None = None) -> GainSchedule:
+                     hold_setpoints: Sequence[float] | None = None, anchor: Gains | None = None) -> GainSchedule:
     """Record the gains `policy` settles on at operating points of the scheduling variable.
 
     The setpoint of the scheduled loop (the one named in ``setpoint[<loop>]`` / ``measurement[<loop>]``,
@@ -213,6 +221,7 @@ def extract_schedule(policy: Policy, config: TuningConfig, schedule_by: str = "s
     schedule_by: "setpoint", "measurement" (of loop 0), "setpoint[<loop>]", "measurement[<loop>]", or
     an FMU variable name. Rows are sorted by breakpoint; rows whose breakpoints coincide (a variable
     that does not depend on the setpoint) are averaged into one, with a warning.
+    anchor: the fixed-PID gains the policy's anchored gain map was trained around (as in training).
     Raises PrlPidError when the closed loop diverges at an operating point (the table would be unsafe).
     """
     from .env import PidTuningEnv
@@ -240,42 +249,37 @@ def extract_schedule(policy: Policy, config: TuningConfig, schedule_by: str = "s
     tail = max(1, math.ceil(SETTLED_FRACTION * steps))
 
     rows, excluded = [], []
-    env = None
+    held = _nominal(dataclasses.replace(config, episode_steps=steps, forecast_horizon=0, measurement_noise_std=0.0,
+                                        actuator_noise_std=0.0, disturbances=()))
+    env = PidTuningEnv(held, info=False, anchor=anchor)
     try:
+        probe = _Probe(variable, env.core)
+        unit = probe.unit()
+        meta = dict(loop_inputs=tuple(l.input for l in config.loops),
+                    output_units=tuple(_unit(env.core, l.output) for l in config.loops),
+                    input_units=tuple(_unit(env.core, l.input) for l in config.loops))
         for sp in setpoints:
             hold = list(others)
             hold[loop] = float(sp)
-            cfg = dataclasses.replace(config, setpoint_schedule=((0, tuple(hold)),), episode_steps=steps,
-                                      forecast_horizon=0, measurement_noise_std=0.0, actuator_noise_std=0.0,
-                                      disturbances=())
-            if env is None:
-                env = PidTuningEnv(cfg)
-                probe = _Probe(variable, env)
-                unit = probe.unit()
-                meta = dict(loop_inputs=tuple(l.input for l in config.loops),
-                            output_units=tuple(_unit(env, l.output) for l in config.loops),
-                            input_units=tuple(_unit(env, l.input) for l in config.loops))
-            else:
-                env.config = cfg  # same plant and PID; only the held setpoint differs (read at reset/step)
-            obs, _ = env.reset(seed=seed)
+            obs, _ = env.reset(seed=seed, options={"setpoint_schedule": ((0, tuple(hold)),)})
             values, gains = [], []
             for k in range(steps):
                 values.append(probe())
-                obs, _, terminated, _, info = env.step(policy(obs))
+                obs, _, terminated, _, _ = env.step(policy(obs))
                 if terminated:
                     break
-                gains.append(info["gains"])
+                gains.append(env.gains)
             if terminated:  # no safe gains exist there: leave the point out of the table
                 excluded.append(float(sp))
                 warnings.warn(f"the closed loop diverged at {variable} setpoint {sp:g} (step {k + 1}); "
                               "that operating point is left out of the schedule", stacklevel=2)
                 continue
-            g = {key: np.array([x[key] for x in gains[-tail:]]) for key in gains[0]}
+            g = {name: np.array([x[i] for x in gains[-tail:]], float) for i, name in enumerate(GAIN_NAMES)
+                 if gains[0][i] is not None}
             rows.append((float(_exact_mean(np.array(values[-tail:]))),
                          {key: _exact_mean(v) for key, v in g.items()}))
     finally:
-        if env is not None:
-            env.close()
+        env.close()
 
     if not rows:
         raise PrlPidError(f"the closed loop diverged at every operating point of {variable} "
@@ -305,6 +309,29 @@ def extract_schedule(policy: Policy, config: TuningConfig, schedule_by: str = "s
         anti_windup=config.anti_windup, u_min=np.array([l.u_min for l in config.loops], float),
         u_max=np.array([l.u_max for l in config.loops], float),
         derivative_filter_N=config.derivative_filter_N, excluded=tuple(excluded), **meta)
+
+
+def fixed_schedule(gains: Gains, config: TuningConfig) -> GainSchedule:
+    """The fixed PID as a one-row table (scheduled on loop 0's setpoint; one row is held everywhere)."""
+    from .core import resolve_fmu
+    from .fmu import describe_fmu
+
+    d = describe_fmu(resolve_fmu(config.fmu, config.fmi_version))
+
+    def unit(name):
+        v = d.variable(name)
+        return (v.unit or "") if v is not None else ""
+
+    lo, hi = config.loops[0].setpoint_range
+    row = lambda a: np.asarray(a, float).reshape(1, -1)  # noqa: E731
+    return GainSchedule(
+        variable=f"setpoint[{config.loops[0].output}]", unit=unit(config.loops[0].output),
+        breakpoints=np.array([0.5 * (lo + hi)]), Kp=row(gains.Kp), Ti=row(gains.Ti), Td=row(gains.Td),
+        coupling=None if gains.coupling is None else row(gains.coupling), sample_time_s=float(config.sample_time_s),
+        loop_names=tuple(l.output for l in config.loops), loop_inputs=tuple(l.input for l in config.loops),
+        output_units=tuple(unit(l.output) for l in config.loops), input_units=tuple(unit(l.input) for l in config.loops),
+        anti_windup=config.anti_windup, u_min=np.array([l.u_min for l in config.loops], float),
+        u_max=np.array([l.u_max for l in config.loops], float), derivative_filter_N=config.derivative_filter_N)
 
 
 # -- CSV ------------------------------------------------------------------------------------------
@@ -418,17 +445,6 @@ def read_schedule_csv(path) -> GainSchedule:
 
 # -- replay ---------------------------------------------------------------------------------------
 
-class _TableLookup:
-    """Stands in for PidTuningEnv.action_map: returns the gains looked up before the step."""
-
-    def __init__(self, size: int):
-        self.size = size
-        self.gains: Gains | None = None
-
-    def __call__(self, action) -> Gains:
-        return self.gains
-
-
 def replay_schedule(schedule: GainSchedule, config: TuningConfig, seed: int = 0,
                     intervals=None) -> tuple[dict, dict]:
     """Run the plain gain-scheduled PID (table lookup, no neural network) on the FMU; (metrics, trajectory).
@@ -454,26 +470,23 @@ def replay_schedule(schedule: GainSchedule, config: TuningConfig, seed: int = 0,
     if not math.isclose(schedule.sample_time_s, config.sample_time_s, rel_tol=1e-12):
         warnings.warn(f"the schedule was tuned at Ts = {schedule.sample_time_s} s, the config runs at "
                       f"Ts = {config.sample_time_s} s", stacklevel=2)
-    from .evaluate import evaluate
+    from .core import LoopCore
+    from .evaluate import evaluate_gains
 
     config = dataclasses.replace(config, forecast_horizon=0)
-    env = PidTuningEnv(config)
+    core = LoopCore(config)
     try:
-        lookup = _TableLookup(env.action_map.size)
-        env.action_map = lookup
-        env.smoother = make_smoother("none", n_params=lookup.size)
-        probe = _Probe(schedule.variable, env)
-        action = np.zeros(lookup.size, np.float32)
+        probe = _Probe(schedule.variable, core)
         values = []
 
-        def table_policy(obs):  # called before every step: look the gains up, the action is unused
+        def table_gains(core):  # called before every step: read the scheduling variable, look the gains up
             z = probe()
             values.append(z)
-            lookup.gains = schedule.gains_object(z)
-            return action
+            g = schedule.gains_object(z)
+            return (g.Kp.tolist(), g.Ti.tolist(), g.Td.tolist(), None if g.coupling is None else g.coupling.tolist())
 
-        metrics, traj = evaluate(table_policy, config, seed=seed, intervals=intervals, env=env)
+        metrics, traj = evaluate_gains(table_gains, config, seed=seed, intervals=intervals, core=core)
     finally:
-        env.close()
+        core.close()
     traj["scheduling_value"] = np.array(values)
     return metrics, traj

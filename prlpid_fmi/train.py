@@ -6,6 +6,7 @@ by a linear action head and a linear value head. Vectorised envs hold one plant 
 from __future__ import annotations
 
 import functools
+import math
 from pathlib import Path
 
 import gymnasium as gym
@@ -13,12 +14,13 @@ import torch
 from torch import nn
 
 from .config import AgentConfig, TuningConfig
-from .env import PidTuningEnv
+from .env import PidTuningEnv, is_anchored
 from .errors import PrlPidError
 from .progress import training_progress
 from .rundir import write_atomic
 
 ALGORITHMS = ("ppo", "sac", "td3")
+ANCHORED_INITIAL_STD = 0.3  # PPO's initial action std around the fixed PID (action units; the band is [-1, 1])
 
 
 def _shared_mlp_class():
@@ -41,18 +43,25 @@ def _shared_mlp_class():
     return SharedMLP
 
 
-def make_vec_env(config: TuningConfig, agent: AgentConfig, monitor_dir: Path | None = None):
-    """n_envs PidTuningEnvs (each with its own plant and prior FMU instances), seeded from agent.seed."""
+def make_vec_env(config: TuningConfig, agent: AgentConfig, monitor_dir: Path | None = None, anchor=None):
+    """n_envs PidTuningEnvs (each with its own plant and prior FMU instances), seeded from agent.seed.
+
+    anchor: the tuned fixed PID's Gains the anchored gain map is centred on (None: absolute map)."""
     from stable_baselines3.common.env_util import make_vec_env as sb3_make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     vec_cls = SubprocVecEnv if agent.vec_env == "subproc" and agent.n_envs > 1 else DummyVecEnv
-    return sb3_make_vec_env(functools.partial(PidTuningEnv, config), n_envs=agent.n_envs, seed=agent.seed,
+    return sb3_make_vec_env(functools.partial(PidTuningEnv, config, anchor=anchor, info=False), n_envs=agent.n_envs, seed=agent.seed,
                             vec_env_cls=vec_cls, monitor_dir=str(monitor_dir) if monitor_dir else None)
 
 
-def build_model(agent: AgentConfig, env, tensorboard_dir: Path | None = None):
-    """An untrained SB3 model for `env` as configured by `agent`."""
+def build_model(agent: AgentConfig, env, tensorboard_dir: Path | None = None, anchored: bool = False):
+    """An untrained SB3 model for `env` as configured by `agent`.
+
+    anchored: the env's gain map is anchored at the tuned fixed PID; PPO's mean action then starts at
+    exactly 0 (the fixed PID) with exploration std ANCHORED_INITIAL_STD, so training starts from the
+    fixed PID and moves away only where that earns reward.
+    """
     from stable_baselines3 import PPO, SAC, TD3
 
     if agent.algorithm not in ALGORITHMS:
@@ -63,9 +72,16 @@ def build_model(agent: AgentConfig, env, tensorboard_dir: Path | None = None):
         policy_kwargs = dict(features_extractor_class=_shared_mlp_class(),
                              features_extractor_kwargs=dict(net_arch=tuple(agent.net_arch)),
                              share_features_extractor=True, net_arch=dict(pi=[], vf=[]), activation_fn=nn.Tanh)
-        return PPO("MlpPolicy", env, n_steps=agent.n_steps, batch_size=agent.batch_size, n_epochs=agent.n_epochs,
-                   gae_lambda=agent.gae_lambda, clip_range=agent.clip_range, ent_coef=agent.ent_coef,
-                   policy_kwargs=policy_kwargs, **common)
+        if anchored:
+            policy_kwargs["log_std_init"] = math.log(ANCHORED_INITIAL_STD)
+        model = PPO("MlpPolicy", env, n_steps=agent.n_steps, batch_size=agent.batch_size, n_epochs=agent.n_epochs,
+                    gae_lambda=agent.gae_lambda, clip_range=agent.clip_range, ent_coef=agent.ent_coef,
+                    policy_kwargs=policy_kwargs, **common)
+        if anchored:
+            with torch.no_grad():  # mean action exactly 0 for every observation at the start
+                model.policy.action_net.weight.zero_()
+                model.policy.action_net.bias.zero_()
+        return model
     policy_kwargs = dict(net_arch=list(agent.net_arch), activation_fn=nn.Tanh)
     cls = SAC if agent.algorithm == "sac" else TD3
     return cls("MlpPolicy", env, buffer_size=agent.buffer_size, learning_starts=agent.learning_starts,
@@ -80,7 +96,7 @@ def load_model(path: Path, algorithm: str, env=None):
 
 
 def train(config: TuningConfig, agent: AgentConfig, run_dir: Path, progress_bar: bool = False,
-          resume_from: Path | None = None, total_timesteps: int | None = None):
+          resume_from: Path | None = None, total_timesteps: int | None = None, anchor=None):
     """Train an agent; checkpoints, TensorBoard logs and Monitor CSVs go under run_dir.
 
     Returns the trained model (also saved as run_dir/model.zip, with run_dir/vecnormalize.pkl when used).
@@ -91,7 +107,7 @@ def train(config: TuningConfig, agent: AgentConfig, run_dir: Path, progress_bar:
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(agent.torch_threads)
-    env = make_vec_env(config, agent, run_dir / "monitor")
+    env = make_vec_env(config, agent, run_dir / "monitor", anchor)
     if agent.normalize:
         stats = run_dir / "vecnormalize.pkl"
         env = VecNormalize.load(str(stats), env) if resume_from and stats.exists() else VecNormalize(env, gamma=agent.gamma)
@@ -99,7 +115,7 @@ def train(config: TuningConfig, agent: AgentConfig, run_dir: Path, progress_bar:
         model = load_model(resume_from, agent.algorithm, env)
         model.tensorboard_log = str(run_dir / "tensorboard")
     else:
-        model = build_model(agent, env, run_dir / "tensorboard")
+        model = build_model(agent, env, run_dir / "tensorboard", anchored=is_anchored(config, anchor))
     steps = total_timesteps if total_timesteps is not None else agent.total_timesteps
     checkpoint = CheckpointCallback(save_freq=max(agent.checkpoint_every // agent.n_envs, 1),
                                     save_path=str(run_dir / "checkpoints"), name_prefix="model",

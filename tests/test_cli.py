@@ -58,7 +58,10 @@ def test_every_paper_scenario_runs_end_to_end(name, tmp_path, capsys):
     resolved = load_scenario(run / "scenario.yaml")
     assert resolved.agent.seed == 3 and resolved.tuning == load_scenario(scenario).tuning
     metrics = json.loads((run / "metrics.json").read_text())
-    assert set(metrics) == {"policy", "fixed_pid"} and "ISE" in "".join(metrics["policy"]["overall"])
+    assert {"policy", "fixed_pid", "deployed", "decision"} <= set(metrics)
+    assert "ISE" in "".join(metrics["policy"]["overall"])
+    assert metrics["deployed"] in ("gain schedule", "fixed PID", "none")
+    assert (run / "fixed_pid.csv").is_file()
     with open(run / "gains.csv") as f:
         rows = list(csv.DictReader(f))
     steps = resolved.evaluation_config().episode_steps

@@ -1,0 +1,99 @@
+"""Assess the deployable controllers of a run and pick one (rule: prlpid_fmi.deliver).
+
+The gain schedule is replayed as a plain PID (no neural network) and the fixed PID runs with exactly
+the gains the search returned, both on the evaluation schedule and on the Monte-Carlo set
+(evaluation.randomize_samples episodes with parameters drawn from evaluation.randomize, seeds
+evaluation.seed + 1, + 2, ...). Robustness margins (prlpid_fmi.margins) are measured at every
+breakpoint of the schedule and at the middle of the setpoint range for the fixed PID.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import warnings
+
+from .actions import Gains
+from .deliver import Candidate, Decision, choose
+from .evaluate import constant_gains, evaluate_gains
+from .schedule import GainSchedule, replay_schedule
+
+
+def _margins_at(config, gains: tuple, points: list[list[float]]) -> list:
+    from .margins import loop_margins
+
+    out = []
+    for point in points:
+        Kp, Ti, Td, coupling = gains(point)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            out.append(loop_margins(config, Kp, Ti, Td, point, coupling=coupling))
+    return out
+
+
+def _operating_point(config, value: float | None = None) -> list[float]:
+    point = [0.5 * (l.setpoint_range[0] + l.setpoint_range[1]) for l in config.loops]
+    if value is not None:
+        point[0] = float(value)
+    return point
+
+
+def _monte_carlo(scenario) -> list:
+    """The evaluation config with parameter randomisation, one per Monte-Carlo sample (seed offsets)."""
+    samples = scenario.evaluation.randomize_samples
+    config = scenario.evaluation_config()
+    if samples <= 0 or not config.randomize:
+        return []
+    return [(config, scenario.evaluation.seed + 1 + i) for i in range(samples)]
+
+
+def assess_fixed(scenario, gains: Gains) -> Candidate:
+    """The fixed PID's evidence: evaluation, Monte-Carlo set, margins at mid-range."""
+    config = scenario.evaluation_config()
+    intervals = list(scenario.evaluation.intervals) or None
+    fn = constant_gains(gains.Kp, gains.Ti, gains.Td, gains.coupling)
+    plain = dataclasses.replace(config, randomize={}) if config.randomize else config
+    metrics, _ = evaluate_gains(fn, plain, seed=scenario.evaluation.seed, intervals=intervals)
+    mc = [evaluate_gains(fn, c, seed=s)[0] for c, s in _monte_carlo(scenario)]
+    point = _operating_point(config)
+    margins = _margins_at(scenario.tuning, lambda p: fn(None), [point])
+    return Candidate("fixed PID", metrics, mc, margins, [point[0]])
+
+
+def assess_schedule(scenario, schedule: GainSchedule) -> Candidate:
+    """The replayed schedule's evidence: evaluation, Monte-Carlo set, margins at every breakpoint."""
+    config = scenario.evaluation_config()
+    intervals = list(scenario.evaluation.intervals) or None
+    plain = dataclasses.replace(config, randomize={}) if config.randomize else config
+    metrics, _ = replay_schedule(schedule, plain, seed=scenario.evaluation.seed, intervals=intervals)
+    mc = [replay_schedule(schedule, c, seed=s)[0] for c, s in _monte_carlo(scenario)]
+
+    def gains(point):
+        g = schedule.gains_at(point[0])
+        return tuple(x.tolist() for x in g) + ((None,) if schedule.coupling is None else ())
+
+    points = [_operating_point(config, b) for b in schedule.breakpoints] \
+        if schedule.variable.startswith("setpoint") else [_operating_point(config)]
+    return Candidate("gain schedule", metrics, mc, _margins_at(scenario.tuning, gains, points),
+                     [p[0] for p in points])
+
+
+def assess(scenario, schedule: GainSchedule | None, fixed_gains: Gains) -> tuple[Decision, Candidate | None, Candidate]:
+    """Evidence for both controllers and the decision (deliver.choose) with deploy.max_sensitivity."""
+    limit = max_sensitivity(scenario)
+    fixed = assess_fixed(scenario, fixed_gains)
+    sched = assess_schedule(scenario, schedule) if schedule is not None else None
+    return choose(sched, fixed, limit), sched, fixed
+
+
+def max_sensitivity(scenario) -> float:
+    """deploy.max_sensitivity of the scenario: the Ms limit no deployed controller may exceed."""
+    return float(scenario.deploy.max_sensitivity)
+
+
+def candidate_summary(c: Candidate) -> dict:
+    """What metrics.json records of a candidate."""
+    return {"metrics": c.metrics, "monte_carlo": c.monte_carlo,
+            "margins": [{"operating_point": b, "Ms": m.Ms, "gain_margin": m.gain_margin,
+                         "phase_margin_deg": m.phase_margin_deg, "reliable": m.reliable, "note": m.note}
+                        for b, m in zip(c.breakpoints, c.margins)],
+            "worst_Ms": c.worst_Ms if math.isfinite(c.worst_Ms) else None}

@@ -1,0 +1,136 @@
+"""Choosing what to deploy: the adaptive gain schedule (replayed as a plain PID) or the tuned fixed PID.
+
+Rule (one place; explained in docs/architecture.md "Deliverable"):
+- A controller is eligible when it never diverged (evaluation and every Monte-Carlo sample) and its
+  worst peak sensitivity Ms over its operating points is at most `max_sensitivity`.
+- Its score is the evaluation's ISE plus the mean ISE over the Monte-Carlo samples.
+- The schedule is deployed when it is eligible, scores below the fixed PID, and its total variation
+  of u is at most TOTAL_VARIATION_LIMIT times the fixed PID's (no ISE bought by chattering);
+  otherwise the fixed PID when it is eligible; otherwise nothing is deployable.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+TOTAL_VARIATION_LIMIT = 1.5
+
+
+@dataclass
+class Candidate:
+    """One deployable controller's evidence.
+
+    name: "gain schedule" | "fixed PID". metrics: evaluation metrics (compute_metrics + "terminated").
+    monte_carlo: metrics of each Monte-Carlo sample. margins: prlpid_fmi.margins.Margins per operating
+    point (one for the fixed PID), with `breakpoints` the matching operating points.
+    """
+
+    name: str
+    metrics: dict
+    monte_carlo: list = field(default_factory=list)
+    margins: list = field(default_factory=list)
+    breakpoints: list = field(default_factory=list)
+
+    @property
+    def diverged(self) -> bool:
+        return bool(self.metrics.get("terminated")) or any(m.get("terminated") for m in self.monte_carlo)
+
+    @property
+    def worst_Ms(self) -> float:
+        return max((m.Ms for m in self.margins), default=math.nan)
+
+    @property
+    def score(self) -> float:
+        """Evaluation ISE + mean Monte-Carlo ISE (lower is better)."""
+        ise = self.overall("ISE")
+        if self.monte_carlo:
+            ise += sum(self.overall("ISE", m) for m in self.monte_carlo) / len(self.monte_carlo)
+        return ise
+
+    def overall(self, key: str, metrics: dict | None = None) -> float:
+        """An overall metric summed over loops (ISE, IAE, effort, total variation) or their worst (others)."""
+        return overall_metric((metrics or self.metrics)["overall"], key)
+
+    def problems(self, max_sensitivity: float) -> list[str]:
+        """Why the candidate may not be deployed (empty: eligible)."""
+        out = []
+        if self.diverged:
+            out.append("it diverged in the evaluation" + (" or a Monte-Carlo sample" if self.monte_carlo else ""))
+        if not self.margins:
+            out.append("its robustness margins could not be measured")
+        elif not self.worst_Ms <= max_sensitivity:
+            out.append(f"its peak sensitivity Ms = {self.worst_Ms:.2f} exceeds the limit {max_sensitivity:g}")
+        return out
+
+
+@dataclass(frozen=True)
+class Decision:
+    """deploy: "gain schedule" | "fixed PID" | "none"; reasons: why, one sentence each."""
+
+    deploy: str
+    reasons: tuple[str, ...]
+
+
+def choose(schedule: Candidate | None, fixed: Candidate, max_sensitivity: float) -> Decision:
+    """Apply the rule of the module docstring."""
+    reasons = []
+    if schedule is not None:
+        problems = schedule.problems(max_sensitivity)
+        if not problems:
+            if not schedule.score < fixed.score:
+                problems.append(f"it does not beat the fixed PID on ISE ({schedule.score:.4g} vs {fixed.score:.4g})")
+            tv_s, tv_f = _total_variation(schedule), _total_variation(fixed)
+            if tv_s > TOTAL_VARIATION_LIMIT * tv_f:
+                problems.append(f"its control signal varies {tv_s / tv_f:.1f}x as much as the fixed PID's "
+                                f"(limit {TOTAL_VARIATION_LIMIT}x)")
+        if not problems:
+            return Decision("gain schedule", (f"it beats the fixed PID on ISE ({schedule.score:.4g} vs "
+                                              f"{fixed.score:.4g}) within the robustness and effort limits",))
+        reasons += [f"The gain schedule is not deployed: {p}." for p in problems]
+    problems = fixed.problems(max_sensitivity)
+    if not problems:
+        return Decision("fixed PID", tuple(reasons))
+    reasons += [f"The fixed PID is not deployable either: {p}." for p in problems]
+    return Decision("none", tuple(reasons))
+
+
+def overall_metric(overall: dict, key: str) -> float:
+    """`key` from compute_metrics' overall dict: plain for one loop; "key[loop]" summed (integral
+    metrics) or maximised (step metrics) over loops for several."""
+    if key in overall:
+        return float(overall[key])
+    values = [float(v) for k, v in overall.items() if k.startswith(key + "[")]
+    if not values:
+        return math.nan
+    return sum(values) if key in ("ISE", "IAE", "ITAE", "ControlEffort", "TotalVariation") else max(values)
+
+
+def _total_variation(c: Candidate) -> float:
+    return c.overall("TotalVariation")
+
+
+def _ratio(a: float, b: float) -> str:
+    return f"{a / b:.2f}x" if b and math.isfinite(a) and math.isfinite(b) else "n/a"
+
+
+def verdict(decision: Decision, schedule: Candidate | None, fixed: Candidate, max_sensitivity: float) -> str:
+    """The report's opening paragraph, in words (markdown)."""
+    lines = ["## Verdict", ""]
+    if decision.deploy == "gain schedule":
+        s, f = schedule, fixed
+        lines.append(f"**Deploy the adaptive gain schedule** (schedule.csv, a plain gain-scheduled PID; no neural "
+                     f"network). On the evaluation its ISE is {_ratio(s.overall('ISE'), f.overall('ISE'))} the fixed "
+                     f"PID's, its overshoot {_ratio(s.overall('Overshoot'), f.overall('Overshoot'))}, and its worst "
+                     f"Ms {s.worst_Ms:.2f} (fixed PID {f.worst_Ms:.2f}; limit {max_sensitivity:g}).")
+    elif decision.deploy == "fixed PID":
+        lines.append(f"**Deploy the fixed PID** (schedule.csv holds it as a one-row table; also fixed_pid.csv). "
+                     f"Its worst Ms is {fixed.worst_Ms:.2f} (limit {max_sensitivity:g}).")
+        if schedule is not None:
+            lines.append("The adaptive schedule lost. To try: a longer training budget (--timesteps), wider "
+                         "controller.anchor_bands, or training.randomize over the parameters that vary in your plant.")
+    else:
+        lines.append(f"**Nothing here is safe to deploy**: no controller meets the robustness limit Ms <= "
+                     f"{max_sensitivity:g} without diverging. Narrow the gain ranges, lower the sample time, or "
+                     "check the plant's limits and operating range.")
+    lines += [""] + [f"- {r}" for r in decision.reasons]
+    return "\n".join(lines) + "\n"
