@@ -143,32 +143,37 @@ class NativeForecast(_Forecast):
 
         self._input = ForecastInput()
         self._result = ForecastResult()
-        # one double view per input array, so a call fills them by slice assignment
-        self._views = {name: getattr(self._input, name) for name, _ in _INPUT_ARRAYS}
+        # one double view per input array (in _INPUT_ARRAYS order): a call fills them by slice assignment
+        self._views = tuple(getattr(self._input, name) for name, _ in _INPUT_ARRAYS)
         call = plant.library["prlpid_forecast"]
-        call.restype = c_int
-        call.argtypes = [c_void_p] * 5
+        call.restype = c_int  # no argtypes: the arguments are c_void_p objects, the cheapest ctypes call
         self._call = call
-        self._args = (plant.component, prior.component, ctypes.addressof(s), ctypes.addressof(self._input),
-                      ctypes.addressof(self._result))
+        self._components = (plant.component, prior.component)
+        self._args = (c_void_p(plant.component), c_void_p(prior.component), c_void_p(ctypes.addressof(s)),
+                      c_void_p(ctypes.addressof(self._input)), c_void_p(ctypes.addressof(self._result)))
 
     def mean_reward(self, setpoint: list, measurement: list, Kp: list, Ti: list, Td: list, coupling: list | None,
                     u_prev: list) -> float:
         """As FmiForecast.mean_reward, in one C call."""
-        v, n = self._views, self.n_loops
-        v["setpoint"][:n] = setpoint
-        v["measurement"][:n] = measurement
-        v["Kp"][:n] = Kp
-        v["Ti"][:n] = Ti
-        v["Td"][:n] = Td
+        n = self.n_loops
+        v_setpoint, v_measurement, v_Kp, v_Ti, v_Td, v_coupling, v_u_prev, v_integral, v_last_error, v_derivative = \
+            self._views
+        v_setpoint[:n] = setpoint
+        v_measurement[:n] = measurement
+        v_Kp[:n] = Kp
+        v_Ti[:n] = Ti
+        v_Td[:n] = Td
         if coupling is not None:
-            v["coupling"][:] = coupling
-        v["u_prev"][:n] = u_prev
+            v_coupling[:] = coupling
+        v_u_prev[:n] = u_prev
         integral, last_error, derivative, initialized = self.pid.raw_state()
-        v["integral"][:n] = integral
-        v["last_error"][:n] = last_error
-        v["derivative"][:n] = derivative
+        v_integral[:n] = integral
+        v_last_error[:n] = last_error
+        v_derivative[:n] = derivative
         self._input.initialized = initialized
+        if (self.plant.component, self.prior.component) != self._components:  # re-instantiated (reset fallback)
+            self._components = (self.plant.component, self.prior.component)
+            self._args[0].value, self._args[1].value = self._components
         rc = self._call(*self._args)
         if rc:
             self._raise(rc)
