@@ -47,8 +47,11 @@ def state_of(info: ValidationInfo) -> Optional[State]:
 
 
 def did_you_mean(word: str, choices) -> str:
-    close = difflib.get_close_matches(str(word), [str(c) for c in choices], n=1)
-    return f"; did you mean {close[0]!r}?" if close else ""
+    """'; did you mean 'x'?' for the closest choice (case-insensitive), or ''."""
+    choices = [str(c) for c in choices]
+    lower = {c.lower(): c for c in choices}
+    close = difflib.get_close_matches(str(word).lower(), list(lower), n=1)
+    return f"; did you mean {lower[close[0]]!r}?" if close else ""
 
 
 # ---------------------------------------------------------------------------------------------
@@ -95,7 +98,8 @@ def check_variable(desc, name: str, causalities: tuple[str, ...], role: str,
     """`name` is a real variable of the FMU with one of `causalities` (and, for parameters, `variabilities`)."""
     v = desc.variable(name)
     wanted = " or ".join(causalities)
-    pool = [x.name for x in desc.variables if x.causality in causalities]
+    pool = [x.name for x in desc.variables if x.causality in causalities and x.type in REAL_TYPES
+            and (variabilities is None or x.causality != "parameter" or x.variability in variabilities)]
     if v is None:
         raise problem(f"the FMU {desc.path.name} has no variable {name!r}",
                       f"{role} ({wanted}) of the FMU: {', '.join(pool) or 'none'}{did_you_mean(name, pool)}")

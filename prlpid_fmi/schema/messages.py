@@ -206,8 +206,17 @@ def error_line(file: str, doc: Any, err: dict) -> str:
     loc = tuple(err["loc"])
     kind = err["type"]
     ctx = err.get("ctx") or {}
+    parent = raw_value(doc, loc[:-1]) if loc else _MISSING
+    if kind == "missing" and loc and isinstance(loc[-1], int) and isinstance(parent, list):
+        loc, kind, ctx = loc[:-1], "too_short", {"actual_length": len(parent)}  # a too short [low, high] pair
     raw = raw_value(doc, loc)
-    got = ctx.get("got") or show(raw if raw is not _MISSING else err.get("input", _MISSING))
+    if "got" in ctx:
+        got = ctx["got"]
+    elif raw is not _MISSING:
+        got = show(raw)
+    else:  # not in the file: a default was checked, or a required key is missing
+        default = err.get("input")
+        got = "nothing" if default is None or kind == "missing" else f"nothing (default {show(default)})"
     if kind == "scenario":
         problem_text = ctx["problem"]
         expected = ctx.get("expected") or expected_at(loc)

@@ -363,7 +363,7 @@ class RewardModel(Section):
 class AgentModel(Section):
     """The RL agent and its training budget (paper Table 1 / Algorithm 1 for PPO)."""
 
-    algorithm: Algorithm = Field("ppo", description="ppo | sac | td3")
+    algorithm: Algorithm = Field("ppo", validate_default=True, description="ppo | sac | td3")
     total_timesteps: Count = Field(500_000, description="training budget [env steps]")
     seed: Steps = Field(0, description="seed of training (>= 0)")
     n_envs: Count = Field(8, description="parallel environments (8 episodes in one process batch the policy's "
