@@ -1,0 +1,437 @@
+"""CLI conventions and run-file safety: --version, python -m, -q, bundled scenario names, progress on
+stderr, file modes, and arguments that must never lose or overwrite a run's files (one line, exit 2)."""
+import errno
+import io
+import json
+import os
+import shutil
+import stat
+import subprocess
+import sys
+from importlib import metadata
+from pathlib import Path
+
+import pytest
+import yaml
+
+from prlpid_fmi import rundir
+from prlpid_fmi.cli import main
+from prlpid_fmi.errors import PrlPidError
+from prlpid_fmi.presets import SCENARIO_DIR, scenario_path
+from prlpid_fmi.progress import Progress, format_duration
+from prlpid_fmi.run import export_schedule
+from prlpid_fmi.schedule import read_schedule_csv
+from test_cli import _small_copy
+
+BUNDLED = sorted(p.stem for p in SCENARIO_DIR.glob("*.yaml"))
+
+
+def _one_error_line(capsys) -> str:
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err, err
+    assert lines[0].startswith("prlpid-fmi")
+    return lines[0]
+
+
+def _tree(path: Path) -> dict:
+    """{relative path: (size, mtime_ns)} of every file under path."""
+    return {str(p.relative_to(path)): (p.stat().st_size, p.stat().st_mtime_ns)
+            for p in sorted(path.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture(scope="module")
+def trained_run(tmp_path_factory):
+    """A tiny finished run (first_order, a token training budget, a token fixed-PID search)."""
+    base = tmp_path_factory.mktemp("run")
+    scenario = _small_copy(scenario_path("first_order"), base / "s.yaml")
+    run = base / "run"
+    old = os.umask(0o022)
+    try:
+        assert main(["-q", "tune", str(scenario), "--timesteps", "256", "--out", str(run)]) == 0
+    finally:
+        os.umask(old)
+    return run
+
+
+# -- version, module entry point, quiet ------------------------------------------------------------
+def test_version_matches_the_installed_distribution(capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(["--version"])
+    assert exit_.value.code == 0
+    assert capsys.readouterr().out.strip() == f"prlpid-fmi {metadata.version('prlpid-fmi')}"
+
+
+def test_python_dash_m_runs_the_cli(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "prlpid_fmi", "--version"], capture_output=True, text=True,
+                          cwd=tmp_path)
+    assert proc.returncode == 0 and proc.stdout.strip() == f"prlpid-fmi {metadata.version('prlpid-fmi')}"
+    proc = subprocess.run([sys.executable, "-m", "prlpid_fmi", "validate", "nonexistent_name"],
+                          capture_output=True, text=True, cwd=tmp_path)
+    assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1 and "Traceback" not in proc.stderr
+
+
+@pytest.mark.parametrize("argv", [["-q", "validate", "first_order"], ["validate", "first_order", "-q"],
+                                  ["validate", "--quiet", "first_order"]])
+def test_quiet_prints_nothing_on_success(argv, capsys):
+    assert main(argv) == 0
+    out = capsys.readouterr()
+    assert out.out == "" and out.err == ""
+
+
+def test_without_quiet_validate_says_ok(capsys):
+    assert main(["validate", "first_order"]) == 0
+    assert capsys.readouterr().out.startswith(f"{SCENARIO_DIR / 'first_order.yaml'}: ok: first_order")
+
+
+def test_a_bad_argument_is_one_line(capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(["tune", "first_order", "--timesteps", "many"])
+    assert exit_.value.code == 2
+    assert "--timesteps" in _one_error_line(capsys)
+
+
+# -- bundled scenario names ------------------------------------------------------------------------
+def test_bundled_scenarios_are_named_from_any_folder(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    assert "first_order" in BUNDLED and "two_tank" in BUNDLED
+    for name in BUNDLED:
+        assert main(["validate", name]) == 0
+        assert f": ok: " in capsys.readouterr().out
+
+
+def test_an_existing_path_wins_over_a_bundled_name(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    doc = yaml.safe_load(scenario_path("first_order").read_text())
+    doc["name"] = "local_copy"
+    Path("first_order").write_text(yaml.safe_dump(doc))
+    assert main(["validate", "first_order"]) == 0
+    assert capsys.readouterr().out.startswith("first_order: ok: local_copy")
+
+
+def test_an_unknown_name_lists_the_bundled_ones(tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    for argv in (["validate", "frist_order"], ["tune", "frist_order", "--out", "r"]):
+        assert main(argv) == 2
+        line = _one_error_line(capsys)
+        assert line.startswith("prlpid-fmi: error: frist_order: ") and ", ".join(BUNDLED) in line
+    assert list(tmp_path.iterdir()) == []
+
+
+# -- refused starts leave nothing behind -----------------------------------------------------------
+@pytest.mark.parametrize("extra, option", [(["--timesteps", "0"], "--timesteps"), (["--timesteps", "-5"], "--timesteps"),
+                                           (["--seed", "-1"], "--seed")])
+def test_bad_numbers_are_refused_before_anything_is_created(extra, option, tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(tmp_path)
+    for out in ([], ["--out", "deep/run"]):
+        assert main(["tune", "first_order", *out, *extra]) == 2
+        line = _one_error_line(capsys)
+        assert option in line and extra[1] in line
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_bad_numbers_in_a_real_process(tmp_path):
+    for extra in (["--timesteps", "0"], ["--seed", "-1"]):
+        proc = subprocess.run([sys.executable, "-m", "prlpid_fmi", "tune", "first_order", *extra],
+                              capture_output=True, text=True, cwd=tmp_path)
+        assert proc.returncode == 2 and "Traceback" not in proc.stderr
+        assert len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_out_naming_an_existing_file_is_one_line_and_the_file_is_kept(tmp_path, capsys):
+    target = tmp_path / "notes.txt"
+    target.write_text("mine")
+    for resume in ([], ["--resume"]):
+        assert main(["tune", "first_order", "--out", str(target), "--timesteps", "8", *resume]) == 2
+        assert f"{target}: is a file" in _one_error_line(capsys)
+    assert target.read_text() == "mine" and sorted(tmp_path.iterdir()) == [target]
+
+
+def test_a_start_refused_after_the_directory_was_made_removes_it(tmp_path, monkeypatch, capsys):
+    """A user error raised after prepare_run_dir (here: by training) removes the folders it created."""
+    import prlpid_fmi.train
+
+    def refuse(*args, **kwargs):
+        raise PrlPidError("agent.extra: unknown option (got {'bogus': 1}; expected a PPO argument)")
+
+    monkeypatch.setattr(prlpid_fmi.train, "train", refuse)
+    assert main(["-q", "tune", "first_order", "--out", str(tmp_path / "a" / "b" / "run"), "--timesteps", "8"]) == 2
+    assert "agent.extra" in _one_error_line(capsys)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_os_error_is_one_line_naming_the_file(tmp_path, capsys):
+    assert main(["tune", "first_order", "--out", "/dev/null/run", "--timesteps", "8"]) == 2
+    assert _one_error_line(capsys) == "prlpid-fmi: error: /dev/null/run: Not a directory"
+
+
+# -- export never loses a run's files --------------------------------------------------------------
+def test_export_never_targets_a_file_the_run_owns(trained_run, tmp_path, capsys):
+    before = _tree(trained_run)
+    model = (trained_run / "model.zip").read_bytes()
+    owned = ["model.zip", "metrics.json", "gains.csv", "schedule.csv", "report.md", "scenario.yaml", "run.json",
+             "response.png", "checkpoints/new.csv", "monitor/x.csv", "evaluations/9/gains.csv"]
+    for name in owned:
+        for force in ([], ["--force"]):
+            assert main(["export", str(trained_run), "-o", str(trained_run / name), *force]) == 2
+            line = _one_error_line(capsys)
+            assert str(trained_run / name) in line and "belongs to the run directory" in line
+    # other spellings of the same file
+    for spelling in (trained_run / ".." / trained_run.name / "model.zip", trained_run / "." / "model.zip"):
+        assert main(["export", str(trained_run), "-o", str(spelling), "--force"]) == 2
+        assert "belongs to the run directory" in _one_error_line(capsys)
+    link = tmp_path / "link.zip"
+    link.symlink_to(trained_run / "model.zip")
+    assert main(["export", str(trained_run), "-o", str(link), "--force"]) == 2
+    assert "belongs to the run directory" in _one_error_line(capsys)
+    assert (trained_run / "model.zip").read_bytes() == model and _tree(trained_run) == before
+
+
+def test_export_refuses_a_directory_and_an_existing_file_without_force(trained_run, tmp_path, capsys):
+    assert main(["export", str(trained_run), "-o", str(tmp_path)]) == 2
+    assert f"{tmp_path}: is a directory" in _one_error_line(capsys)
+    existing = tmp_path / "gains.csv"
+    existing.write_text("my own table\n")
+    assert main(["export", str(trained_run), "-o", str(existing), "--points", "3"]) == 2
+    assert "--force" in _one_error_line(capsys)
+    assert existing.read_text() == "my own table\n"
+    assert main(["-q", "export", str(trained_run), "-o", str(existing), "--points", "3", "--force"]) == 0
+    assert capsys.readouterr().out == f"gain schedule written to {existing}\n"
+    assert len(read_schedule_csv(existing).breakpoints) == 3
+
+
+def test_scenario_without_replay_is_refused(trained_run, tmp_path, capsys):
+    assert main(["export", str(trained_run), "-o", str(tmp_path / "s.csv"), "--scenario", "first_order"]) == 2
+    assert "--replay" in _one_error_line(capsys)
+    assert not (tmp_path / "s.csv").exists()
+
+
+def test_replay_on_another_scenarios_evaluation(trained_run, tmp_path):
+    other = _small_copy(scenario_path("first_order"), tmp_path / "other.yaml",
+                        {"evaluation": {"episode_steps": 120, "setpoints": [{"at_step": 0, "value": 0.3},
+                                                                           {"at_step": 60, "value": 0.8}],
+                                        "intervals": [[0, 60], [60, 120]]}})
+    _, own = export_schedule(trained_run, tmp_path / "own.csv", points=3, replay=True)
+    _, moved = export_schedule(trained_run, tmp_path / "other.csv", points=3, replay=True, scenario_path=other)
+    spans = [(i["start_step"], i["end_step"]) for i in moved["schedule"]["intervals"]]
+    assert spans == [(0, 60), (60, 120)]
+    assert [(i["start_step"], i["end_step"]) for i in moved["policy"]["intervals"]] == spans
+    assert [(i["start_step"], i["end_step"]) for i in own["schedule"]["intervals"]] != spans
+
+
+def test_a_corrupt_model_is_one_line_naming_it(trained_run, tmp_path, capsys):
+    broken = tmp_path / "broken"
+    shutil.copytree(trained_run, broken)
+    (broken / "model.zip").write_bytes(b"PK\x03\x04 this is not a model")
+    assert main(["evaluate", str(broken)]) == 2
+    assert f"{broken / 'model.zip'}: cannot load the trained policy" in _one_error_line(capsys)
+    assert not (broken / "evaluations").exists()
+    assert main(["export", str(broken), "-o", str(tmp_path / "t.csv")]) == 2
+    assert str(broken / "model.zip") in _one_error_line(capsys)
+    assert not (tmp_path / "t.csv").exists()
+
+
+def test_a_write_the_os_refuses_is_one_line_naming_the_file(trained_run, tmp_path, capsys):
+    try:
+        os.close(os.open("/sys/prlpid_probe", os.O_CREAT | os.O_WRONLY))
+        pytest.skip("/sys is writable here")
+    except OSError:
+        pass
+    assert main(["export", str(trained_run), "-o", "/sys/schedule.csv", "--points", "3"]) == 2
+    assert _one_error_line(capsys).startswith("prlpid-fmi: error: /sys/schedule.csv: ")
+
+
+def test_a_full_disk_while_plotting_is_one_line_naming_the_png(trained_run, tmp_path, monkeypatch, capsys):
+    from matplotlib.figure import Figure
+
+    def full(self, fname, **kwargs):
+        with open(fname, "wb") as f:
+            f.write(b"\x89PNG")
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(Figure, "savefig", full)
+    assert main(["evaluate", str(trained_run)]) == 2
+    line = _one_error_line(capsys)
+    assert line.startswith("prlpid-fmi: error: ") and line.endswith("response.png: No space left on device")
+    folder = Path(line.split("error: ")[1].split(":")[0]).parent
+    assert not any(p.name.startswith(".") for p in folder.iterdir())  # no temporary file left behind
+
+
+# -- what a run writes -----------------------------------------------------------------------------
+def test_run_files_are_0644_under_umask_022(trained_run):
+    files = [p for p in trained_run.rglob("*") if p.is_file() and not {"tensorboard", "evaluations"} & set(p.parts)]
+    assert {"model.zip", "metrics.json", "gains.csv", "schedule.csv", "response.png", "report.md"} <= {
+        p.name for p in files}
+    assert {p.name: stat.S_IMODE(p.stat().st_mode) for p in files} == {p.name: 0o644 for p in files}
+
+
+def test_evaluate_report_names_the_scenario_file(trained_run, tmp_path, capsys):
+    other = _small_copy(scenario_path("first_order"), tmp_path / "wider.yaml")
+    assert main(["-q", "evaluate", str(trained_run), "--scenario", str(other)]) == 0
+    out_dir = Path(capsys.readouterr().out.split("evaluation written to ")[1].strip())
+    assert f"Scenario file: `{other}`" in (out_dir / "report.md").read_text()
+    assert main(["-q", "evaluate", str(trained_run)]) == 0
+    out_dir = Path(capsys.readouterr().out.split("evaluation written to ")[1].strip())
+    assert f"Scenario file: `{trained_run / 'scenario.yaml'}`" in (out_dir / "report.md").read_text()
+
+
+def test_tune_progress_goes_to_stderr_and_never_passes_the_target(tmp_path, capsys):
+    scenario = _small_copy(scenario_path("first_order"), tmp_path / "s.yaml")
+    run = tmp_path / "run"
+    assert main(["tune", str(scenario), "--timesteps", "200", "--out", str(run)]) == 0
+    out, err = capsys.readouterr()
+    trained = json.loads((run / "run.json").read_text())["trained_timesteps"]
+    assert trained > 200  # PPO collects whole rollouts past the target ...
+    training = [line for line in err.splitlines() if line.startswith("prlpid-fmi: training: ")]
+    assert training[0] == "prlpid-fmi: training: 0/200 steps (0 %)"  # ... the progress does not
+    assert training[-1].startswith("prlpid-fmi: training: 200 steps in ")
+    assert all(int(line.split(": ")[2].split("/")[0].replace(",", "")) <= 200 for line in training[:-1])
+    budget = 2 * 2 * 3  # (maxiter + 1) * popsize * (Kp, Ti, Td) of the small baseline
+    assert f"prlpid-fmi: fixed-PID search: {budget}/{budget} evaluations (100 %)" in err
+    assert "prlpid-fmi: training" not in out and "fixed-PID search:" not in out
+    assert "run directory:" in out and "| metric |" in out
+
+
+def test_quiet_tune_prints_only_the_run_directory(tmp_path, capsys):
+    scenario = _small_copy(scenario_path("first_order"), tmp_path / "s.yaml")
+    assert main(["tune", str(scenario), "--timesteps", "64", "--out", str(tmp_path / "run"), "-q",
+                 "--no-baseline"]) == 0
+    out, err = capsys.readouterr()
+    assert out == f"run directory: {tmp_path / 'run'}\n" and err == ""
+
+
+# -- build-fmus ------------------------------------------------------------------------------------
+def test_no_plant_sources_is_one_line(tmp_path, monkeypatch, capsys):
+    import prlpid_fmi.fmu.build as build
+
+    monkeypatch.setattr(build, "PLANT_SOURCES", tmp_path)
+    for argv in (["build-fmus"], ["check-plants"]):
+        assert main(argv) == 2
+        assert f"{tmp_path}: no bundled plant sources found" in _one_error_line(capsys)
+
+
+def test_build_fmus_out_and_the_lock_in_the_cache(tmp_path, monkeypatch, capsys):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    out = tmp_path / "fmus"
+    assert main(["build-fmus", "FirstOrderUnstable", "--out", str(out)]) == 0
+    assert capsys.readouterr().out == f"built {out / 'FirstOrderUnstable.fmu'}\n"
+    assert sorted(p.name for p in out.iterdir()) == ["FirstOrderUnstable.fmu"]  # no lock, no temporary file
+    assert stat.S_IMODE((out / "FirstOrderUnstable.fmu").stat().st_mode) == 0o666 & ~_umask()
+    assert list((tmp_path / "cache").rglob(".build.lock"))
+    assert main(["build-fmus", "NoSuchPlant", "--out", str(out)]) == 2
+    assert "NoSuchPlant" in _one_error_line(capsys)
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+# -- the pieces: atomic writer, ownership, progress ------------------------------------------------
+def test_write_atomic_modes_and_kinds(tmp_path):
+    old = os.umask(0o022)
+    try:
+        a = rundir.write_atomic(tmp_path / "a.txt", "é\n")
+        b = rundir.write_atomic(tmp_path / "sub" / "b.bin", b"\x00\x01")
+        c = rundir.write_atomic(tmp_path / "c.zip", lambda p: Path(p).write_bytes(b"zip"))
+    finally:
+        os.umask(old)
+    assert a.read_bytes() == "é\n".encode() and b.read_bytes() == b"\x00\x01" and c.read_bytes() == b"zip"
+    assert {stat.S_IMODE(p.stat().st_mode) for p in (a, b, c)} == {0o644}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.txt", "c.zip", "sub"]
+
+
+def test_write_atomic_failure_keeps_the_old_file_and_names_the_target(tmp_path):
+    target = tmp_path / "metrics.json"
+    target.write_text("old")
+
+    def fail(p):
+        Path(p).write_text("half")
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    with pytest.raises(OSError) as exc:
+        rundir.write_atomic(target, fail)
+    assert exc.value.filename == str(target) and exc.value.errno == errno.ENOSPC
+    assert target.read_text() == "old" and sorted(tmp_path.iterdir()) == [target]
+
+
+def test_owned_names(tmp_path):
+    run = tmp_path / "run"
+    (run / "checkpoints").mkdir(parents=True)
+    assert rundir.owned_name(run, run / "model.zip") == "model.zip"
+    assert rundir.owned_name(run, run / "checkpoints" / "model_8_steps.zip") == "checkpoints"
+    assert rundir.owned_name(run, tmp_path / "run" / ".." / "run" / "report.md") == "report.md"
+    assert rundir.owned_name(run, run / "my_schedule.csv") is None
+    assert rundir.owned_name(run, tmp_path / "model.zip") is None
+
+
+class FakeClock:
+    def __init__(self):
+        self.t = 100.0
+
+    def __call__(self):
+        return self.t
+
+
+def test_progress_log_lines_every_interval_clamped_with_eta():
+    clock, stream = FakeClock(), io.StringIO()
+    p = Progress("training", "steps", total=50_000, stream=stream, clock=clock)
+    for t, done in ((10.0, 1_000), (29.0, 14_500), (30.0, 15_000), (45.0, 22_000), (61.0, 51_200)):
+        clock.t = 100.0 + t
+        p.update(done)
+    p.close()
+    assert stream.getvalue().splitlines() == [
+        "prlpid-fmi: training: 0/50,000 steps (0 %)",
+        # 15,000 steps in 30 s: 500 steps/s, 35,000 left: 70 s
+        "prlpid-fmi: training: 15,000/50,000 steps (30 %), 500 steps/s, ETA 1 min 10 s",
+        # 51,200 done is shown as the target
+        "prlpid-fmi: training: 50,000/50,000 steps (100 %), 820 steps/s, ETA 0 s",
+        "prlpid-fmi: training: 50,000 steps in 1 min 01 s",
+    ]
+
+
+def test_progress_counts_resumed_work_but_not_in_the_rate():
+    clock, stream = FakeClock(), io.StringIO()
+    p = Progress("training", "steps", total=1_000, start=600, stream=stream, clock=clock, interval_s=5.0)
+    clock.t += 10.0
+    p.update(700)  # 100 steps in 10 s this session: 10 steps/s, 300 left
+    assert stream.getvalue().splitlines()[-1] == "prlpid-fmi: training: 700/1,000 steps (70 %), 10 steps/s, ETA 30 s"
+
+
+def test_progress_total_given_later_and_an_early_end():
+    clock, stream = FakeClock(), io.StringIO()
+    p = Progress("fixed-PID search", "evaluations", stream=stream, clock=clock)
+    assert stream.getvalue() == ""
+    clock.t += 2.0
+    p.update(48, 504)
+    clock.t += 1.0
+    p.update(240, 504)
+    p.close()
+    lines = stream.getvalue().splitlines()
+    assert lines[0] == "prlpid-fmi: fixed-PID search: 48/504 evaluations (10 %), 24 evaluations/s, ETA 19 s"
+    assert lines[-1] == "prlpid-fmi: fixed-PID search: 240 evaluations in 3 s (stopped before 504: done early)"
+
+
+class FakeTerminal(io.StringIO):
+    def isatty(self):
+        return True
+
+
+def test_progress_on_a_terminal_redraws_one_line():
+    clock, stream = FakeClock(), FakeTerminal()
+    p = Progress("training", "steps", total=2_048, stream=stream, clock=clock)
+    for k in range(1, 11):
+        clock.t += 0.5
+        p.update(300 * k)
+    p.close()
+    text = stream.getvalue()
+    assert text.count("\n") == 1 and text.endswith("\n") and text.count("\r") == 12
+    final = text.rsplit("\r", 1)[1]
+    assert "2,048/2,048 steps 100 %" in final and "#" * 24 in final
+
+
+def test_format_duration():
+    assert [format_duration(s) for s in (0.4, 59.4, 61, 3599, 3600, 7325)] == [
+        "0 s", "59 s", "1 min 01 s", "59 min 59 s", "1 h 00 min", "2 h 02 min"]
