@@ -13,13 +13,14 @@ import gymnasium as gym
 import torch
 from torch import nn
 
+from . import schema
 from .config import AgentConfig, TuningConfig
 from .env import PidTuningEnv, is_anchored
 from .errors import PrlPidError
 from .progress import training_progress
 from .rundir import write_atomic
 
-ALGORITHMS = ("ppo", "sac", "td3")
+ALGORITHMS = schema.ALGORITHMS  # ppo | sac | td3: the scenario schema's choices
 ANCHORED_INITIAL_STD = 0.3  # PPO's initial action std around the fixed PID (action units; the band is [-1, 1])
 
 
