@@ -81,7 +81,10 @@ class FmiForecast(_Forecast):
 
     def __init__(self, plant, prior, pid, horizon: int, scale, bound, penalty: float, weights: RewardWeights,
                  u_scale, overrides: dict | None = None, state_map: dict | None = None):
+        from ..fmu import StepRejected
+
         super().__init__(plant, prior, pid, horizon, scale, bound, penalty, weights, u_scale, overrides)
+        self._rejected = StepRejected
         self.state_map = dict(state_map or {})
         self.last_rewards: list[float] = []
         self.last_measurements: list[list[float]] = []
@@ -102,8 +105,6 @@ class FmiForecast(_Forecast):
         All arguments are lists of n_loops floats (coupling: 6 floats, or None when not coupled);
         u_prev is the control signal of the previous sample.
         """
-        from ..fmu import StepRejected
-
         self._sync()
         pid, prior, n, scale, bound = self.pid, self.prior, self.n_loops, self.scale, self.bound
         weights, u_scale = self.weights, self.u_scale
@@ -120,7 +121,7 @@ class FmiForecast(_Forecast):
                     u = pid.step_values([setpoint[i] - y[i] for i in range(n)], Kp, Ti, Td)
                 try:
                     y = prior.step_values(u)
-                except StepRejected:
+                except self._rejected:
                     rewards.append(self.penalty)
                     break
                 measurements.append(y)

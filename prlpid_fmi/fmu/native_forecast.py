@@ -163,7 +163,7 @@ class NativeForecast(_Forecast):
         v_Kp[:n] = Kp
         v_Ti[:n] = Ti
         v_Td[:n] = Td
-        if coupling is not None:
+        if self.coupled:
             v_coupling[:] = coupling
         v_u_prev[:n] = u_prev
         integral, last_error, derivative, initialized = self.pid.raw_state()
