@@ -11,5 +11,5 @@ def fmi_version(request):
 
 
 def fmu(name: str, version: int = 2):
-    """Path of a bundled FMU, built on demand (cached in fmus/)."""
+    """Path of a bundled FMU, built on demand (cached in the per-user FMU cache)."""
     return bundled_fmu(name, version)
