@@ -108,8 +108,8 @@ CASES = [
      "'zz'", "no variable 'zz'"),
     ("randomize-low-gt-high", "first_order", _set("training.randomize", {"a": [2, 1]}), "training.randomize.a",
      "[2, 1]", "low > high"),
-    ("randomize-fixed-parameter", "two_tank", _set("training.randomize", {"h1_0": [10, 20]}),
-     "training.randomize.h1_0", "'h1_0'", "fixed parameter"),
+    ("randomize-an-output", "two_tank", _set("training.randomize", {"h2": [10, 20]}),
+     "training.randomize.h2", "'h2'", "causality mismatch"),
     ("randomize-not-a-pair", "first_order", _set("training.randomize", {"a": [1]}), "training.randomize.a", "[1]",
      "list of length 1"),
     # agent.extra against the algorithm's constructor
@@ -352,7 +352,7 @@ def test_cli_reports_all_mistakes_exit_2(tmp_path):
 
 
 @pytest.mark.parametrize("case", [c for c in CASES if c[0] in ("learning-rate-inf", "extra-unknown",
-                                                               "randomize-fixed-parameter")],
+                                                               "randomize-an-output")],
                          ids=lambda c: c[0])
 def test_cli_bad_value(case, tmp_path):
     _, base, edit, key, shown, word = case

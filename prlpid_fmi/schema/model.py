@@ -86,8 +86,7 @@ PlantParameter = Annotated[Name, _variable_check(("parameter", "input"), "a para
 PriorParameter = Annotated[Name, _variable_check(("parameter", "input"), "a parameter", prior=True)]
 PriorStateParameter = Annotated[Name, _variable_check(("parameter",), "a prior parameter", prior=True)]
 PlantVariable = Annotated[Name, _variable_check(("output", "local", "parameter", "input"), "a plant variable")]
-RandomizedParameter = Annotated[Name, _variable_check(("parameter", "input"), "an input or tunable parameter",
-                                                      ("tunable",))]
+RandomizedParameter = Annotated[Name, _variable_check(("parameter", "input"), "a parameter or input")]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -580,8 +579,8 @@ class TrainingModel(_EpisodeSection):
     actuator_noise_std: NonNegative = Field(0.0, description="Gaussian noise on every control signal [input units]")
     disturbances: list[DisturbanceModel] = Field(default_factory=list, description="disturbances of every episode")
     randomize: dict[RandomizedParameter, RandomRange] = Field(
-        default_factory=dict, description="{FMU input or tunable parameter: [low, high]}: drawn uniformly at the "
-                                          "start of every episode [FMU units]")
+        default_factory=dict, description="{FMU parameter or input: [low, high]}: drawn uniformly and set before "
+                                          "every episode starts, like plant.parameters [FMU units]")
 
 
 class EvaluationModel(_EpisodeSection):
