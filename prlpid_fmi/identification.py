@@ -111,10 +111,12 @@ class ClosedLoopRig:
         config: the tuning problem (plant, loops, limits, anti-windup, derivative filter, coupling).
         Kp, Ti, Td: gains per loop (n_loops,); coupling: (6,) for the coupled PID, else None.
         setpoint: the operating point, one setpoint per loop (plant units).
+        snapshots: return to the settled state through an FMU state snapshot where the FMU can
+            serialize its state; otherwise (or False) by replaying the settling from t = 0.
     """
 
     def __init__(self, config: TuningConfig, Kp: Sequence[float], Ti: Sequence[float], Td: Sequence[float],
-                 setpoint: Sequence[float], coupling: Sequence[float] | None = None):
+                 setpoint: Sequence[float], coupling: Sequence[float] | None = None, snapshots: bool = True):
         c = config
         n = c.n_loops
         for name, values in (("Kp", Kp), ("Ti", Ti), ("Td", Td), ("operating_point", setpoint)):
@@ -143,8 +145,9 @@ class ClosedLoopRig:
         path = resolve_fmu(c.fmu, c.fmi_version)
         self.plant = FmuPlant(path, [l.input for l in c.loops], [l.output for l in c.loops], c.sample_time_s,
                               c.plant_parameters, "margins")
+        self._snapshots = snapshots
         self._snapshot = None
-        self._settle_steps = 0
+        self._settle_steps = 0  # replayed by restore() when the FMU cannot serialize its state
         self.y = self.plant.read_outputs()
 
     def close(self) -> None:
@@ -191,7 +194,7 @@ class ClosedLoopRig:
         self._settle_steps = k
         self.y = y
         saturated = bool(np.any((u <= self.u_min) | (u >= self.u_max)))
-        if not diverged and self.plant.description.can_serialize_state:
+        if not diverged and self._snapshots and self.plant.description.can_serialize_state:
             self._snapshot = (self.plant.get_state(), self.pid.get_state(), y.copy())
         return Settling(k, settled, diverged, saturated, y.copy(), np.array(u, float))
 

@@ -212,15 +212,20 @@ def _no_margins(loop: str, amplitude: float, note: str) -> Margins:
                    empty.astype(complex), amplitude, False, note, loop)
 
 
-def _measure_loop(rig: ClosedLoopRig, loop: int, frequencies, amplitude: float) -> list[PlantResponse]:
-    """The multisine experiments of one loop: a log grid (period grown while too coarse), then refinement."""
+def _controller(rig: ClosedLoopRig, loop: int):
+    """w [rad/s] -> C(e^{j w Ts}) of loop `loop`'s PID as the rig runs it."""
     c = rig.config
-    Ts = c.sample_time_s
+    return lambda w: pid_frequency_response(rig.Kp[loop], rig.Ti[loop], rig.Td[loop], c.sample_time_s, w,
+                                            c.derivative_filter_N)
 
-    def controller(w):
-        return pid_frequency_response(rig.Kp[loop], rig.Ti[loop], rig.Td[loop], Ts, w, c.derivative_filter_N)
 
-    wait = rig._settle_steps
+def _measure_loop(rig: ClosedLoopRig, loop: int, frequencies, amplitude: float, wait: int) -> list[PlantResponse]:
+    """The multisine experiments of one loop: a log grid (period grown while too coarse), then refinement.
+
+    wait: samples to let the transient of a new multisine die out (the settling time is a fair guess).
+    """
+    Ts = rig.config.sample_time_s
+    controller = _controller(rig, loop)
     if frequencies is None:
         period = DEFAULT_PERIOD
     else:
@@ -260,16 +265,15 @@ def _merged(responses: list[PlantResponse]) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _loop_result(rig: ClosedLoopRig, loop: int, responses: list[PlantResponse]) -> Margins:
-    c = rig.config
-    name = c.loops[loop].output
+    name = rig.config.loops[loop].output
     amplitude = min(r.amplitude for r in responses)
     if any(r.diverged for r in responses):
         return _no_margins(name, amplitude, "the closed loop diverged during the frequency-response experiment "
                                             f"(multisine peak {amplitude:.3g})")
     omega, P = _merged(responses)
-    C = pid_frequency_response(rig.Kp[loop], rig.Ti[loop], rig.Td[loop], c.sample_time_s, omega,
-                               c.derivative_filter_N)
+    C = _controller(rig, loop)(omega)
     L = C * P
+    # no integral action and |L| flat at the lowest frequencies: a finite DC loop gain
     no_integrator = not math.isfinite(rig.Ti[loop]) and len(L) > 1 and abs(abs(L[1]) / abs(L[0]) - 1) < 0.1
     Ms, w_ms, gm, wpc, pm, wgc = margins_from_loop_response(omega, L, finite_dc_gain=no_integrator)
     problems = []
@@ -314,13 +318,14 @@ def loop_margins(config: TuningConfig, Kp: Sequence[float], Ti: Sequence[float],
                 results.append(_no_margins(name, amplitudes[i], "the control signal is at a limit at this operating "
                                            f"point (u = {np.array2string(settling.control_signal, precision=4)})"))
             else:
-                responses = _measure_loop(rig, i, frequencies, amplitudes[i])
+                responses = _measure_loop(rig, i, frequencies, amplitudes[i], settling.steps)
                 results.append(_loop_result(rig, i, responses))
     finally:
         rig.close()
     if not settling.settled and not settling.diverged:
-        results = [dataclasses.replace(m, note="; ".join(filter(None, [m.note, "the loop had not settled "
-                   f"after {settling.steps} samples"]))) for m in results]
+        results = [dataclasses.replace(m, reliable=False, note="; ".join(filter(None, [
+            m.note, f"the loop had not settled at the operating point after {settling.steps} samples"])))
+            for m in results]
     if n == 1:
         return results[0]
     worst = max(results, key=lambda m: (m.Ms, -m.phase_margin_deg if math.isfinite(m.phase_margin_deg) else 0))

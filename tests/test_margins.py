@@ -13,6 +13,7 @@ import pytest
 from scipy.signal import lfilter
 
 from prlpid_fmi.control.pid import PID
+from prlpid_fmi.identification import ClosedLoopRig, measure_response
 from prlpid_fmi.margins import Margins, format_margins, loop_margins, pid_transfer_function
 from prlpid_fmi.presets import preset
 
@@ -217,3 +218,17 @@ def test_format_margins_one_line():
     assert format_margins(m) == "Ms 1.42, GM 8.3 dB at 12.1 rad/s, PM 52° at 3.4 rad/s"
     flagged = dataclasses.replace(m, reliable=False, note="the control signal reached a limit")
     assert format_margins(flagged).endswith("(unreliable: the control signal reached a limit)")
+
+
+def test_replayed_settling_gives_the_same_response_as_the_state_snapshot():
+    """FMUs that cannot serialize their state are brought back to the operating point by a replay."""
+    config = preset("two_tank")
+    responses = []
+    for snapshots in (True, False):
+        rig = ClosedLoopRig(config, [5.0], [20.0], [0.0], [8.0], snapshots=snapshots)
+        settling = rig.settle()
+        C = lambda w: pid_transfer_function(5.0, 20.0, 0.0, TS)(np.exp(1j * w * TS))  # noqa: E731
+        responses.append(measure_response(rig, 0, [1, 3, 10, 30, 100], 1024, 0.5, C, settling.steps))
+        rig.close()
+    np.testing.assert_array_equal(responses[0].response, responses[1].response)
+    assert responses[0].periods >= 2 and not responses[0].saturated
