@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import copy
 import math
+import random
+import re
 import subprocess
 import sys
 import zipfile
@@ -377,3 +379,50 @@ def test_cli_broken_archive_and_repeated_key(tmp_path):
     assert f"{path}: plant.fmu: unsafe member name" in lines[0]
     assert f"{path}: plant.sample_time: duplicate key at lines 5 and 6" in lines[1]
     assert zipfile.is_zipfile(tmp_path / "plant.fmu")  # validate reads the archive, never changes it
+
+
+# --------------------------------------------------------------------------------------------
+# any value anywhere: a ScenarioError with well-formed lines, never another exception
+
+_ODD_VALUES = [None, -1, 0, 0.5, 1e9, "x", "", [], [1], [1, 2, 3], {}, {"q": 1}, True, INF, -INF, NAN, "3e-4",
+               [None], {"a": None}]
+_LINE = re.compile(r"^(?P<file>.+?): (?P<key>\S+): .+ \(got .+; expected .+\)$")
+
+
+def _paths(node, path=()):
+    if isinstance(node, dict):
+        for k, v in node.items():
+            yield from _paths(v, path + (k,))
+    elif isinstance(node, list):
+        for i, v in enumerate(node):
+            yield from _paths(v, path + (i,))
+    if path:
+        yield path
+
+
+def test_random_values_anywhere_give_only_well_formed_lines(tmp_path):
+    base = _raw("template")
+    paths = list(_paths(base))
+    rng = random.Random(7)
+    path = tmp_path / "odd.yaml"
+    refused = 0
+    for _ in range(120):
+        doc = copy.deepcopy(base)
+        for _ in range(rng.randint(1, 3)):
+            where = rng.choice(paths)
+            node = doc
+            try:
+                for k in where[:-1]:
+                    node = node[k]
+                node[where[-1]] = copy.deepcopy(rng.choice(_ODD_VALUES))
+            except (KeyError, IndexError, TypeError):
+                pass  # an earlier edit replaced a parent
+        _write(path, doc)
+        try:
+            load_scenario(path)
+        except ScenarioError as exc:
+            refused += 1
+            for line in str(exc).splitlines():
+                match = _LINE.match(line)
+                assert match and match["file"] == str(path), line
+    assert refused >= 100  # almost every such edit is a mistake

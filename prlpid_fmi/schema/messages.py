@@ -7,6 +7,7 @@ bounds, choices, known keys with a did-you-mean for a misspelled key or choice).
 """
 from __future__ import annotations
 
+import re
 from functools import lru_cache
 from typing import Any, Optional
 
@@ -81,12 +82,12 @@ def _resolve(node: dict) -> dict:
 
 
 def _non_null(node: dict) -> dict:
+    """The schema without its null branch (an Optional field's value schema)."""
     node = _resolve(node)
-    for branch in node.get("anyOf", ()):
-        branch = _resolve(branch)
-        if branch.get("type") != "null":
-            return {**branch, **{k: v for k, v in node.items() if k in ("description", "default")}}
-    return node
+    branches = [_resolve(b) for b in node.get("anyOf", ()) if _resolve(b).get("type") != "null"]
+    if len(branches) == 1:
+        return {**branches[0], **{k: v for k, v in node.items() if k in ("description", "default")}}
+    return {**node, "anyOf": branches} if branches else node
 
 
 def _walk(loc: tuple) -> Optional[dict]:
@@ -152,7 +153,7 @@ def describe(node: dict) -> str:
         return "a non-empty string"
     if kind == "object":
         if "properties" in node:
-            return "a mapping with keys " + ", ".join(node["properties"])
+            return "a mapping {" + ", ".join(node["properties"]) + "}"
         return "a mapping {name: value}"
     if kind == "array":
         items = node.get("prefixItems")
@@ -163,8 +164,9 @@ def describe(node: dict) -> str:
             count = f"{n_max}" if n_min == n_max else f"{n_min} or {n_max}"
             return f"a list of {count} items: " + ", ".join(describe(_non_null(i)) for i in items)
         inner = describe(_non_null(node["items"])) if isinstance(node.get("items"), dict) else "items"
-        at_least = f"at least {node['minItems']} " if node.get("minItems") else ""
-        return f"a list of {at_least}x {inner}".replace("x a ", "").replace("x an ", "")
+        inner = re.sub(r"^an? (mapping|number|integer|list|non-empty string)", r"\1s", inner)
+        at_least = f" (at least {node['minItems']})" if node.get("minItems") else ""
+        return f"a list{at_least} of {inner}"
     if "anyOf" in node:
         return " or ".join(describe(_resolve(b)) for b in node["anyOf"])
     return "a valid value"
