@@ -6,7 +6,13 @@ class PrlPidError(Exception):
 
 
 class ScenarioError(PrlPidError):
-    """A scenario file is invalid: the message names the file, the key, the value and what was expected."""
+    """A scenario file is invalid: one line per mistake, each naming the file, the key, the value and what was
+    expected (the CLI prints every line)."""
+
+    @property
+    def lines(self) -> list[str]:
+        """The mistakes, one message line each, in file order."""
+        return str(self).splitlines()
 
 
 class PlantError(PrlPidError):

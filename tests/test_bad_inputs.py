@@ -314,7 +314,8 @@ def test_four_mistakes_give_four_lines_in_file_order(tmp_path):
     path = _write(tmp_path / "four.yaml", FOUR)
     with pytest.raises(ScenarioError) as info:
         load_scenario(path)
-    lines = str(info.value).splitlines()
+    lines = info.value.lines
+    assert lines == str(info.value).splitlines()
     assert [line.split(": ")[1] for line in lines] == FOUR_KEYS
     assert all(line.startswith(f"{path}: ") and "(got " in line and "; expected " in line for line in lines)
 
