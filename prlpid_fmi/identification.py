@@ -30,6 +30,7 @@ from .control.pid import coupling_matrix
 from .env import resolve_fmu
 from .fmu import FmuPlant, StepRejected
 
+SETPOINT_RAMP_STEPS = 100  # samples over which the setpoint ramps from the initial measurement to the operating point
 SETTLE_WINDOW = 50          # samples over which the closed loop must be still to count as settled
 SETTLE_TOLERANCE = 1e-7     # per-sample change of y [measurement_scale] and u [amplitude scale] counted as still
 MAX_SETTLE_STEPS = 20_000   # give up settling after this many samples (the experiment still checks convergence)
@@ -153,36 +154,51 @@ class ClosedLoopRig:
     def close(self) -> None:
         self.plant.close()
 
-    def _control(self, y: np.ndarray) -> np.ndarray:
+    def _control(self, y: np.ndarray, setpoint: np.ndarray | None = None) -> np.ndarray:
+        r = self.setpoint if setpoint is None else setpoint
         if self.coupling is not None:
-            return self.pid.step(self.setpoint, y, self.Kp, self.Ti, self.Td, self.coupling)
-        return self.pid.step(self.setpoint, y, self.Kp, self.Ti, self.Td)
+            return self.pid.step(r, y, self.Kp, self.Ti, self.Td, self.coupling)
+        return self.pid.step(r, y, self.Kp, self.Ti, self.Td)
 
-    def _outside(self, y: np.ndarray) -> bool:
-        return not (np.all(np.isfinite(y)) and np.all(np.abs(y - self.setpoint) / self.scale <= self.bound))
+    def _outside(self, y: np.ndarray, setpoint: np.ndarray) -> bool:
+        return not (np.all(np.isfinite(y)) and np.all(np.abs(y - setpoint) / self.scale <= self.bound))
+
+    def _start(self) -> tuple[np.ndarray, np.ndarray]:
+        """Plant and PID at t = 0, started bumplessly (the integral term holds the plant's input start
+        values, clipped to the limits, as the env does); returns (y0, u0)."""
+        y0 = self.plant.reset()
+        self.pid.reset()
+        u0 = np.clip(self.plant.get(list(self.plant.inputs)), self.u_min, self.u_max)
+        if np.any(u0 != 0):
+            self.pid.preset_integral(u0.tolist(), self.Kp, self.Ti)
+        return y0, u0
+
+    def _ramp(self, y0: np.ndarray, k: int) -> np.ndarray:
+        """Setpoint while settling: a ramp from the initial measurement to the operating point."""
+        return y0 + (self.setpoint - y0) * min(1.0, (k + 1) / SETPOINT_RAMP_STEPS)
 
     def settle(self) -> Settling:
-        """From t = 0, run the closed loop until it is still (or MAX_SETTLE_STEPS); remember that state."""
-        self.plant.reset()
-        self.pid.reset()
-        y = self.plant.read_outputs()
+        """From t = 0, ramp the setpoint to the operating point over SETPOINT_RAMP_STEPS samples and run
+        the closed loop until it is still (or MAX_SETTLE_STEPS); remember that state."""
+        y0, u = self._start()
+        y = y0
         u_scale = np.where(np.isfinite(self.u_max - self.u_min), self.u_max - self.u_min, 1.0)
         still, u_prev, y_prev = 0, None, y
         diverged = settled = False
-        u = np.zeros(self.n_loops)
         k = 0
         while k < MAX_SETTLE_STEPS:
-            u = self._control(y)
+            r = self._ramp(y0, k)
+            u = self._control(y, r)
             try:
                 y = self.plant.step(u)
             except StepRejected:
                 diverged = True
                 break
             k += 1
-            if self._outside(y):
+            if self._outside(y, r):
                 diverged = True
                 break
-            if u_prev is not None and np.all(np.abs(y - y_prev) <= SETTLE_TOLERANCE * self.scale) and \
+            if k > SETPOINT_RAMP_STEPS and np.all(np.abs(y - y_prev) <= SETTLE_TOLERANCE * self.scale) and \
                     np.all(np.abs(u - u_prev) <= SETTLE_TOLERANCE * np.maximum(u_scale, np.abs(u))):
                 still += 1
                 if still >= SETTLE_WINDOW:
@@ -206,11 +222,10 @@ class ClosedLoopRig:
             self.pid.set_state(pid_state)
             self.y = y.copy()
             return
-        self.plant.reset()
-        self.pid.reset()
-        y = self.plant.read_outputs()
-        for _ in range(self._settle_steps):
-            y = self.plant.step(self._control(y))
+        y0, _ = self._start()
+        y = y0
+        for k in range(self._settle_steps):
+            y = self.plant.step(self._control(y, self._ramp(y0, k)))
         self.y = y
 
     def simulate(self, loop: int, d: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool, bool]:

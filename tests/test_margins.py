@@ -232,3 +232,11 @@ def test_replayed_settling_gives_the_same_response_as_the_state_snapshot():
         rig.close()
     np.testing.assert_array_equal(responses[0].response, responses[1].response)
     assert responses[0].periods >= 2 and not responses[0].saturated
+
+
+def test_operating_point_far_from_the_initial_state_is_approached_by_a_ramp():
+    """A setpoint step from y = 0 to 2 would leave a divergence bound of 0.5 at once; the ramp does not."""
+    config = preset("first_order")
+    config = dataclasses.replace(config, loops=(dataclasses.replace(config.loops[0], divergence_bound=0.5),))
+    m = loop_margins(config, [3.0], [2.0], [0.05], [2.0])
+    assert_close_margins(m, reference_margins(pid_by_hand(3.0, 2.0, 0.05) * first_order_zoh(1.0)))
