@@ -109,6 +109,9 @@ class Margins:
 
     @property
     def gain_margin_db(self) -> float:
+        """20 log10(gain_margin) [dB]; NaN when there is no margin to speak of (Ms = inf)."""
+        if math.isnan(self.gain_margin):
+            return math.nan
         return 20 * math.log10(self.gain_margin) if self.gain_margin > 0 else -math.inf
 
     @property
@@ -146,8 +149,8 @@ def margins_from_loop_response(omega: np.ndarray, L: np.ndarray, finite_dc_gain:
             wpc.append(0.0)
     if len(sm) and np.min(sm) > 0 and 1 / np.min(sm) > Ms:
         Ms, w_ms = 1 / float(np.min(sm)), float(np.asarray(wms)[np.argmin(sm)])
-    g = int(np.argmin(np.abs(np.log(gm)))) if gm else -1
-    p = int(np.argmin(np.abs(pm))) if len(pm) else -1
+    g = int(np.argmin(np.abs(np.log(gm)))) if gm else 0
+    p = int(np.argmin(np.abs(pm))) if len(pm) else 0
     return (Ms, w_ms, float(gm[g]) if gm else math.inf, float(wpc[g]) if gm else math.nan,
             float(pm[p]) if len(pm) else math.inf, float(np.asarray(wgc)[p]) if len(pm) else math.nan)
 
