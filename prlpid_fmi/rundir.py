@@ -166,15 +166,16 @@ def prepare_run_dir(out: str | Path | None, name: str, resume: bool) -> tuple[Pa
     return run_dir, created
 
 
-def holds_training(run_dir: Path) -> bool:
-    """True when the run directory holds a trained model or a checkpoint (something worth keeping)."""
-    return (run_dir / MODEL).is_file() or any((run_dir / CHECKPOINTS).glob("*.zip"))
+def holds_results(run_dir: Path) -> bool:
+    """True when the run directory holds work worth keeping: the tuned fixed PID, a trained model or a
+    checkpoint (`--resume` continues from them)."""
+    return any((run_dir / name).is_file() for name in (FIXED_PID, MODEL)) or any((run_dir / CHECKPOINTS).glob("*.zip"))
 
 
 def discard_if_empty(run_dir: Path, created: Path | None) -> None:
-    """Remove the folders a refused start created (`created` from prepare_run_dir), unless training
-    already produced a model or a checkpoint there."""
-    if created is not None and created.is_dir() and not holds_training(run_dir):
+    """Remove the folders a refused start created (`created` from prepare_run_dir), unless the run
+    already produced results there (holds_results)."""
+    if created is not None and created.is_dir() and not holds_results(run_dir):
         shutil.rmtree(created, ignore_errors=True)
 
 

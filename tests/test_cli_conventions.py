@@ -149,16 +149,31 @@ def test_out_naming_an_existing_file_is_one_line_and_the_file_is_kept(tmp_path, 
 
 
 def test_a_start_refused_after_the_directory_was_made_removes_it(tmp_path, monkeypatch, capsys):
-    """A user error raised after prepare_run_dir (here: by training) removes the folders it created."""
+    """A user error raised after prepare_run_dir, before any result, removes the folders it created."""
+    import prlpid_fmi.baseline
+
+    def refuse(*args, **kwargs):
+        raise PrlPidError("plant.fmu: FirstOrderUnstable: output y is NaN at t = 0.1 s")
+
+    monkeypatch.setattr(prlpid_fmi.baseline, "tune_fixed_pid", refuse)
+    scenario = _small_copy(scenario_path("first_order"), tmp_path / "s.yaml")
+    assert main(["-q", "tune", str(scenario), "--out", str(tmp_path / "a" / "b" / "run"), "--timesteps", "8"]) == 2
+    assert "NaN" in _one_error_line(capsys)
+    assert sorted(tmp_path.iterdir()) == [scenario]
+
+
+def test_a_start_refused_after_the_fixed_pid_search_keeps_its_result(tmp_path, monkeypatch, capsys):
     import prlpid_fmi.train
 
     def refuse(*args, **kwargs):
-        raise PrlPidError("agent.extra: unknown option (got {'bogus': 1}; expected a PPO argument)")
+        raise PrlPidError("agent: cannot train (got a refusal from the test; expected nothing)")
 
     monkeypatch.setattr(prlpid_fmi.train, "train", refuse)
-    assert main(["-q", "tune", "first_order", "--out", str(tmp_path / "a" / "b" / "run"), "--timesteps", "8"]) == 2
-    assert "agent.extra" in _one_error_line(capsys)
-    assert list(tmp_path.iterdir()) == []
+    scenario = _small_copy(scenario_path("first_order"), tmp_path / "s.yaml")
+    run = tmp_path / "run"
+    assert main(["-q", "tune", str(scenario), "--out", str(run), "--timesteps", "8"]) == 2
+    assert "cannot train" in _one_error_line(capsys)
+    assert (run / "fixed_pid.json").is_file() and not (run / "model.zip").exists()
 
 
 def test_an_os_error_is_one_line_naming_the_file(tmp_path, capsys):
