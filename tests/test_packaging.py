@@ -74,7 +74,8 @@ def test_wheel_holds_every_module_plant_source_and_scenario(wheel):
     modules = {p.relative_to(REPO).as_posix() for p in (REPO / "prlpid_fmi").rglob("*.py")}
     plants = {"prlpid_fmi/" + p.relative_to(REPO).as_posix() for p in (REPO / "plant_sources").rglob("*")
               if p.suffix in PLANT_SUFFIXES}
-    scenarios = {"prlpid_fmi/" + p.relative_to(REPO).as_posix() for p in (REPO / "scenarios").glob("*.yaml")}
+    scenarios = {"prlpid_fmi/" + p.relative_to(REPO).as_posix() for p in (REPO / "scenarios").iterdir()
+                 if p.suffix in (".yaml", ".json")}  # the scenarios and the JSON Schema editors read
     assert {"prlpid_fmi/plant_sources/common/instance.c", "prlpid_fmi/scenarios/first_order.yaml"} <= plants | scenarios
     assert modules <= names and plants <= names and scenarios <= names
     assert not [n for n in names if n.startswith(("fmus/", "tests/")) or n.endswith((".fmu", ".pyc"))]
