@@ -40,8 +40,13 @@ def _plant_names(requested: list[str]) -> list[str]:
 
 
 def _build_fmus(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from .errors import PlantError
     from .fmu import build_fmu
 
+    if args.out is not None and Path(args.out).exists() and not Path(args.out).is_dir():
+        raise PlantError(f"{args.out}: is a file, not a folder (got --out {args.out}; expected a folder for the FMUs)")
     for name in _plant_names(args.plants):
         path = build_fmu(name, args.fmi_version, args.out)
         _say(args, f"built {path}")

@@ -336,6 +336,8 @@ def test_build_fmus_out_and_the_lock_in_the_cache(tmp_path, monkeypatch, capsys)
     assert list((tmp_path / "cache").rglob(".build.lock"))
     assert main(["build-fmus", "NoSuchPlant", "--out", str(out)]) == 2
     assert "NoSuchPlant" in _one_error_line(capsys)
+    assert main(["build-fmus", "TwoTank", "--out", str(out / "FirstOrderUnstable.fmu")]) == 2
+    assert "FirstOrderUnstable.fmu: is a file" in _one_error_line(capsys)
 
 
 def _umask() -> int:
