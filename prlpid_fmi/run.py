@@ -51,6 +51,11 @@ def trajectory_csv(traj: dict, loop_names: list[str]) -> str:
 
 
 # -- the pieces of a run ---------------------------------------------------------------------------
+def _one_line(exc: BaseException) -> str:
+    """An exception's message with its whitespace (newlines included) collapsed."""
+    return " ".join(str(exc).split())
+
+
 def _policy(run_dir: Path, algorithm: str):
     from .evaluate import model_policy
     from .train import load_model
@@ -59,7 +64,7 @@ def _policy(run_dir: Path, algorithm: str):
     try:
         model = load_model(path, algorithm)
     except Exception as exc:  # a damaged file can fail in zipfile, pickle or torch: all mean the same here
-        raise RunError(f"{path}: cannot load the trained policy ({type(exc).__name__}: {exc}; "
+        raise RunError(f"{path}: cannot load the trained policy ({type(exc).__name__}: {_one_line(exc)}; "
                        f"expected a {algorithm.upper()} model.zip written by `tune`)") from None
     vecnorm = None
     if (run_dir / rd.VECNORMALIZE).is_file():
@@ -70,7 +75,7 @@ def _policy(run_dir: Path, algorithm: str):
                 vecnorm = pickle.load(f)
         except (pickle.UnpicklingError, EOFError, AttributeError, ValueError) as exc:
             raise RunError(f"{run_dir / rd.VECNORMALIZE}: cannot load the observation statistics "
-                           f"({type(exc).__name__}: {exc}; expected the file written by `tune`)") from None
+                           f"({type(exc).__name__}: {_one_line(exc)}; expected the file written by `tune`)") from None
         vecnorm.training = False
     return model_policy(model, vecnorm)
 
