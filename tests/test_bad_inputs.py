@@ -278,6 +278,18 @@ def test_broken_prior_archive_names_prior_fmu(tmp_path):
     _one_line(_write(tmp_path / "bad.yaml", doc), "prior.fmu", "'prior.fmu'", "unsafe member name")
 
 
+def test_another_prior_fmu_needs_a_state_map(tmp_path):
+    _rezip(tmp_path, lambda n, d: [(n, d)], "prior.fmu")
+    doc = _raw("first_order")
+    doc["prior"] = {"fmu": "prior.fmu", "parameters": {"a": 1.2}}
+    _one_line(_write(tmp_path / "bad.yaml", doc), "prior.state_map", "nothing (default {})", "needs a state map")
+    doc["prior"]["state_map"] = {"x0": "y"}
+    prior = load_scenario(_write(tmp_path / "ok.yaml", doc)).tuning.prior
+    assert Path(prior.fmu) == (tmp_path / "prior.fmu").resolve() and prior.state_map == {"x0": "y"}
+    doc["prior"]["state_map"] = {"x9": "y"}
+    _one_line(_write(tmp_path / "bad.yaml", doc), "prior.state_map.x9", "'x9'", "no variable 'x9'")
+
+
 def test_a_sound_rebuilt_archive_is_accepted(tmp_path):
     """The archive checks refuse what is broken, not what is merely repacked."""
     _rezip(tmp_path, lambda n, d: [(n, d)])

@@ -75,7 +75,12 @@ RandomRange = Annotated[tuple[Finite, Finite], AfterValidator(_randomize_range)]
 def _variable_check(causalities, role, variabilities=None, prior=False):
     def check(name: str, info: ValidationInfo) -> str:
         state = state_of(info)
-        desc = state and (state.prior_desc or state.desc if prior else state.desc)
+        if state is None:
+            return name
+        if prior and state.prior_fmu_given is not False:  # another prior FMU: only once it is known to be valid
+            desc = state.prior_desc
+        else:
+            desc = state.desc
         if desc is not None:
             check_variable(desc, name, causalities, role, variabilities)
         return name
