@@ -22,7 +22,7 @@ import numpy as np
 
 from .config import TuningConfig
 from .control import CoupledPID, PID
-from .control.reward import _loop_reward
+from .control.reward import mean_loop_reward
 from .errors import PlantError
 from .fmu import FmuPlant, StepRejected, bundled_fmu, bundled_plant_names
 
@@ -129,7 +129,7 @@ class LoopCore:
         forecast = make_forecast(self.plant, prior, self.pid, horizon=c.forecast_horizon, scale=self.scale,
                                  bound=self.bound, penalty=self.penalty, weights=self.weights,
                                  u_scale=self.u_scale, overrides=overrides, state_map=dict(c.prior.state_map),
-                                 path=forecast_path, reward=self.reward)
+                                 path=forecast_path)
         return prior, forecast
 
     # -- episode ------------------------------------------------------------------------------
@@ -200,16 +200,7 @@ class LoopCore:
 
     def reward(self, error: list[float], previous_error: list[float], u: list[float], u_prev: list[float]) -> float:
         """Eq. 10-11 plus the control-variation term, mean over loops; errors normalised."""
-        w, n = self.weights, self.n_loops
-        cv = w.control_variation_weight
-        total = 0.0
-        for i in range(n):
-            r = _loop_reward(error[i], previous_error[i], w)
-            if cv:
-                du = abs(u[i] - u_prev[i]) / self.u_scale[i]
-                r -= cv * (du if du < 1.0 else 1.0)
-            total += r
-        return total / n
+        return mean_loop_reward(error, previous_error, self.weights, u, u_prev, self.u_scale)
 
     def step(self, Kp: list[float], Ti: list[float], Td: list[float], coupling: list[float] | None = None
              ) -> tuple[float, bool]:
@@ -218,27 +209,43 @@ class LoopCore:
         Returns (reward, terminated): terminated when the plant rejects the step, a measurement is not
         finite, or |error| / measurement_scale exceeds divergence_bound (reward = divergence penalty).
         """
-        c, k, n = self.config, self.k, self.n_loops
-        events = self._fmu_events.get(k)
-        if events:
-            self.plant.set(dict(events))
+        n = self.n_loops
+        self.begin_step()
         setpoint, measurement = self.setpoint, self.measurement
-        scale = self.scale
-        error = [(setpoint[i] - measurement[i]) / scale[i] for i in range(n)]
         if self._bumpless:
             self._bumpless = False
             if any(self.pid_output):
                 self.pid.preset_integral(self.pid_output, Kp, Ti)
-        u_prev = self.pid_output
-
         self.forecast_reward = None
         if self.forecast is not None:
-            self.forecast_reward = self.forecast.mean_reward(setpoint, measurement, Kp, Ti, Td, coupling, u_prev)
-
+            self.forecast_reward = self.forecast.mean_reward(setpoint, measurement, Kp, Ti, Td, coupling,
+                                                             self.pid_output)
         if coupling is not None:
             u = self.pid.step_values(setpoint, measurement, Kp, Ti, Td, coupling)
         else:
             u = self.pid.step_values([setpoint[i] - measurement[i] for i in range(n)], Kp, Ti, Td)
+        return self._apply(u)
+
+    def step_control(self, u: list[float]) -> tuple[float, bool]:
+        """One sample with the control signal u (n_loops floats, before actuator offsets, noise and
+        limits) instead of the PID: for open-loop tests and reference controllers. No forecast."""
+        self.begin_step()
+        self._bumpless = False
+        self.forecast_reward = None
+        return self._apply([float(x) for x in u])
+
+    def begin_step(self) -> None:
+        """Apply the FMU disturbances due at this sample (idempotent; every step calls it first)."""
+        events = self._fmu_events.get(self.k)
+        if events:
+            self.plant.set(dict(events))
+
+    def _apply(self, u: list[float]) -> tuple[float, bool]:
+        """Apply the controller's output u: offsets, noise, limits, plant step, measurement, reward."""
+        k, n, scale = self.k, self.n_loops, self.scale
+        setpoint, measurement = self.setpoint, self.measurement
+        error = [(setpoint[i] - measurement[i]) / scale[i] for i in range(n)]
+        u_prev = self.pid_output
         self.pid_output = u
         applied = self._offset("actuator", k, u) if self._offsets["actuator"] else u
         if self._noise_u is not None:

@@ -19,7 +19,8 @@ from prlpid_fmi.schedule import read_schedule_csv, replay_schedule
 from test_scenario import MISTAKES, _raw, _write
 
 # A small budget so each end-to-end run takes seconds: short PPO rollouts, a token baseline search.
-SMALL = {"agent": {"n_steps": 128, "batch_size": 64, "checkpoint_every": 128},
+# one env keeps the step arithmetic of the resume test exact (8 envs train in rollouts of 8 x n_steps)
+SMALL = {"agent": {"n_envs": 1, "n_steps": 128, "batch_size": 64, "checkpoint_every": 128},
          "baseline": {"episodes": 1, "maxiter": 1, "popsize": 2}}
 
 
@@ -48,8 +49,10 @@ def test_every_paper_scenario_runs_end_to_end(name, tmp_path, capsys):
     assert "adaptive policy" in out and "fixed PID" in out
     for f in ("model.zip", "scenario.yaml", "run.json", "metrics.json", "gains.csv", "report.md", "fixed_pid.json"):
         assert (run / f).is_file(), f
-    # a barely trained policy may not stabilise every operating point: then the report says why
-    assert (run / "schedule.csv").is_file() or "No gain schedule" in (run / "report.md").read_text()
+    # a barely trained policy may not stabilise every operating point, and no controller may meet the
+    # robustness limit: then schedule.csv is not written and the report says why
+    report = (run / "report.md").read_text()
+    assert (run / "schedule.csv").is_file() or "No gain schedule" in report or "Nothing here is safe" in report
     for png in ("response.png", "control_signal.png", "gains.png", "learning_curve.png"):
         _assert_png(run / png)
     info = json.loads((run / "run.json").read_text())

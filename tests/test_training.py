@@ -31,7 +31,7 @@ def _params(model):
 
 
 def test_same_seed_same_policy_and_checkpoints(tmp_path):
-    agent = AgentConfig(total_timesteps=2048, n_steps=512, seed=7, checkpoint_every=1024)
+    agent = AgentConfig(total_timesteps=2048, n_envs=1, n_steps=512, seed=7, checkpoint_every=1024)
     a = train(CONFIG, agent, tmp_path / "a")
     b = train(CONFIG, agent, tmp_path / "b")
     c = train(CONFIG, dataclasses.replace(agent, seed=8), tmp_path / "c")
@@ -42,7 +42,7 @@ def test_same_seed_same_policy_and_checkpoints(tmp_path):
 
 
 def test_resume_continues_from_a_checkpoint(tmp_path):
-    agent = AgentConfig(total_timesteps=1024, n_steps=512, seed=1, checkpoint_every=512)
+    agent = AgentConfig(total_timesteps=1024, n_envs=1, n_steps=512, seed=1, checkpoint_every=512)
     train(CONFIG, agent, tmp_path / "run")
     model = train(CONFIG, agent, tmp_path / "run", resume_from=tmp_path / "run" / "checkpoints" / "model_1024_steps.zip",
                   total_timesteps=1024)

@@ -140,18 +140,16 @@ class FmiForecast(_Forecast):
 
 
 def make_forecast(plant, prior, pid, *, horizon: int, scale, bound, penalty: float, weights: RewardWeights, u_scale,
-                  overrides: dict | None = None, state_map: dict | None = None, path: str = "auto", reward=None):
+                  overrides: dict | None = None, state_map: dict | None = None, path: str = "auto"):
     """The reward forecast for this plant and prior.
 
     path: "auto" = one C call (NativeForecast) when plant and prior are instances of the same FMU file
     loaded once, without a state_map, and its binary exports prlpid_forecast with the ABI this package
     knows (the bundled plants); the FMI path otherwise. "fmi" forces the FMI path (as for a third-party
     FMU); "native" requires the C call (PlantError when it is not available).
-    reward: ignored. Both paths compute the reward from `weights` and `u_scale` with control.reward,
-    so that they agree bit for bit; the argument is accepted for callers that still pass their own.
-    Other arguments: see _Forecast and FmiForecast.
+    Both paths compute the reward from `weights` and `u_scale` with control.reward, so that they agree
+    bit for bit. Other arguments: see _Forecast and FmiForecast.
     """
-    del reward
     if path not in ("auto", "fmi", "native"):
         raise ValueError(f"forecast path must be 'auto', 'fmi' or 'native', got {path!r}")
     args = (plant, prior, pid, horizon, scale, bound, penalty, weights, u_scale, overrides)
