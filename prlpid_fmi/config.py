@@ -138,6 +138,9 @@ class TuningConfig:
         return len(self.loops)
 
 
+DEFAULT_N_ENVS = {"ppo": 8, "sac": 1, "td3": 1}  # measured: architecture.md "The loop core and its three drivers"
+
+
 def _agent(key: str):
     return _d(_m.AgentModel, key)
 
@@ -149,7 +152,7 @@ class AgentConfig:
     algorithm: Algorithm = _agent("algorithm")
     total_timesteps: int = _agent("total_timesteps")
     seed: int = _agent("seed")
-    n_envs: int = _agent("n_envs")
+    n_envs: Optional[int] = _agent("n_envs")  # None: DEFAULT_N_ENVS[algorithm]; use .envs
     vec_env: VecEnv = _agent("vec_env")
     normalize: bool = _agent("normalize")
     learning_rate: float = _agent("learning_rate")
@@ -168,6 +171,11 @@ class AgentConfig:
     checkpoint_every: int = _agent("checkpoint_every")
     torch_threads: int = _agent("torch_threads")
     extra: dict = field(default_factory=dict)  # further keyword arguments for the SB3 algorithm
+
+    @property
+    def envs(self) -> int:
+        """The number of parallel environments: n_envs, or DEFAULT_N_ENVS[algorithm] when it is None."""
+        return self.n_envs if self.n_envs is not None else DEFAULT_N_ENVS[self.algorithm]
 
 
 @dataclass(frozen=True)

@@ -51,8 +51,8 @@ def make_vec_env(config: TuningConfig, agent: AgentConfig, monitor_dir: Path | N
     from stable_baselines3.common.env_util import make_vec_env as sb3_make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
-    vec_cls = SubprocVecEnv if agent.vec_env == "subproc" and agent.n_envs > 1 else DummyVecEnv
-    return sb3_make_vec_env(functools.partial(PidTuningEnv, config, anchor=anchor, info=False), n_envs=agent.n_envs, seed=agent.seed,
+    vec_cls = SubprocVecEnv if agent.vec_env == "subproc" and agent.envs > 1 else DummyVecEnv
+    return sb3_make_vec_env(functools.partial(PidTuningEnv, config, anchor=anchor, info=False), n_envs=agent.envs, seed=agent.seed,
                             vec_env_cls=vec_cls, monitor_dir=str(monitor_dir) if monitor_dir else None)
 
 
@@ -118,7 +118,7 @@ def train(config: TuningConfig, agent: AgentConfig, run_dir: Path, progress_bar:
     else:
         model = build_model(agent, env, run_dir / "tensorboard", anchored=is_anchored(config, anchor))
     steps = total_timesteps if total_timesteps is not None else agent.total_timesteps
-    checkpoint = CheckpointCallback(save_freq=max(agent.checkpoint_every // agent.n_envs, 1),
+    checkpoint = CheckpointCallback(save_freq=max(agent.checkpoint_every // agent.envs, 1),
                                     save_path=str(run_dir / "checkpoints"), name_prefix="model",
                                     save_vecnormalize=agent.normalize)
     callbacks = [checkpoint, training_progress()] if progress_bar else [checkpoint]

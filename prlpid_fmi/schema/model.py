@@ -370,8 +370,10 @@ class AgentModel(Section):
     algorithm: Algorithm = Field("ppo", validate_default=True, description="ppo | sac | td3")
     total_timesteps: Count = Field(500_000, description="training budget [env steps]")
     seed: Steps = Field(0, description="seed of training (>= 0)")
-    n_envs: Count = Field(8, description="parallel environments (8 episodes in one process batch the policy's "
-                                         "forward pass; measured in docs/architecture.md)")
+    n_envs: Optional[Count] = Field(None, description="parallel environments; null: 8 for PPO (8 episodes in one "
+                                                      "process batch the policy's forward pass; measured in "
+                                                      "docs/architecture.md), 1 for SAC / TD3 (one gradient step "
+                                                      "per env step, as their defaults assume)")
     vec_env: VecEnv = Field("dummy", description="dummy (one process) | subproc (one process per env)")
     normalize: Flag = Field(False, description="VecNormalize on observations and rewards")
     learning_rate: Positive = Field(3e-4, description="optimiser step size")
