@@ -130,7 +130,8 @@ def measure(traj: dict, config: TuningConfig, intervals=None) -> dict:
     """compute_metrics on a trajectory of `config`, plus whether the episode terminated."""
     metrics = compute_metrics(traj["time_s"], traj["setpoint"], traj["measurement"], traj["control_signal"],
                               config.sample_time_s, intervals=intervals,
-                              loop_names=[l.output for l in config.loops])
+                              loop_names=[l.output for l in config.loops],
+                              events=sorted({d.start_step for d in config.disturbances}))
     metrics["terminated"] = traj["terminated"]
     return metrics
 

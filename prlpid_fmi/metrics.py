@@ -26,9 +26,20 @@ linearly interpolated between samples.
   never passes the new setpoint (for a step down: how far it goes below the new setpoint).
 - RiseTime [s]: from the first time the response covers 10 % of the step (from the base value) to
   the first time it covers 90 %.
-- SettlingTime [s]: from the step until |e| <= 2 % of |delta| for the rest of the segment
-  (0 if it always is).
+- SettlingTime [s]: from the step until |e| <= band for the rest of the segment (0 if it always is),
+  band = max(2 % of |delta|, 5 * noise), where noise = std(diff(y)) / sqrt(2) over the segment's
+  last 10 % (white measurement noise of std s gives std(diff) = s*sqrt(2); a smooth response gives
+  almost 0): measurement noise cannot keep a settled loop "unsettled".
 - SteadyStateError [y-unit]: mean |e| over the last 10 % of the segment's samples (at least one).
+
+Regulation segments: a segment that does not start with a setpoint step (zero step size, e.g. a
+plant that starts at its setpoint) or that starts at an *event* (``events``: sample indices where a
+disturbance begins; a disturbance inside a setpoint segment splits it) reports, instead of the step
+metrics above (which are NaN there):
+
+- PeakDeviation [y-unit]: max |e| over the segment.
+- RecoveryTime [s]: from the segment's start until |e| <= max(10 % of PeakDeviation, 5 * noise) for
+  the rest of the segment (inf if never; 0 if always).
 
 Undefined and failed values (plain floats; ``json.dumps`` writes them as NaN / Infinity):
 
@@ -67,7 +78,9 @@ from typing import Sequence
 import numpy as np
 
 INTEGRAL_METRICS = ("ISE", "IAE", "ITAE", "ControlEffort", "TotalVariation")
-STEP_METRICS = ("Overshoot", "RiseTime", "SettlingTime", "SteadyStateError")
+STEP_METRICS = ("Overshoot", "RiseTime", "SettlingTime", "SteadyStateError", "PeakDeviation", "RecoveryTime")
+RECOVERY_FRACTION = 0.1  # recovery band: this fraction of the peak deviation (or 3 x noise, if larger)
+NOISE_BAND = 5.0  # bands are at least this many noise standard deviations wide (|noise| > 5 sigma: p = 6e-7)
 METRIC_NAMES = INTEGRAL_METRICS + STEP_METRICS
 MIN_SEGMENT_STEPS = 2
 _REL_TOL = 1e-9
@@ -106,24 +119,49 @@ def _crossing_time(t: np.ndarray, s: np.ndarray, level: float) -> float:
     return float(t[j - 1] + frac * (t[j] - t[j - 1]))
 
 
+def _time_in_band(t: np.ndarray, abs_e: np.ndarray, band: float) -> float:
+    """Time from t[0] until abs_e stays <= band (interpolated); 0 if always, inf if not at the end."""
+    m = abs_e.size
+    outside = np.flatnonzero(abs_e > band)
+    if outside.size == 0:
+        return 0.0
+    if outside[-1] == m - 1:
+        return math.inf
+    j = int(outside[-1])
+    frac = (abs_e[j] - band) / (abs_e[j] - abs_e[j + 1])
+    return float(t[j] + frac * (t[j + 1] - t[j]) - t[0])
+
+
+def _noise(y_tail: np.ndarray) -> float:
+    """Measurement-noise estimate std(diff(y)) / sqrt(2) on a segment's tail (0 for fewer than 3 samples)."""
+    return float(np.std(np.diff(y_tail)) / math.sqrt(2.0)) if y_tail.size >= 3 else 0.0
+
+
 def _segment_metrics(t: np.ndarray, r_new: float, base: float, y: np.ndarray, settling_threshold: float,
-                     rise_time_limits: tuple[float, float], steady_state_fraction: float) -> dict:
-    """Step metrics of one segment: t, y (m,) from the step sample on; step from base to r_new."""
+                     rise_time_limits: tuple[float, float], steady_state_fraction: float,
+                     regulation: bool = False) -> dict:
+    """Step (or regulation) metrics of one segment: t, y (m,) from its first sample on; step from base to r_new."""
     m = y.size
     nan = math.nan
     delta = r_new - base
-    zero = _zero_step(delta, r_new, base)
+    zero = regulation or _zero_step(delta, r_new, base)
     if m < MIN_SEGMENT_STEPS:
-        return dict(Overshoot=nan, RiseTime=nan, SettlingTime=nan, SteadyStateError=nan)
+        return dict(Overshoot=nan, RiseTime=nan, SettlingTime=nan, SteadyStateError=nan, PeakDeviation=nan,
+                    RecoveryTime=nan)
     if not np.all(np.isfinite(y)):
         step_value = nan if zero else math.inf
         return dict(Overshoot=step_value, RiseTime=step_value, SettlingTime=step_value,
-                    SteadyStateError=math.inf)
+                    SteadyStateError=math.inf, PeakDeviation=math.inf if zero else nan,
+                    RecoveryTime=math.inf if zero else nan)
     abs_e = np.abs(r_new - y)
     n_tail = max(1, math.ceil(steady_state_fraction * m))
     sse = float(np.mean(abs_e[-n_tail:]))
+    noise_band = NOISE_BAND * _noise(y[-max(n_tail, 3):])
     if zero:
-        return dict(Overshoot=nan, RiseTime=nan, SettlingTime=nan, SteadyStateError=sse)
+        peak = float(np.max(abs_e))
+        recovery = _time_in_band(t, abs_e, max(RECOVERY_FRACTION * peak, noise_band))
+        return dict(Overshoot=nan, RiseTime=nan, SettlingTime=nan, SteadyStateError=sse, PeakDeviation=peak,
+                    RecoveryTime=recovery)
     size = abs(delta)
     sign = 1.0 if delta > 0 else -1.0
     overshoot = max(0.0, float(np.max(sign * (y - r_new)))) / size * 100.0
@@ -131,18 +169,9 @@ def _segment_metrics(t: np.ndarray, r_new: float, base: float, y: np.ndarray, se
     t_low = _crossing_time(t, progress, rise_time_limits[0] * size)
     t_high = _crossing_time(t, progress, rise_time_limits[1] * size)
     rise = t_high - t_low if math.isfinite(t_high) else math.inf
-    band = settling_threshold * size
-    outside = np.flatnonzero(abs_e > band)
-    if outside.size == 0:
-        settling = 0.0
-    elif outside[-1] == m - 1:
-        settling = math.inf
-    else:
-        j = int(outside[-1])
-        frac = (abs_e[j] - band) / (abs_e[j] - abs_e[j + 1])
-        settling = float(t[j] + frac * (t[j + 1] - t[j]) - t[0])
+    settling = _time_in_band(t, abs_e, max(settling_threshold * size, noise_band))
     return dict(Overshoot=float(overshoot), RiseTime=float(rise), SettlingTime=float(settling),
-                SteadyStateError=sse)
+                SteadyStateError=sse, PeakDeviation=nan, RecoveryTime=nan)
 
 
 def _integral_metrics(t: np.ndarray, e: np.ndarray, u: np.ndarray, u_prev: float | None, ts: float) -> dict:
@@ -180,7 +209,7 @@ def _aggregate(segments: list[dict]) -> dict:
 
 def compute_metrics(time_s, setpoint, measurement, control_signal, sample_time_s: float,
                     intervals: Sequence[tuple[int, int]] | None = None,
-                    loop_names: Sequence[str] | None = None, *,
+                    loop_names: Sequence[str] | None = None, events: Sequence[int] | None = None, *,
                     settling_threshold: float = 0.02, rise_time_limits: tuple[float, float] = (0.1, 0.9),
                     steady_state_fraction: float = 0.1) -> dict:
     """Closed-loop metrics of one run (see the module docstring for definitions and the result layout).
@@ -189,6 +218,7 @@ def compute_metrics(time_s, setpoint, measurement, control_signal, sample_time_s
     control_signal: (n,) or (n, n_loops). sample_time_s: Ts [s] > 0 for the rectangular sums.
     intervals: optional (start_step, end_step) half-open index ranges, 0 <= start < end <= n.
     loop_names: optional names (n_loops,) used in the keys; default "0", "1", ...
+    events: sample indices where disturbances begin (they start regulation segments).
     settling_threshold, rise_time_limits, steady_state_fraction: 2 % band, 10 %/90 % levels, last
     10 % of a segment (fractions of the step size / segment length).
     Returns a dict of plain Python floats/ints/strings/lists, serialisable with json.dumps.
@@ -238,13 +268,14 @@ def compute_metrics(time_s, setpoint, measurement, control_signal, sample_time_s
         ri = r[:, i]
         tol = _REL_TOL * np.maximum(1.0, np.maximum(np.abs(ri[1:]), np.abs(ri[:-1])))
         changes = [int(k) + 1 for k in np.flatnonzero(np.abs(np.diff(ri)) > tol)]
-        starts = [0] + changes
-        ends = changes + [n]
+        event_starts = sorted({int(k) for k in (events or ()) if 0 < int(k) < n} - set(changes))
+        starts = sorted({0, *changes, *event_starts})
+        ends = starts[1:] + [n]
         loop_segments = []
         for s, end in zip(starts, ends):
             base = y[0, i] if s == 0 else r[s - 1, i]
             m = _segment_metrics(t[s:end], float(r[s, i]), float(base), y[s:end, i], settling_threshold,
-                                 tuple(rise_time_limits), steady_state_fraction)
+                                 tuple(rise_time_limits), steady_state_fraction, regulation=s in event_starts)
             seg = {"loop": name, "start_step": int(s), "end_step": int(end), "start_time_s": float(t[s]),
                    "StepSize": float(r[s, i] - base) if math.isfinite(base) else math.nan, **m}
             loop_segments.append(seg)

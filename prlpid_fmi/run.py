@@ -19,7 +19,7 @@ from .rundir import write_atomic, write_json
 from .scenario import Scenario, load_scenario, scenario_to_yaml
 
 METRIC_COLUMNS = ("ISE", "IAE", "ITAE", "Overshoot", "SettlingTime", "RiseTime", "SteadyStateError",
-                  "ControlEffort", "TotalVariation")
+                  "PeakDeviation", "RecoveryTime", "ControlEffort", "TotalVariation")
 
 
 # -- trajectories to CSV ---------------------------------------------------------------------------
@@ -276,7 +276,8 @@ def _candidates_table(sched, fixed) -> str:
     from .deliver import overall_metric
 
     rows = [("ISE", "ISE", ""), ("IAE", "IAE", ""), ("Overshoot", "Overshoot", "%"),
-            ("SettlingTime", "settling time", "s"), ("TotalVariation", "total variation of u", "")]
+            ("SettlingTime", "settling time", "s"), ("PeakDeviation", "peak deviation (regulation)", ""),
+            ("RecoveryTime", "recovery time (regulation)", "s"), ("TotalVariation", "total variation of u", "")]
     cands = [c for c in (sched, fixed) if c is not None]
     lines = ["| metric (evaluation) | " + " | ".join(c.name for c in cands) + " |",
              "|---|" + "---|" * len(cands)]

@@ -191,3 +191,47 @@ def test_invalid_input_raises(kwargs):
     args.update(kwargs)
     with pytest.raises(ValueError):
         compute_metrics(**args)
+
+
+# -- regulation segments and noise-robust bands (hand-computed) --------------------------------------
+def test_disturbance_event_starts_a_regulation_segment_with_peak_deviation_and_recovery():
+    ts = 0.1
+    n = 40
+    t = np.arange(n) * ts
+    r = np.ones(n)
+    y = np.ones(n)
+    y[:10] = np.linspace(0.0, 1.0, 10)  # a step response that settles at sample 9
+    # a disturbance at sample 20 pushes y down by 0.5, then it decays by half each sample
+    y[20:] = 1.0 - 0.5 * 0.5 ** np.arange(n - 20)
+    res = compute_metrics(t, r, y, np.zeros(n), ts, events=[20])
+    seg = [s for s in res["segments"] if s["start_step"] == 20][0]
+    assert seg["PeakDeviation"] == pytest.approx(0.5)
+    # recovery band = 10 % of 0.5 = 0.05: |e| = 0.5 * 0.5**k <= 0.05 from k = 4 (0.03125); between k = 3
+    # (0.0625) and k = 4 linear interpolation: (0.0625 - 0.05) / (0.0625 - 0.03125) = 0.4 of a sample
+    assert seg["RecoveryTime"] == pytest.approx((3 + 0.4) * ts)
+    assert math.isnan(seg["Overshoot"]) and math.isnan(seg["SettlingTime"])
+    first = [s for s in res["segments"] if s["start_step"] == 0][0]
+    assert math.isnan(first["PeakDeviation"]) and first["SettlingTime"] < 1.0  # the step's own settling is unaffected
+
+
+def test_measurement_noise_does_not_defeat_the_settling_band():
+    rng = np.random.default_rng(0)
+    ts, n = 0.1, 400
+    t = np.arange(n) * ts
+    r = np.ones(n)
+    y = 1.0 - np.exp(-t / 0.5) + rng.normal(0.0, 0.05, n)  # noise std 0.05 = 2.5x the 2 % band of a unit step
+    res = compute_metrics(t, r, y, np.zeros(n), ts)
+    # without the noise floor the band (0.02) would be left by noise until the very end: inf
+    assert math.isfinite(res["overall"]["SettlingTime"])
+    # the exponential itself enters the 5-sigma band 5 * 0.05 = 0.25 at t = -0.5 ln(0.25) = 0.69 s
+    assert res["overall"]["SettlingTime"] < 5.0
+
+
+def test_a_plant_starting_at_its_setpoint_reports_regulation_not_overshoot():
+    ts, n = 0.1, 50
+    t = np.arange(n) * ts
+    r = np.full(n, 10.0)
+    y = 10.0 + 0.3 * np.sin(np.arange(n) * 0.5) * np.exp(-np.arange(n) / 5.0)
+    res = compute_metrics(t, r, y, np.zeros(n), ts)
+    assert math.isnan(res["overall"]["Overshoot"])
+    assert res["overall"]["PeakDeviation"] == pytest.approx(np.max(np.abs(y - 10.0)))
