@@ -118,10 +118,14 @@ def verdict(decision: Decision, schedule: Candidate | None, fixed: Candidate, ma
     lines = ["## Verdict", ""]
     if decision.deploy == "gain schedule":
         s, f = schedule, fixed
+        if math.isfinite(s.overall("Overshoot")) and f.overall("Overshoot") > 0:
+            shape = f"its overshoot {_ratio(s.overall('Overshoot'), f.overall('Overshoot'))}"
+        else:  # no setpoint step: disturbance rejection
+            shape = f"its peak deviation {_ratio(s.overall('PeakDeviation'), f.overall('PeakDeviation'))}"
         lines.append(f"**Deploy the adaptive gain schedule** (schedule.csv, a plain gain-scheduled PID; no neural "
                      f"network). On the evaluation its ISE is {_ratio(s.overall('ISE'), f.overall('ISE'))} the fixed "
-                     f"PID's, its overshoot {_ratio(s.overall('Overshoot'), f.overall('Overshoot'))}, and its worst "
-                     f"Ms {s.worst_Ms:.2f} (fixed PID {f.worst_Ms:.2f}; limit {max_sensitivity:g}).")
+                     f"PID's, {shape}, and its worst Ms {s.worst_Ms:.2f} (fixed PID {f.worst_Ms:.2f}; limit "
+                     f"{max_sensitivity:g}). Ratios are gain schedule ÷ fixed PID; lower is better.")
     elif decision.deploy == "fixed PID":
         lines.append(f"**Deploy the fixed PID** (schedule.csv holds it as a one-row table; also fixed_pid.csv). "
                      f"Its worst Ms is {fixed.worst_Ms:.2f} (limit {max_sensitivity:g}).")
