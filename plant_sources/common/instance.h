@@ -17,6 +17,9 @@ typedef struct {
     char *name;
     LogFunction log;
     void *log_env;
+#ifdef PRLPID_FAULT_RESET_LEAK_BYTES
+    void *fault_leak; /* test builds only: blocks the leaking reset allocated (faults.h) */
+#endif
 } Instance;
 
 Instance *instance_new(const char *name, LogFunction log, void *log_env);

@@ -33,11 +33,12 @@ from ..errors import PlantError
 from ..rundir import write_atomic
 
 PLANT_SOURCES = data_dir("plant_sources")
-COMMON_SOURCES = ("plant_model.h", "instance.h", "instance.c", "forecast.h", "forecast.c")
+COMMON_SOURCES = ("plant_model.h", "instance.h", "instance.c", "faults.h", "forecast.h", "forecast.c")
 API_SOURCE = {2: "fmi2_api.c", 3: "fmi3_api.c"}
 DEFAULT_FMI_VERSION = 2
 DEFAULT_FIXED_STEP_S = 1e-3  # internal RK4 step of a plant whose model.yaml declares none (bundled plants do)
 DEFAULT_EXPERIMENT_STEP_S = 0.1
+CAPABILITY_FLAGS = ("canGetAndSetFMUstate", "canSerializeFMUstate", "canBeInstantiatedOnlyOncePerProcess")
 CAUSALITY_CODES = {
     ("independent", None): "CAUSALITY_INDEPENDENT",
     ("input", None): "CAUSALITY_INPUT",
@@ -134,9 +135,12 @@ def _compiled_sources(spec: PlantSpec, fmi_version: int) -> list[str]:
     return [f for f in _source_files(spec, fmi_version) if f.endswith(".c")]
 
 
-def instantiation_token(spec: PlantSpec, fmi_version: int) -> str:
-    """Deterministic GUID from the plant's sources, the shared layer and this builder."""
+def instantiation_token(spec: PlantSpec, fmi_version: int, defines: dict | None = None,
+                        capabilities: dict | None = None) -> str:
+    """Deterministic GUID from the plant's sources, the shared layer, this builder and any test switches."""
     digest = hashlib.sha256(f"fmi{fmi_version}".encode())
+    if defines or capabilities:
+        digest.update(repr((sorted((defines or {}).items()), sorted((capabilities or {}).items()))).encode())
     for path in [*(PLANT_SOURCES / "common" / f for f in (*COMMON_SOURCES, API_SOURCE[fmi_version])),
                  spec.directory / "model.c", spec.directory / "model.yaml", Path(__file__),
                  *sorted(spec.directory.glob("*.mo"))]:
@@ -157,13 +161,24 @@ def _units_and_experiment(root: ET.Element, spec: PlantSpec) -> None:
                   stepSize=_fmt(DEFAULT_EXPERIMENT_STEP_S))
 
 
-def _model_description_fmi2(spec: PlantSpec, token: str) -> ET.Element:
+def _capability_attributes(fmi_version: int, capabilities: dict | None) -> dict[str, str]:
+    """modelDescription capability flags {FMI 2.0 name: bool} in the version's spelling ("true"/"false")."""
+    out = {}
+    for name, on in (capabilities or {}).items():
+        if name not in CAPABILITY_FLAGS:
+            raise ValueError(f"unknown capability flag {name!r}; expected one of {', '.join(CAPABILITY_FLAGS)}")
+        out[name.replace("FMUstate", "FMUState") if fmi_version == 3 else name] = "true" if on else "false"
+    return out
+
+
+def _model_description_fmi2(spec: PlantSpec, token: str, capabilities: dict | None = None) -> ET.Element:
     root = ET.Element("fmiModelDescription", fmiVersion="2.0", modelName=spec.name, guid=token,
                       description=spec.description, generationTool="prlpid-fmi",
                       variableNamingConvention="flat", numberOfEventIndicators="0")
     cs = ET.SubElement(root, "CoSimulation", modelIdentifier=spec.name,
                        canHandleVariableCommunicationStepSize="true", canGetAndSetFMUstate="true",
                        canSerializeFMUstate="true", canNotUseMemoryManagementFunctions="true")
+    cs.attrib.update(_capability_attributes(2, capabilities))
     files = ET.SubElement(cs, "SourceFiles")
     for f in _compiled_sources(spec, 2):
         ET.SubElement(files, "File", name=f)
@@ -194,13 +209,14 @@ def _model_description_fmi2(spec: PlantSpec, token: str) -> ET.Element:
     return root
 
 
-def _model_description_fmi3(spec: PlantSpec, token: str) -> ET.Element:
+def _model_description_fmi3(spec: PlantSpec, token: str, capabilities: dict | None = None) -> ET.Element:
     root = ET.Element("fmiModelDescription", fmiVersion="3.0", modelName=spec.name,
                       instantiationToken=token, description=spec.description,
                       generationTool="prlpid-fmi", variableNamingConvention="flat")
-    ET.SubElement(root, "CoSimulation", modelIdentifier=spec.name,
-                  canHandleVariableCommunicationStepSize="true", canGetAndSetFMUState="true",
-                  canSerializeFMUState="true", hasEventMode="false", providesIntermediateUpdate="false")
+    cs = ET.SubElement(root, "CoSimulation", modelIdentifier=spec.name,
+                       canHandleVariableCommunicationStepSize="true", canGetAndSetFMUState="true",
+                       canSerializeFMUState="true", hasEventMode="false", providesIntermediateUpdate="false")
+    cs.attrib.update(_capability_attributes(3, capabilities))
     _units_and_experiment(root, spec)
     variables = ET.SubElement(root, "ModelVariables")
     outputs = []
@@ -256,24 +272,29 @@ def _build_lock():
 
 
 def build_fmu(name: str, fmi_version: int = DEFAULT_FMI_VERSION, out_dir: Path | None = None,
-              source_dir: Path | None = None) -> Path:
+              source_dir: Path | None = None, defines: dict | None = None,
+              capabilities: dict | None = None) -> Path:
     """Build one plant into an FMU (binary for this platform + sources). Returns its path.
 
     out_dir: where to write (default: the per-user FMU cache). source_dir: a directory with model.yaml
     and model.c written like plant_sources/<Name>/ (default: the bundled plant `name`), so a user's own
     C model builds with the same shared FMI layer.
+    defines: C preprocessor switches {NAME: value or None}, e.g. the test faults of
+    plant_sources/common/faults.h ({"PRLPID_FAULT_NAN_AFTER_S": 3.0}); bundled plants are built without.
+    capabilities: modelDescription flags to override {FMI 2.0 name: bool}, names in CAPABILITY_FLAGS.
     """
     with _build_lock():
-        return _build(name, fmi_version, out_dir, source_dir)
+        return _build(name, fmi_version, out_dir, source_dir, defines, capabilities)
 
 
-def _build(name: str, fmi_version: int, out_dir: Path | None, source_dir: Path | None) -> Path:
+def _build(name: str, fmi_version: int, out_dir: Path | None, source_dir: Path | None,
+           defines: dict | None = None, capabilities: dict | None = None) -> Path:
     if fmi_version not in API_SOURCE:
         raise PlantError(f"--fmi-version must be 2 or 3, got {fmi_version!r}")
     from fmpy.build import build_platform_binary
 
     spec = load_spec(name, source_dir)
-    token = instantiation_token(spec, fmi_version)
+    token = instantiation_token(spec, fmi_version, defines, capabilities)
     target = fmu_path(name, fmi_version, out_dir)
     target.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix=f"build-{name}-") as tmp:
@@ -289,16 +310,16 @@ def _build(name: str, fmi_version: int, out_dir: Path | None, source_dir: Path |
         for mo in spec.directory.glob("*.mo"):
             shutil.copy2(mo, documentation / mo.name)
         if fmi_version == 2:
-            _write_xml(_model_description_fmi2(spec, token), unzipdir / "modelDescription.xml")
+            _write_xml(_model_description_fmi2(spec, token, capabilities), unzipdir / "modelDescription.xml")
         else:
-            _write_xml(_model_description_fmi3(spec, token), unzipdir / "modelDescription.xml")
+            _write_xml(_model_description_fmi3(spec, token, capabilities), unzipdir / "modelDescription.xml")
             _write_xml(_build_description_fmi3(spec), sources / "buildDescription.xml")
         build_dir = Path(tmp) / "cmake"
         build_dir.mkdir()
         log = Path(tmp) / "build.log"
         try:
             with open(log, "w") as out:
-                _quiet_call(build_platform_binary, unzipdir, build_dir, out)
+                _quiet_call(build_platform_binary, unzipdir, build_dir, out, defines)
         except (subprocess.CalledProcessError, OSError) as exc:
             raise PlantError(f"building {name} (FMI {fmi_version}.0) failed: {exc}\n{log.read_text()[-3000:]}") from None
         def write_zip(tmp: Path) -> None:
@@ -311,22 +332,26 @@ def _build(name: str, fmi_version: int, out_dir: Path | None, source_dir: Path |
     return target
 
 
-def _cmake_options() -> dict[str, str]:
+def _cmake_options(defines: dict | None = None) -> dict[str, str]:
     """No fused multiply-add: the C forecast must round exactly like Python's float arithmetic.
 
     GCC contracts a*b + c into an FMA by default in GNU C modes, clang in any mode, wherever the
     target has FMA (aarch64, x86-64-v3). MSVC does not contract under its default /fp:precise.
+    defines {NAME: value or None} become -DNAME[=value] (/D on MSVC).
     """
-    return {} if os.name == "nt" else {"CMAKE_C_FLAGS:STRING": "-ffp-contract=off"}
+    flags = [] if os.name == "nt" else ["-ffp-contract=off"]
+    for key, value in (defines or {}).items():
+        flags.append(("/D" if os.name == "nt" else "-D") + (key if value is None else f"{key}={value}"))
+    return {"CMAKE_C_FLAGS:STRING": " ".join(flags)} if flags else {}
 
 
-def _quiet_call(build, unzipdir: Path, build_dir: Path, out) -> None:
+def _quiet_call(build, unzipdir: Path, build_dir: Path, out, defines: dict | None = None) -> None:
     """Run FMPy's CMake build with the compiler's output sent to `out` instead of the terminal."""
     saved = os.dup(1), os.dup(2)
     try:
         os.dup2(out.fileno(), 1)
         os.dup2(out.fileno(), 2)
-        build(unzipdir, build_dir=build_dir, cmake_options=_cmake_options())
+        build(unzipdir, build_dir=build_dir, cmake_options=_cmake_options(defines))
     finally:
         os.dup2(saved[0], 1)
         os.dup2(saved[1], 2)
