@@ -16,6 +16,8 @@ is taken against that input too.
 """
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +27,30 @@ from .control import CoupledPID, PID
 from .control.reward import mean_loop_reward
 from .errors import PlantError
 from .fmu import FmuPlant, StepRejected, bundled_fmu, bundled_plant_names
+
+
+@dataclass(frozen=True)
+class Termination:
+    """Why and when an episode ended before its last sample.
+
+    kind: "nan" (the FMU returned a non-finite output), "discard" (doStep discarded the step), "error"
+    (the FMU returned error or fatal), "crash" (the FMU's worker process died), "diverged" (|error| /
+    measurement_scale passed divergence_bound). step: samples done including the failed one; time_s:
+    when it happened [s] (a rejected step: its communication point); message: one line for the report.
+    """
+
+    kind: str
+    step: int
+    time_s: float
+    message: str
+
+    def as_dict(self) -> dict:
+        return {"kind": self.kind, "step": self.step, "time_s": self.time_s, "message": self.message}
+
+    @property
+    def invalid_sample(self) -> bool:
+        """True when the last sample holds no measurement (only a divergence keeps a real one)."""
+        return self.kind != "diverged"
 
 
 def resolve_fmu(fmu: str, fmi_version: int = 2) -> Path:
@@ -67,7 +93,8 @@ class LoopCore:
             the standard get/serialize/deserialize/set path, as for a third-party FMU).
     After reset/step (lists of n_loops floats): setpoint, measurement (the sample the next step uses),
     and after a step: applied_setpoint (what u was computed for), control_signal (u applied to the plant),
-    pid_output (u before actuator offsets and noise), forecast_reward, step_reward, k (samples done).
+    pid_output (u before actuator offsets and noise), forecast_reward, step_reward, k (samples done),
+    termination (None, or the Termination that ended the episode: why and when).
     """
 
     def __init__(self, config: TuningConfig, forecast_path: str = "auto"):
@@ -108,6 +135,7 @@ class LoopCore:
         if c.forecast_horizon > 0:
             self.prior, self.forecast = self._make_prior(path, forecast_path)
         self.k = 0
+        self.termination: Termination | None = None
         self._rng = np.random.default_rng(0)
 
     # -- construction ---------------------------------------------------------------------------
@@ -143,6 +171,7 @@ class LoopCore:
         self._rng = rng
         self._schedule = setpoint_schedule if setpoint_schedule is not None else c.setpoint_schedule
         self.k = 0
+        self.termination = None
         if self._randomize:
             drawn = {name: float(rng.uniform(lo, hi)) for name, lo, hi in self._randomize}
             y_true = self.plant.reset(parameters=drawn).tolist()
@@ -254,10 +283,13 @@ class LoopCore:
         applied = [umin[i] if applied[i] < umin[i] else umax[i] if applied[i] > umax[i] else applied[i]
                    for i in range(n)]
         self.control_signal = applied
+        failure = None
         try:
             y_true = self.plant.step_values(applied)
-        except StepRejected:
-            y_true = [float("nan")] * n
+        except StepRejected as exc:
+            y_true, failure = [float("nan")] * n, ("discard", str(exc))
+        except PlantError as exc:  # doStep or reading the outputs returned error or fatal
+            y_true, failure = [float("nan")] * n, ("error", str(exc))
         self.k = k = k + 1
         self.applied_setpoint = setpoint
         self.previous_error = [setpoint[i] - measurement[i] for i in range(n)]
@@ -267,10 +299,25 @@ class LoopCore:
         bound = self.bound
         if not all(abs(new_error[i]) <= bound[i] for i in range(n)):  # also catches NaN
             self.step_reward = None
+            self.termination = self._why(failure, y_true, new_error)
             self.measurement = [v if v == v and abs(v) != float("inf") else 0.0 for v in y]
             return self.penalty, True
         self.step_reward = self.reward(new_error, error, u, u_prev)
         return (self.forecast_reward if self.forecast_reward is not None else self.step_reward), False
+
+    def _why(self, failure, y_true: list[float], error: list[float]) -> "Termination":
+        """The Termination of the step just done (k samples): a rejected step, a non-finite output or divergence."""
+        t = self.k * self.config.sample_time_s
+        if failure is not None:
+            return Termination(failure[0], self.k, t - self.config.sample_time_s, " ".join(failure[1].split()))
+        for name, v in zip(self.loop_names, y_true):
+            if not math.isfinite(v):
+                value = "NaN" if v != v else repr(v)
+                return Termination("nan", self.k, t, f"{self.plant.path.name} returned {value} for {name} at t = {t:g} s")
+        worst = max(range(self.n_loops), key=lambda i: abs(error[i]) / self.bound[i] if error[i] == error[i] else math.inf)
+        return Termination("diverged", self.k, t,
+                           f"diverged: |error| of {self.loop_names[worst]} exceeded the divergence bound "
+                           f"({self.bound[worst]:g} x measurement_scale) at t = {t:g} s")
 
     def close(self) -> None:
         for p in (self.plant, self.prior):

@@ -55,7 +55,11 @@ class Candidate:
         """Why the candidate may not be deployed (empty: eligible)."""
         out = []
         if self.diverged:
-            out.append("it diverged in the evaluation" + (" or a Monte-Carlo sample" if self.monte_carlo else ""))
+            ended = self.metrics.get("termination")
+            if ended:
+                out.append(f"its evaluation ended early at t = {ended['time_s']:g} s ({ended['message']})")
+            else:
+                out.append("it diverged in the evaluation" + (" or a Monte-Carlo sample" if self.monte_carlo else ""))
         if not self.margins:
             out.append("its robustness margins could not be measured")
         elif not self.worst_Ms <= max_sensitivity:

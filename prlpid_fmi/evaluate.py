@@ -51,6 +51,9 @@ class _Recorder:
 
     def trajectory(self, terminated: bool) -> dict:
         n = len(self.rewards)
+        termination = self.core.termination if terminated else None
+        if termination is not None and termination.invalid_sample:  # no measurement after the failed step
+            self.measurements[-1] = [float("nan")] * len(self.measurements[-1])
         controls = self.controls + [self.controls[-1]] if self.controls else [list(self.core.control_signal)]
         gains = {name: np.array([g[i] for g in self.gains], float) for i, name in enumerate(GAIN_NAMES)
                  if self.gains and self.gains[0][i] is not None}
@@ -60,6 +63,7 @@ class _Recorder:
             "control_signal": np.array(controls), "reward": np.array(self.rewards),
             "pid_output": np.array(self.commands).reshape(n, -1),
             "gains": gains, "terminated": bool(terminated),
+            "termination": termination.as_dict() if termination is not None else None,
         }
 
 
@@ -73,7 +77,9 @@ def rollout(policy: Policy, config: TuningConfig, seed: int = 0, forecast: bool 
     Returns arrays: time_s (n+1,), setpoint, measurement, control_signal (n+1, n_loops) — row k is the
     signal at t = k·Ts (control_signal's last row repeats; it is what the plant received, actuator
     offsets and noise included) — pid_output (n, n_loops, the controller's command), gains {Kp, Ti,
-    Td: (n, n_loops), coupling}, reward (n,), terminated (bool).
+    Td: (n, n_loops), coupling}, reward (n,), terminated (bool), termination (None, or core.Termination's
+    dict: kind, step, time_s, message; after a rejected step or a non-finite output the last measurement
+    row is NaN).
     """
     own_env = env is None
     if own_env:
@@ -127,12 +133,33 @@ def constant_gains(Kp, Ti, Td, coupling=None) -> GainsFn:
 
 
 def measure(traj: dict, config: TuningConfig, intervals=None) -> dict:
-    """compute_metrics on a trajectory of `config`, plus whether the episode terminated."""
-    metrics = compute_metrics(traj["time_s"], traj["setpoint"], traj["measurement"], traj["control_signal"],
-                              config.sample_time_s, intervals=intervals,
+    """compute_metrics on a trajectory of `config`, plus whether and why the episode terminated.
+
+    An episode that ended early is measured over the samples it has: a last sample without a
+    measurement (a rejected step, a non-finite output) is left out, intervals are cut at the end
+    (an entry then holds "requested_end_step") and intervals starting after it are left out.
+    Adds "terminated" (bool) and "termination" (None or {kind, step, time_s, message}).
+    """
+    termination = traj.get("termination")
+    n = len(traj["time_s"])
+    if termination is not None and termination["kind"] != "diverged" and n > 1:
+        n -= 1
+    windows, cut = [], {}
+    for iv in intervals or []:
+        a, b = (int(v) for v in iv)
+        if a < n:
+            windows.append((a, min(b, n)))
+            if b > n:
+                cut[(a, min(b, n))] = b
+    metrics = compute_metrics(traj["time_s"][:n], traj["setpoint"][:n], traj["measurement"][:n],
+                              traj["control_signal"][:n], config.sample_time_s, intervals=windows or None,
                               loop_names=[l.output for l in config.loops],
                               events=sorted({d.start_step for d in config.disturbances}))
+    for iv in metrics["intervals"]:
+        if (iv["start_step"], iv["end_step"]) in cut:
+            iv["requested_end_step"] = cut[(iv["start_step"], iv["end_step"])]
     metrics["terminated"] = traj["terminated"]
+    metrics["termination"] = termination
     return metrics
 
 

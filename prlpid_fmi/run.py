@@ -89,6 +89,7 @@ def _report(scenario: Scenario, policy_m: dict, fixed_m: dict | None, fixed_gain
         lines += [f"Scenario file: `{source}`.", ""]
     lines += [f"Evaluation: {scenario.evaluation_config().episode_steps} steps at Ts = "
              f"{scenario.tuning.sample_time_s:g} s; loops: {', '.join(loops)}.", ""]
+    lines += ended_early_lines([("adaptive policy", policy_m), ("fixed PID", fixed_m)])
     if fixed_gains:
         lines += ["Fixed PID (differential evolution on the training distribution): " +
                   ", ".join(f"{k} = {np.round(np.asarray(v), 4).tolist()}" for k, v in fixed_gains.items()), ""]
@@ -106,6 +107,17 @@ def _report(scenario: Scenario, policy_m: dict, fixed_m: dict | None, fixed_gain
                 iae = sum(v for k, v in iv.items() if k.split("[")[0] == "IAE")
                 lines.append(f"| {iv['start_step']}–{iv['end_step']} | {ise:.4g} | {iae:.4g} |")
     return "\n".join(lines) + "\n"
+
+
+def ended_early_lines(named_metrics) -> list[str]:
+    """Report lines for evaluations that ended before their last sample: when, why, what the metrics cover."""
+    lines = []
+    for name, m in named_metrics:
+        t = (m or {}).get("termination")
+        if t:
+            lines += [f"**The {name}'s evaluation ended early** at step {t['step']} (t = {t['time_s']:g} s): "
+                      f"{t['message']}. Its metrics cover the samples before that.", ""]
+    return lines
 
 
 def evaluate_into(run_dir: Path, scenario: Scenario, out_dir: Path, policy, fixed: dict | None,

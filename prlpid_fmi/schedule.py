@@ -271,7 +271,8 @@ def extract_schedule(policy: Policy, config: TuningConfig, schedule_by: str = "s
                 gains.append(env.gains)
             if terminated:  # no safe gains exist there: leave the point out of the table
                 excluded.append(float(sp))
-                warnings.warn(f"the closed loop diverged at {variable} setpoint {sp:g} (step {k + 1}); "
+                why = env.core.termination.message if env.core.termination else f"diverged at step {k + 1}"
+                warnings.warn(f"the closed loop failed at {variable} setpoint {sp:g} ({why}); "
                               "that operating point is left out of the schedule", stacklevel=2)
                 continue
             g = {name: np.array([x[i] for x in gains[-tail:]], float) for i, name in enumerate(GAIN_NAMES)
