@@ -10,6 +10,7 @@ import sys
 import warnings
 
 from . import __version__
+from .deploy import FORMATS
 from .errors import PrlPidError
 
 PROG = "prlpid-fmi"
@@ -116,11 +117,23 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _export(args: argparse.Namespace) -> int:
+    from .deploy import csv_only_options, export_controller
     from .run import export_schedule
 
+    wrong = csv_only_options(args)
+    if wrong:
+        raise PrlPidError(f"{wrong[0]}: not used with --format {args.format} (expected " + (
+            "--format csv; the code carries the run's deployed schedule.csv)" if args.format != "csv" else
+            "--format st, plcopen or c)"))
+    if args.format != "csv":
+        for path in export_controller(args.run_dir, args.output, args.format, fixed=args.fixed, name=args.name,
+                                      force=args.force):
+            print(f"controller code written to {path}")
+        return 0
     scenario = None if args.scenario is None else _scenario(args.scenario)
-    path, comparison = export_schedule(args.run_dir, args.output, args.schedule_by, args.points, args.replay,
-                                       scenario_path=scenario, force=args.force)
+    given = {k: v for k, v in (("schedule_by", args.schedule_by), ("points", args.points)) if v is not None}
+    path, comparison = export_schedule(args.run_dir, args.output, replay=args.replay, scenario_path=scenario,
+                                       force=args.force, **given)
     print(f"gain schedule written to {path}")
     if comparison and not args.quiet:
         p, s = comparison["policy"]["overall"], comparison["schedule"]["overall"]
@@ -188,14 +201,23 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--scenario", default=None,
                    help="use this scenario's evaluation (setpoints, disturbances); a file or a bundled name")
 
-    p = command("export", _export, "write the tuned gain schedule as CSV for a plain PID")
+    p = command("export", _export, "write the tuned gain schedule as CSV for a plain PID, or the deployed "
+                                   "controller as PLC or C code")
     p.add_argument("run_dir")
     p.add_argument("-o", "--output", required=True,
-                   help="CSV file to write (a new file outside the run's own files)")
+                   help="file to write, outside the run's own files (csv; st: .st; plcopen: .xml; "
+                        "c: NAME.c and NAME.h beside it)")
+    p.add_argument("--format", choices=FORMATS, default=FORMATS[0],
+                   help="csv: extract a gain schedule from the policy (default); st: IEC 61131-3 function block; "
+                        "plcopen: PLCopen TC6 XML; c: C99 header and source (the code carries the run's "
+                        "schedule.csv, see docs/deploy.md)")
+    p.add_argument("--fixed", action="store_true", help="st/plcopen/c: export the tuned fixed PID (fixed_pid.csv)")
+    p.add_argument("--name", default=None,
+                   help="st/plcopen/c: identifier in the code (default: from the output file name)")
     p.add_argument("--force", action="store_true", help="replace an existing output file (never a run's own file)")
-    p.add_argument("--schedule-by", default="setpoint",
-                   help="setpoint, measurement, or an FMU variable name (default: setpoint)")
-    p.add_argument("--points", type=int, default=9, help="number of operating points (default: 9)")
+    p.add_argument("--schedule-by", default=None,
+                   help="csv: setpoint, measurement, or an FMU variable name (default: setpoint)")
+    p.add_argument("--points", type=int, default=None, help="csv: number of operating points (default: 9)")
     p.add_argument("--replay", action="store_true",
                    help="run the table as a plain gain-scheduled PID on the FMU and compare with the policy")
     p.add_argument("--scenario", default=None,
