@@ -9,7 +9,13 @@
 typedef struct {
     Instance *core;
     fmi2CallbackFunctions callbacks;
+    int model_exchange;  /* instantiated as fmi2ModelExchange: the importer integrates m.x */
 } Fmi2Instance;
+
+/* Model exchange exposes the states and their derivatives after the model's variables:
+ * value reference N_VARIABLES + i is state i, N_VARIABLES + N_STATES + i its derivative. */
+#define VR_FIRST_STATE N_VARIABLES
+#define VR_FIRST_DERIVATIVE (N_VARIABLES + N_STATES)
 
 static void log_fmi2(void *env, const char *instance_name, Status status, const char *message) {
     Fmi2Instance *c = (Fmi2Instance *)env;
@@ -39,16 +45,18 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
                               fmi2Boolean visible, fmi2Boolean loggingOn) {
     Fmi2Instance *c;
     (void)fmuResourceLocation; (void)visible; (void)loggingOn;
-    if (!functions || fmuType != fmi2CoSimulation || !fmuGUID || strcmp(fmuGUID, INSTANTIATION_TOKEN) != 0) {
+    if (!functions || (fmuType != fmi2CoSimulation && fmuType != fmi2ModelExchange) || !fmuGUID ||
+        strcmp(fmuGUID, INSTANTIATION_TOKEN) != 0) {
         if (functions && functions->logger) {
             functions->logger(functions->componentEnvironment, instanceName, fmi2Error, "logStatusError",
-                              "only co-simulation with GUID %s is supported", INSTANTIATION_TOKEN);
+                              "only GUID %s is supported", INSTANTIATION_TOKEN);
         }
         return NULL;
     }
     c = (Fmi2Instance *)calloc(1, sizeof(Fmi2Instance));
     if (!c) return NULL;
     c->callbacks = *functions;
+    c->model_exchange = fmuType == fmi2ModelExchange;
     c->core = instance_new(instanceName, log_fmi2, c);
     if (!c->core) { free(c); return NULL; }
     return c;
@@ -85,7 +93,23 @@ fmi2Status fmi2Reset(fmi2Component c) {
 }
 
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2Real value[]) {
-    return to_fmi2(instance_get_real(CORE(c), vr, nvr, value));
+    Instance *core = CORE(c);
+    double dx[N_STATES + 1];
+    size_t i;
+    if (!((Fmi2Instance *)c)->model_exchange) return to_fmi2(instance_get_real(core, vr, nvr, value));
+    /* model exchange: outputs follow the states, time and inputs the importer set last */
+    if (core->mode != MODE_INITIALIZATION) model_outputs(&core->m);
+    model_derivatives(&core->m, core->m.time, core->m.x, dx);
+    for (i = 0; i < nvr; i++) {
+        if (vr[i] >= VR_FIRST_DERIVATIVE && vr[i] < VR_FIRST_DERIVATIVE + N_STATES) {
+            value[i] = dx[vr[i] - VR_FIRST_DERIVATIVE];
+        } else if (vr[i] >= VR_FIRST_STATE && vr[i] < VR_FIRST_DERIVATIVE) {
+            value[i] = core->m.x[vr[i] - VR_FIRST_STATE];
+        } else if (instance_get_real(core, &vr[i], 1, &value[i]) != STATUS_OK) {
+            return fmi2Error;
+        }
+    }
+    return fmi2OK;
 }
 
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2Real value[]) {
@@ -151,25 +175,55 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
     return fmi2Error;
 }
 
-/* Model-exchange functions: this FMU is co-simulation only. */
-static fmi2Status model_exchange_only(fmi2Component c) {
-    instance_log(CORE(c), STATUS_ERROR, "model exchange is not supported");
-    return fmi2Error;
+/* Model exchange: the importer's solver integrates the core's states; no events, no event indicators. */
+fmi2Status fmi2EnterEventMode(fmi2Component c) { (void)c; return fmi2OK; }
+fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *info) {
+    (void)c;
+    memset(info, 0, sizeof(*info));
+    return fmi2OK;
 }
-fmi2Status fmi2EnterEventMode(fmi2Component c) { return model_exchange_only(c); }
-fmi2Status fmi2NewDiscreteStates(fmi2Component c, fmi2EventInfo *info) { (void)info; return model_exchange_only(c); }
-fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c) { return model_exchange_only(c); }
+fmi2Status fmi2EnterContinuousTimeMode(fmi2Component c) { (void)c; return fmi2OK; }
 fmi2Status fmi2CompletedIntegratorStep(fmi2Component c, fmi2Boolean noSetFMUStatePriorToCurrentPoint,
                                        fmi2Boolean *enterEventMode, fmi2Boolean *terminateSimulation) {
-    (void)noSetFMUStatePriorToCurrentPoint; (void)enterEventMode; (void)terminateSimulation;
-    return model_exchange_only(c);
+    (void)noSetFMUStatePriorToCurrentPoint;
+    model_constrain(CORE(c)->m.x);  /* e.g. a tank level never goes negative */
+    *enterEventMode = fmi2False;
+    *terminateSimulation = fmi2False;
+    return fmi2OK;
 }
-fmi2Status fmi2SetTime(fmi2Component c, fmi2Real time) { (void)time; return model_exchange_only(c); }
-fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], size_t nx) { (void)x; (void)nx; return model_exchange_only(c); }
-fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real derivatives[], size_t nx) { (void)derivatives; (void)nx; return model_exchange_only(c); }
-fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real eventIndicators[], size_t ni) { (void)eventIndicators; (void)ni; return model_exchange_only(c); }
-fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx) { (void)x; (void)nx; return model_exchange_only(c); }
-fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x_nominal[], size_t nx) { (void)x_nominal; (void)nx; return model_exchange_only(c); }
+fmi2Status fmi2SetTime(fmi2Component c, fmi2Real time) { CORE(c)->m.time = time; return fmi2OK; }
+static fmi2Status state_count(fmi2Component c, size_t nx) {
+    if (nx == N_STATES) return fmi2OK;
+    instance_log(CORE(c), STATUS_ERROR, "the model has %d continuous states, got nx = %lu", N_STATES, (unsigned long)nx);
+    return fmi2Error;
+}
+fmi2Status fmi2SetContinuousStates(fmi2Component c, const fmi2Real x[], size_t nx) {
+    if (state_count(c, nx) != fmi2OK) return fmi2Error;
+    memcpy(CORE(c)->m.x, x, nx * sizeof(double));
+    return fmi2OK;
+}
+fmi2Status fmi2GetDerivatives(fmi2Component c, fmi2Real derivatives[], size_t nx) {
+    if (state_count(c, nx) != fmi2OK) return fmi2Error;
+    model_derivatives(&CORE(c)->m, CORE(c)->m.time, CORE(c)->m.x, derivatives);
+    return fmi2OK;
+}
+fmi2Status fmi2GetEventIndicators(fmi2Component c, fmi2Real eventIndicators[], size_t ni) {
+    (void)eventIndicators;
+    if (ni == 0) return fmi2OK;
+    instance_log(CORE(c), STATUS_ERROR, "the model has no event indicators, got ni = %lu", (unsigned long)ni);
+    return fmi2Error;
+}
+fmi2Status fmi2GetContinuousStates(fmi2Component c, fmi2Real x[], size_t nx) {
+    if (state_count(c, nx) != fmi2OK) return fmi2Error;
+    memcpy(x, CORE(c)->m.x, nx * sizeof(double));
+    return fmi2OK;
+}
+fmi2Status fmi2GetNominalsOfContinuousStates(fmi2Component c, fmi2Real x_nominal[], size_t nx) {
+    size_t i;
+    if (state_count(c, nx) != fmi2OK) return fmi2Error;
+    for (i = 0; i < nx; i++) x_nominal[i] = 1.0;
+    return fmi2OK;
+}
 
 fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                        const fmi2Integer order[], const fmi2Real value[]) {

@@ -1,4 +1,7 @@
-"""One small adapter per FMI version: the function pointers and call shapes of a co-simulation instance.
+"""One small adapter per FMI version and interface: the function pointers and call shapes of an instance.
+
+FMI 1.0, 2.0 and 3.0 co-simulation step with the FMU's own doStep; FMI 2.0 model exchange is integrated
+over each communication step by FMPy's CVode solver (sundials), with the FMU's events handled between steps.
 
 FmuPlant talks to an adapter only, so the hot path has no FMI-version branches, and FMPy's private
 attributes (`_functions`, `dll`, `component`) are touched here and nowhere else. Setters, getters and
@@ -10,6 +13,7 @@ FMPy is pinned to the version range tested here (pyproject.toml).
 from __future__ import annotations
 
 import ctypes
+import math
 import weakref
 from ctypes import byref, c_size_t
 from typing import Callable
@@ -120,23 +124,27 @@ class Fmi2Adapter(FmiAdapter):
         f, c, h = self.function("DoStep"), self.component, float(step_size_s)
         return lambda t: f(c, t, h, 1)
 
+    slave_class = "FMU2Slave"
+
     @classmethod
     def instantiate(cls, description, unzipdir: str, instance_name: str, sink) -> "Fmi2Adapter":
         """Instantiate with a logger that stores each message as `sink.last_message`."""
-        from fmpy.fmi2 import FMU2Slave, calloc, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE
+        import fmpy.fmi2
+        from fmpy.fmi2 import calloc, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE
         from fmpy.fmi2 import fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, free
         from fmpy.logging import addLoggerProxy
 
         callbacks = fmi2CallbackFunctions()
         callbacks.logger = _fmi2_logger(fmi2CallbackLoggerTYPE)
-        key = max(_FMI2_SINKS.keys(), default=0) + 1
+        key = max((k for k in _FMI2_SINKS.keys() if k < 2**31), default=0) + 1
         _FMI2_SINKS[key] = sink
         callbacks.componentEnvironment = key
         callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
         callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
         addLoggerProxy(byref(callbacks))
-        fmu = FMU2Slave(guid=description.guid, unzipDirectory=unzipdir,
-                        modelIdentifier=description.model_identifier, instanceName=instance_name)
+        fmu = getattr(fmpy.fmi2, cls.slave_class)(guid=description.guid, unzipDirectory=unzipdir,
+                                                  modelIdentifier=description.model_identifier,
+                                                  instanceName=instance_name)
         fmu.instantiate(callbacks=callbacks)
         adapter = cls(fmu)
         adapter._callbacks = callbacks  # keep the callback structure alive with the instance
@@ -188,6 +196,160 @@ class Fmi3Adapter(FmiAdapter):
         self._fmu.exitInitializationMode()
 
 
-def adapter_class(fmi_version: str) -> type[FmiAdapter]:
-    """The adapter for a modelDescription's fmiVersion ("2.0", "3.0", ...)."""
-    return Fmi3Adapter if fmi_version.startswith("3") else Fmi2Adapter
+class Fmi2ModelExchangeAdapter(Fmi2Adapter):
+    """FMI 2.0 model exchange (FMPy's FMU2Model): each communication step is integrated by FMPy's CVode
+    solver, restarted at the step's start (the inputs jump there and the state may have been set), with
+    step, state and time events handled at the points where they occur. A failed integration keeps the
+    states from before the step and reports discard, like a co-simulation FMU that rejects a step."""
+
+    slave_class = "FMU2Model"
+    relative_tolerance = 1e-8   # CVode's; absolute tolerance = this x the FMU's state nominals
+
+    def __init__(self, fmu):
+        super().__init__(fmu)
+        self._solver = None
+        self._next_event_time = math.inf
+
+    @classmethod
+    def instantiate(cls, description, unzipdir, instance_name, sink):
+        adapter = super().instantiate(description, unzipdir, instance_name, sink)
+        adapter._nx, adapter._nz = description.n_states, description.n_event_indicators
+        adapter._x_saved = (ctypes.c_double * max(adapter._nx, 1))()
+        return adapter
+
+    def initialize(self, start_time):
+        fmu = self._fmu
+        fmu.setupExperiment(startTime=start_time)
+        fmu.enterInitializationMode()
+        fmu.exitInitializationMode()
+        self._event_iteration()
+        if self._solver is None:
+            from fmpy.sundials import CVodeSolver
+
+            class _NoInput:
+                @staticmethod
+                def apply(t):  # the inputs are held over the step; FmuPlant sets them before it
+                    return None
+
+            # the raw ctypes functions (no FMPy call logging): the solver calls them for every right-hand side
+            c, f = self.component, self.function
+            raw = {name: f(name) for name in ("SetTime", "SetContinuousStates", "GetDerivatives",
+                                              "GetContinuousStates", "GetEventIndicators",
+                                              "GetNominalsOfContinuousStates")}
+            self._solver = CVodeSolver(
+                nx=self._nx, nz=self._nz, get_x=lambda x, n: raw["GetContinuousStates"](c, x, n),
+                set_x=lambda x, n: raw["SetContinuousStates"](c, x, n),
+                get_dx=lambda dx, n: raw["GetDerivatives"](c, dx, n),
+                get_z=lambda z, n: raw["GetEventIndicators"](c, z, n),
+                get_nominals=lambda x, n: raw["GetNominalsOfContinuousStates"](c, x, n),
+                set_time=lambda t: raw["SetTime"](c, t), input=_NoInput(),
+                startTime=start_time, relativeTolerance=self.relative_tolerance, maxNumSteps=100_000)
+        else:
+            self._solver.reset(start_time)
+
+    def _event_iteration(self) -> None:
+        """Event mode until the FMU needs no new discrete states, then back to continuous-time mode."""
+        fmu = self._fmu
+        needed, self._next_event_time = True, math.inf
+        while needed:
+            needed, terminate, _, _, defined, t_next = fmu.newDiscreteStates()
+            if terminate:
+                raise RuntimeError("the FMU asked to terminate the simulation")
+            self._next_event_time = t_next if defined else math.inf
+        fmu.enterContinuousTimeMode()
+
+    def stepper(self, step_size_s):
+        h = float(step_size_s)
+        return lambda t: self._integrate(t, t + h)
+
+    def _integrate(self, t: float, t_end: float) -> int:
+        fmu, solver, nx = self._fmu, self._solver, self._nx
+        if nx:
+            fmu.getContinuousStates(self._x_saved, nx)
+        try:
+            fmu.setTime(t)
+            solver.reset(t)
+            time = t
+            while time < t_end - 1e-12 * max(1.0, abs(t_end)):
+                stop = min(t_end, self._next_event_time)
+                state_event, _, time = solver.step(time, stop)
+                fmu.setTime(time)
+                step_event, terminate = fmu.completedIntegratorStep()
+                if terminate:
+                    raise RuntimeError("the FMU asked to terminate the simulation")
+                if state_event or step_event or time >= self._next_event_time:
+                    fmu.enterEventMode()
+                    self._event_iteration()
+                    solver.reset(time)
+        except Exception as exc:  # CVode failure or an FMU error: back to the state before the step
+            if nx:
+                fmu.setContinuousStates(self._x_saved, nx)
+            fmu.setTime(t)
+            self._error = str(exc)
+            return FMI_DISCARD
+        return FMI_OK
+
+    def terminate(self):
+        self._fmu.terminate()
+
+
+class Fmi1Adapter(Fmi2Adapter):
+    """FMI 1.0 co-simulation (FMPy's FMU1Slave): fmiSetReal(c, vr, n, v), fmiDoStep(c, t, h, newStep), the
+    call shapes of FMI 2.0. FMI 1.0 has no FMU state functions: such an FMU cannot be its own predictive prior."""
+
+    prefix = "fmi1"
+    state_names = ()
+
+    def __init__(self, fmu):
+        super().__init__(fmu)
+        # FMPy 0.3 declares some FMI 1.0 functions (fmiInitializeSlave, fmiDoStep, ...) as returning a
+        # string; every function but these returns an fmiStatus
+        for name, function in self._f.items():
+            if name not in ("fmi1GetVersion", "fmi1GetTypesPlatform", "fmi1InstantiateSlave", "fmi1FreeSlaveInstance"):
+                function.restype = ctypes.c_int
+
+    @classmethod
+    def instantiate(cls, description, unzipdir: str, instance_name: str, sink) -> "Fmi1Adapter":
+        """Instantiate with a logger that stores each message as `sink.last_message`."""
+        from fmpy.fmi1 import FMU1Slave, calloc, fmi1CallbackAllocateMemoryTYPE, fmi1CallbackFreeMemoryTYPE
+        from fmpy.fmi1 import fmi1CallbackFunctions, fmi1CallbackLoggerTYPE, free
+        from fmpy.fmi2 import fmi2CallbackLoggerTYPE
+        from fmpy.logging import addLoggerProxy
+
+        callbacks = fmi1CallbackFunctions()
+        # FMPy's formatting proxy keeps one Python logger per process: the same dispatcher as FMI 2.0,
+        # keyed by the component pointer (FMI 1.0 passes it where FMI 2.0 passes the environment)
+        address = ctypes.cast(_fmi2_logger(fmi2CallbackLoggerTYPE), ctypes.c_void_p).value
+        callbacks.logger = fmi1CallbackLoggerTYPE(address)
+        callbacks.allocateMemory = fmi1CallbackAllocateMemoryTYPE(calloc)
+        callbacks.freeMemory = fmi1CallbackFreeMemoryTYPE(free)
+        callbacks.stepFinished = None
+        addLoggerProxy(byref(callbacks))
+        fmu = FMU1Slave(guid=description.guid, unzipDirectory=unzipdir,
+                        modelIdentifier=description.model_identifier, instanceName=instance_name)
+        fmu.instantiate(functions=callbacks)
+        if not fmu.component:
+            raise RuntimeError("fmiInstantiateSlave returned NULL")
+        _FMI2_SINKS[fmu.component] = sink
+        adapter = cls(fmu)
+        adapter._callbacks = callbacks
+        return adapter
+
+    def initialize(self, start_time):
+        status = self.function("InitializeSlave")(self.component, float(start_time), 0, 0.0)
+        if status > FMI_WARNING:
+            raise RuntimeError(f"fmiInitializeSlave returned status {status}")
+
+    def _unsupported(self, *args) -> int:
+        return FMI_ERROR
+
+    get_state = set_state = free_state = serialized_size = serialize = deserialize = _unsupported
+
+
+def adapter_class(fmi_version: str, co_simulation: bool = True) -> type[FmiAdapter]:
+    """The adapter for a modelDescription's fmiVersion ("1.0", "2.0", "3.0") and interface."""
+    if fmi_version.startswith("1"):
+        return Fmi1Adapter
+    if fmi_version.startswith("3"):
+        return Fmi3Adapter
+    return Fmi2Adapter if co_simulation else Fmi2ModelExchangeAdapter

@@ -21,6 +21,9 @@ class FmuVariable:
     start: float | str | None
     unit: str | None
     description: str
+    min: float | None = None      # declared range and nominal value (modelDescription), FMU units
+    max: float | None = None
+    nominal: float | None = None
 
 
 @dataclass(frozen=True)
@@ -38,6 +41,8 @@ class FmuDescription:
     can_serialize_state: bool
     default_step_size_s: float | None
     variables: tuple[FmuVariable, ...]
+    n_states: int = 0             # continuous states (model exchange integrates them)
+    n_event_indicators: int = 0
 
     def variable(self, name: str) -> FmuVariable | None:
         for v in self.variables:
@@ -77,8 +82,8 @@ class FmuDescription:
     def plant_problems(self) -> list[str]:
         """Why this FMU cannot be stepped as a plant (empty when it can)."""
         problems = []
-        if not self.co_simulation:
-            problems.append("no co-simulation interface")
+        if not (self.co_simulation or self.model_exchange):
+            problems.append("neither a co-simulation nor a model-exchange interface")
         if not self.input_names:
             problems.append("no real inputs")
         if not self.output_names:
@@ -105,20 +110,32 @@ def _describe(path: str, mtime: float) -> FmuDescription:
         raise PlantError(f"{path}: not an FMU (expected a ZIP archive with a modelDescription.xml)") from None
     except Exception as exc:
         raise PlantError(f"{path}: cannot read its modelDescription.xml: {exc}") from None
-    cs = md.coSimulation
+    cs = md.coSimulation or md.modelExchange  # the capabilities of the interface FmuPlant uses
+
+    def number(v, key):
+        value = getattr(v, key, None)
+        if value is None and v.declaredType is not None:
+            value = getattr(v.declaredType, key, None)
+        try:
+            return float(value) if value is not None else None
+        except (TypeError, ValueError):
+            return None
+
     variables = tuple(
         FmuVariable(v.name, int(v.valueReference), v.causality, v.variability, v.type,
                     v.start, getattr(v, "unit", None) or (v.declaredType.unit if v.declaredType is not None else None),
-                    v.description or "")
+                    v.description or "", number(v, "min"), number(v, "max"), number(v, "nominal"))
         for v in md.modelVariables)
     step = md.defaultExperiment.stepSize if md.defaultExperiment is not None else None
     return FmuDescription(
         path=Path(path), fmi_version=md.fmiVersion, model_name=md.modelName,
-        model_identifier=cs.modelIdentifier if cs else (md.modelExchange.modelIdentifier if md.modelExchange else ""),
-        guid=md.guid, co_simulation=cs is not None, model_exchange=md.modelExchange is not None,
+        model_identifier=cs.modelIdentifier if cs else "",
+        guid=md.guid, co_simulation=md.coSimulation is not None, model_exchange=md.modelExchange is not None,
         can_get_and_set_state=bool(cs and cs.canGetAndSetFMUstate),
         can_serialize_state=bool(cs and cs.canSerializeFMUstate),
-        default_step_size_s=float(step) if step else None, variables=variables)
+        default_step_size_s=float(step) if step else None, variables=variables,
+        n_states=int(md.numberOfContinuousStates or len(md.derivatives)),
+        n_event_indicators=int(md.numberOfEventIndicators or 0))
 
 
 def describe_fmu(path: str | Path) -> FmuDescription:

@@ -79,6 +79,8 @@ def native_unavailable(plant, prior) -> str | None:
     """Why the one-call forecast cannot serve this plant and prior, or None when it can."""
     if plant is prior:
         return "plant and prior are the same instance"
+    if not plant.description.co_simulation:
+        return "a model-exchange FMU is integrated by FMPy's solver, not by its binary's own step"
     if plant.description.guid != prior.description.guid or plant.path.resolve() != prior.path.resolve():
         return f"the prior ({prior.path}) is not the plant's FMU ({plant.path})"
     if getattr(plant.library, "_handle", None) != getattr(prior.library, "_handle", None):

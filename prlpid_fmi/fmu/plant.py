@@ -1,4 +1,5 @@
-"""FmuPlant: one FMI 2.0 or 3.0 co-simulation instance driven step by step over FMPy.
+"""FmuPlant: one FMI 1.0, 2.0 or 3.0 co-simulation instance (or an FMI 2.0 model-exchange instance, integrated
+by FMPy's CVode solver) driven step by step over FMPy.
 
 The model description is read once, the FMU extracted once per file (instances of the same FMU
 share the extraction), and value references are resolved at construction, so a step is one
@@ -59,8 +60,8 @@ class FmuPlant:
         self.path = Path(fmu_path)
         self.description: FmuDescription = describe_fmu(self.path)
         d = self.description
-        if not d.co_simulation:
-            raise PlantError(f"{self.path}: the FMU has no co-simulation interface (FMI {d.fmi_version}, model exchange only)")
+        if not (d.co_simulation or d.model_exchange):
+            raise PlantError(f"{self.path}: the FMU has neither a co-simulation nor a model-exchange interface")
         if not (sample_time_s > 0 and np.isfinite(sample_time_s)):
             raise PlantError(f"sample time must be a positive number of seconds, got {sample_time_s!r}")
         self.sample_time_s = float(sample_time_s)
@@ -95,7 +96,7 @@ class FmuPlant:
         d = self.description
         unzipdir = _extract(self.path)
         try:
-            self._fmi = adapter_class(d.fmi_version).instantiate(d, unzipdir, instance_name, self)
+            self._fmi = adapter_class(d.fmi_version, d.co_simulation).instantiate(d, unzipdir, instance_name, self)
         except Exception as exc:  # a broken binary or a platform without one
             raise PlantError(f"{self.path}: cannot instantiate the FMU: {exc} {self.last_message}".strip()) from None
         fmi = self._fmi

@@ -212,8 +212,9 @@ class PlantModel(Section):
             return value
         resolved, path = checks.resolve_fmu(value, state)
         desc = checks.describe(path)
-        if not desc.co_simulation:
-            raise problem("the FMU has no co-simulation interface", "an FMU exported for co-simulation")
+        if not (desc.co_simulation or desc.model_exchange):
+            raise problem("the FMU has neither a co-simulation nor a model-exchange interface",
+                          "an FMU exported for co-simulation or model exchange")
         state.desc = desc
         return resolved
 
