@@ -77,7 +77,8 @@ def test_wheel_holds_every_module_plant_source_and_scenario(wheel):
     scenarios = {"prlpid_fmi/" + p.relative_to(REPO).as_posix() for p in (REPO / "scenarios").iterdir()
                  if p.suffix in (".yaml", ".json")}  # the scenarios and the JSON Schema editors read
     assert {"prlpid_fmi/plant_sources/common/instance.c", "prlpid_fmi/scenarios/first_order.yaml"} <= plants | scenarios
-    assert modules <= names and plants <= names and scenarios <= names
+    templates = {p.relative_to(REPO).as_posix() for p in (REPO / "prlpid_fmi" / "templates").rglob("*.j2")}
+    assert modules <= names and plants <= names and scenarios <= names and templates and templates <= names
     assert not [n for n in names if n.startswith(("fmus/", "tests/")) or n.endswith((".fmu", ".pyc"))]
     version = wheel.name.split("-")[1]
     assert version == prlpid_fmi.__version__
