@@ -144,8 +144,17 @@ class LoopCore:
 
         c = self.config
         prior_path = resolve_fmu(c.prior.fmu, c.fmi_version) if c.prior.fmu else path
-        prior = FmuPlant(prior_path, self.inputs, self.loop_names, c.sample_time_s,
-                         {**c.plant_parameters, **c.prior.parameters}, "prior")
+        mode = "copy"
+        if prior_path == path and not c.prior.state_map:
+            mode = self.plant.description.prior_mode
+            if mode is None:
+                raise PlantError(f"{path.name}: cannot serve as its own prior ({self.plant.description.prior_summary()}); "
+                                 "set strategies.forecast_horizon: 0, or give a prior.fmu with a state_map")
+        if mode == "rollback":  # one instance: the plant itself, its state saved and set back
+            prior = self.plant
+        else:
+            prior = FmuPlant(prior_path, self.inputs, self.loop_names, c.sample_time_s,
+                             {**c.plant_parameters, **c.prior.parameters}, "prior")
         if prior_path != path and not c.prior.state_map:
             raise PlantError(f"prior FMU {prior_path} differs from the plant {path}: its state cannot be "
                              "copied, so prior.state_map must say which prior parameters take which plant values")

@@ -15,7 +15,9 @@ from torch import nn
 
 from . import schema
 from .config import AgentConfig, TuningConfig
+from .core import resolve_fmu
 from .env import PidTuningEnv, is_anchored
+from .fmu import describe_fmu
 from .errors import PrlPidError
 from .progress import training_progress
 from .rundir import write_atomic
@@ -52,6 +54,8 @@ def make_vec_env(config: TuningConfig, agent: AgentConfig, monitor_dir: Path | N
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
     vec_cls = SubprocVecEnv if agent.vec_env == "subproc" and agent.envs > 1 else DummyVecEnv
+    if agent.envs > 1 and describe_fmu(resolve_fmu(config.fmu, config.fmi_version)).once_per_process:
+        vec_cls = SubprocVecEnv  # canBeInstantiatedOnlyOncePerProcess: one env (one instance) per process
     return sb3_make_vec_env(functools.partial(PidTuningEnv, config, anchor=anchor, info=False), n_envs=agent.envs, seed=agent.seed,
                             vec_env_cls=vec_cls, monitor_dir=str(monitor_dir) if monitor_dir else None)
 

@@ -17,7 +17,9 @@ Two implementations of one interface, `mean_reward(setpoint, measurement, Kp, Ti
 u_prev) -> float` on lists of n_loops floats (coupling: 6 floats or None):
 
 - FmiForecast: the standard FMI path for any FMU that can serialize its state (get, serialize,
-  deserialize, set), or, for a different prior FMU, a re-initialisation from `state_map`.
+  deserialize, set), or, for a different prior FMU, a re-initialisation from `state_map`; or, when
+  the prior *is* the plant (an FMU that cannot serialize its state or may be instantiated only once
+  per process), a single-instance rollback: get the plant's own state, roll N steps, set it back.
 - NativeForecast (prlpid_fmi.fmu.native_forecast): one C call for the bundled plants; bit for bit the
   same result (tests/test_native_forecast.py).
 
@@ -74,6 +76,8 @@ class FmiForecast(_Forecast):
     state_map: {prior parameter: plant variable}; when given, the prior is reset each call with these
         parameters taken from the plant instead of receiving its state (a prior FMU that differs from
         the plant), and the overrides are not applied (the reset prior is nominal already).
+    prior may be the plant itself: then each call holds the plant's state (FmuPlant.hold_state), applies
+    the overrides, rolls the plant N steps and restores it, so the plant's trajectory is unchanged.
 
     After a call, `last_rewards` (list of floats) and `last_measurements` (list of n_loops-float lists,
     one per step the prior took) describe the roll-out.
@@ -86,11 +90,18 @@ class FmiForecast(_Forecast):
         super().__init__(plant, prior, pid, horizon, scale, bound, penalty, weights, u_scale, overrides)
         self._rejected = StepRejected
         self.state_map = dict(state_map or {})
+        self.rollback = prior is plant
+        if self.rollback and self.state_map:
+            raise ValueError("a state_map needs a prior FMU other than the plant")
         self.last_rewards: list[float] = []
         self.last_measurements: list[list[float]] = []
 
     def _sync(self) -> None:
-        if self.state_map:
+        if self.rollback:
+            self.plant.hold_state()
+            if self.overrides:
+                self.prior.set(self.overrides)
+        elif self.state_map:
             values = self.plant.get(list(self.state_map.values()))
             self.prior.reset(parameters=dict(zip(self.state_map.keys(), values.tolist())))
         else:
@@ -133,6 +144,8 @@ class FmiForecast(_Forecast):
                 previous_error, u_prev = error, u
         finally:
             pid.set_state(saved)
+            if self.rollback:
+                self.plant.restore_state()
         total = 0.0
         for r in rewards:
             total += r

@@ -41,6 +41,7 @@ class FmuDescription:
     can_serialize_state: bool
     default_step_size_s: float | None
     variables: tuple[FmuVariable, ...]
+    once_per_process: bool = False  # canBeInstantiatedOnlyOncePerProcess
     n_states: int = 0             # continuous states (model exchange integrates them)
     n_event_indicators: int = 0
 
@@ -91,13 +92,32 @@ class FmuDescription:
         return problems
 
     def prior_problems(self) -> list[str]:
-        """Why this FMU cannot serve as the predictive prior (empty when it can)."""
+        """Why this FMU cannot serve as its own predictive prior (empty when it can)."""
         problems = self.plant_problems()
         if not self.can_get_and_set_state:
             problems.append("cannot get and set its state (canGetAndSetFMUstate)")
-        if not self.can_serialize_state:
-            problems.append("cannot serialize its state (canSerializeFMUstate), so the plant state cannot be copied in")
         return problems
+
+    @property
+    def prior_mode(self) -> str | None:
+        """How the FMU serves as its own prior: "copy" (a second instance receives the plant's serialized
+        state), "rollback" (the plant's own state is saved, N steps rolled, set back: the FMU cannot
+        serialize its state or may be instantiated only once per process), or None (no state access)."""
+        if self.prior_problems():
+            return None
+        return "copy" if self.can_serialize_state and not self.once_per_process else "rollback"
+
+    def prior_summary(self) -> str:
+        """One line: which prior applies, and why."""
+        mode = self.prior_mode
+        if mode == "copy":
+            return "yes: a second instance receives the plant's state each step"
+        if mode == "rollback":
+            why = ("it may be instantiated only once per process" if self.once_per_process
+                   else "it cannot serialize its state (canSerializeFMUstate)")
+            return ("yes: single-instance rollback (the plant's own state is saved, N steps rolled, set back; "
+                    f"{why})")
+        return "no: " + "; ".join(self.prior_problems())
 
 
 @lru_cache(maxsize=64)
@@ -134,6 +154,7 @@ def _describe(path: str, mtime: float) -> FmuDescription:
         can_get_and_set_state=bool(cs and cs.canGetAndSetFMUstate),
         can_serialize_state=bool(cs and cs.canSerializeFMUstate),
         default_step_size_s=float(step) if step else None, variables=variables,
+        once_per_process=bool(cs and cs.canBeInstantiatedOnlyOncePerProcess),
         n_states=int(md.numberOfContinuousStates or len(md.derivatives)),
         n_event_indicators=int(md.numberOfEventIndicators or 0))
 
@@ -158,6 +179,7 @@ def format_description(d: FmuDescription) -> str:
         f"Interfaces   {', '.join(kinds) or 'none'}",
         f"State        get/set: {'yes' if d.can_get_and_set_state else 'no'}, "
         f"serialize: {'yes' if d.can_serialize_state else 'no'}",
+        f"Instances    {'one per process (canBeInstantiatedOnlyOncePerProcess)' if d.once_per_process else 'several'}",
     ]
     if d.default_step_size_s:
         lines.append(f"Default step {d.default_step_size_s:g} s")
@@ -169,8 +191,7 @@ def format_description(d: FmuDescription) -> str:
             unit = f"[{v.unit}]" if v.unit else ""
             extra = f" ({v.variability})" if causality == "parameter" else ""
             lines.append(f"  {v.name:<16} {v.type:<8} {start:<18} {unit:<10} {v.description}{extra}".rstrip())
-    plant, prior = d.plant_problems(), d.prior_problems()
+    plant = d.plant_problems()
     lines.append("As plant     " + ("yes" if not plant else "no: " + "; ".join(plant)))
-    lines.append("As prior     " + ("yes (a second instance receives the plant's state each step)"
-                                    if not prior else "no: " + "; ".join(prior)))
+    lines.append("As prior     " + d.prior_summary())
     return "\n".join(lines)

@@ -221,6 +221,19 @@ class FmuPlant:
         self._check(self._fmi.set_state(self._incoming), "setting the FMU state")
         self.time = float(time)
 
+    def hold_state(self) -> None:
+        """Remember this instance's state and time in place (get FMU state, no serialization), for
+        `restore_state`: what a single-instance rollback prior needs (canGetAndSetFMUstate)."""
+        if not self.description.can_get_and_set_state:
+            raise PlantError(f"{self.path.name} cannot get and set its state (canGetAndSetFMUstate is false)")
+        self._capture()
+        self._held_time = self.time
+
+    def restore_state(self) -> None:
+        """Back to the state and time of the last `hold_state`."""
+        self._check(self._fmi.set_state(self._state), "setting the FMU state")
+        self.time = self._held_time
+
     def copy_state_to(self, other: "FmuPlant") -> None:
         """Move this instance's full state (and time) into `other`, an instance of the same FMU."""
         if other.description.guid != self.description.guid:
