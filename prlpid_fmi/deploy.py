@@ -26,7 +26,6 @@ plus one exact-residual correction, no libm), so C reproduces Python's math.sqrt
 """
 from __future__ import annotations
 
-import keyword
 import math
 import re
 from dataclasses import dataclass
@@ -53,7 +52,7 @@ volatile while""".split())
 LREAL_MAX = "1.7976931348623157E308"  # ST has no infinity: an unbounded limit is the largest LREAL
 
 __all__ = ["DeployedController", "from_schedule", "render", "export_controller", "controller_name", "FORMATS",
-           "deployable_files"]
+           "csv_only_options", "deployable_files"]
 
 
 @dataclass(frozen=True)
@@ -138,11 +137,11 @@ def controller_name(text: str) -> str:
     name = re.sub(r"[^A-Za-z0-9]+", "_", text).strip("_")
     if not name or not name[0].isalpha():
         name = "pid_" + name if name else "pid"
-    return name.rstrip("_")
+    return name + "_pid" if name in _C_KEYWORDS else name
 
 
 def _check_name(name: str) -> str:
-    if not _IDENTIFIER.match(name) or name.lower() in _C_KEYWORDS or keyword.iskeyword(name):
+    if not _IDENTIFIER.match(name) or name in _C_KEYWORDS:
         raise PrlPidError(f"--name {name!r}: not usable as a C and IEC 61131-3 identifier "
                           "(expected a letter, then letters, digits and single underscores, e.g. two_tank_pid)")
     return name
@@ -301,7 +300,7 @@ def export_controller(run_dir: str | Path, output: str | Path, fmt: str, fixed: 
     for path in paths:
         check_output(run_dir, path, force)
     base = paths[0].with_suffix("").name if fmt == "c" else None
-    controller = from_schedule(read_schedule_csv(table), _check_name(name or controller_name(paths[0].stem)),
+    controller = from_schedule(read_schedule_csv(table), name or controller_name(paths[0].stem),
                                source=f"{run_dir.name}/{table.name}")
     files = render(controller, fmt, basename=base)
     return [write_atomic(path, text) for path, text in zip(paths, files.values())]

@@ -338,6 +338,7 @@ def test_st_literals_read_back_exactly():
 
 def test_names_and_refused_tables(deployed, tmp_path):
     assert controller_name("two-tank pid") == "two_tank_pid" and controller_name("3d") == "pid_3d"
+    assert controller_name("int") == "int_pid" and controller_name("__") == "pid"
     table = deployed["siso_setpoint_clamping"]["table"]
     with pytest.raises(PrlPidError, match=r"^here: Ti\[y\]: row 1 \(breakpoint -0.5\) \(got -2.0; expected Ti > 0 s\)$"):
         from_schedule(dataclasses.replace(table, Ti=-table.Ti), "pid", source="here")
