@@ -144,6 +144,18 @@ def _export(args: argparse.Namespace) -> int:
     return 0
 
 
+def _sweep(args: argparse.Namespace) -> int:
+    from .sweep import resolve_sweep, run_sweep
+
+    result = run_sweep(resolve_sweep(args.sweep), out=args.out, workers=args.workers, ray=args.ray is not None,
+                       ray_address=args.ray or None, log=(lambda line: None) if args.quiet else
+                       (lambda line: print(line, file=sys.stderr, flush=True)))
+    for label, error in result.failed:
+        print(f"{PROG}: error: {label}: {error}", file=sys.stderr)
+    print(f"sweep summary: {result.out / 'summary.md'}")
+    return 1 if result.failed else 0
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with the tool's error convention: one line on stderr, exit code 2."""
 
@@ -195,6 +207,15 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--resume", action="store_true", help="continue the run in --out from its latest checkpoint")
     p.add_argument("--no-progress", action="store_true", help="no progress on stderr")
     p.add_argument("--no-baseline", action="store_true", help="skip tuning the fixed-PID baseline")
+
+    p = command("sweep", _sweep, "run a scenario's variants over several seeds (local processes or Ray) and "
+                                 "summarise them: mean and 95 % interval per variant")
+    p.add_argument("sweep", help="sweep YAML file, or the name of a bundled sweep (scenarios/sweeps/)")
+    p.add_argument("--out", default=None, help="sweep folder (default: runs/sweeps/<name>); run again to continue")
+    p.add_argument("--workers", type=int, default=None, help="local processes (default: one per CPU core)")
+    p.add_argument("--ray", nargs="?", const="", default=None, metavar="ADDRESS",
+                   help="run the trials as Ray tasks: on the cluster at ADDRESS (e.g. auto, ray://host:10001), or "
+                        "without ADDRESS on RAY_ADDRESS or a new local Ray instance")
 
     p = command("evaluate", _evaluate, "re-evaluate a trained policy (into RUN_DIR/evaluations/<n>/)")
     p.add_argument("run_dir")
