@@ -27,6 +27,7 @@ from scipy.optimize import differential_evolution
 from .actions import ActionMap, Gains, gains_from_values
 from .config import TuningConfig
 from .core import LoopCore
+from .isolation import make_core
 from .evaluate import gains_rollout
 
 DIVERGED_COST = 1e6
@@ -103,7 +104,7 @@ def tune_fixed_pid(config: TuningConfig, seed: int = 0, episodes: int = 3, maxit
     search = dataclasses.replace(config, forecast_horizon=0)
     gain_map = ActionMap(config.loops, config.coupled, config.coupling_range)
     seeds = [seed + i for i in range(episodes)]
-    core = LoopCore(search)
+    core = make_core(search)
     n = gain_map.size
     expected = (maxiter + 1) * popsize * n
     done = [popsize * n]

@@ -11,7 +11,7 @@ import warnings
 
 from . import __version__
 from .deploy import FORMATS
-from .errors import PrlPidError
+from .errors import Interrupted, PrlPidError
 
 PROG = "prlpid-fmi"
 
@@ -89,19 +89,68 @@ def _schema(args: argparse.Namespace) -> int:
     return 0
 
 
+def _start_values(pairs: list[str]) -> dict:
+    """--set NAME=VALUE arguments as {name: float}; one line for a malformed one."""
+    out = {}
+    for pair in pairs or []:
+        name, sep, value = pair.partition("=")
+        try:
+            out[name.strip()] = float(value)
+        except ValueError:
+            raise PrlPidError(f"--set {pair}: expected NAME=NUMBER (got {pair!r})") from None
+        if not sep or not name.strip():
+            raise PrlPidError(f"--set {pair}: expected NAME=NUMBER (got {pair!r})")
+    return out
+
+
 def _init(args: argparse.Namespace) -> int:
     from .scenario import init_scenario
 
-    sys.stdout.write(init_scenario(args.fmu))
+    sys.stdout.write(init_scenario(args.fmu, output=args.output, start_values=_start_values(args.set)))
     return 0
 
 
+def _probe(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from .probe import format_probe, plot_probe, probe
+
+    result = probe(args.fmu, output=args.output, inputs=args.input or None, start_values=_start_values(args.set))
+    print(format_probe(result))
+    plot = Path(args.plot) if args.plot else Path(f"{Path(args.fmu).stem}-probe.png")
+    plot_probe(result, plot)
+    _say(args, f"plot: {plot}")
+    return 0
+
+
+def _interrupt_on_signals():
+    """SIGTERM and SIGINT raise Interrupted (once; a second signal is ignored while the checkpoint is saved).
+    Returns the previous handlers."""
+    import signal
+
+    from .errors import Interrupted
+
+    def handler(signum, frame):
+        for s in (signal.SIGTERM, signal.SIGINT):
+            signal.signal(s, signal.SIG_IGN)
+        raise Interrupted(signum)
+
+    return {s: signal.signal(s, handler) for s in (signal.SIGTERM, signal.SIGINT)}
+
+
 def _tune(args: argparse.Namespace) -> int:
+    import signal
+
     from .run import tune
 
-    run_dir = tune(_scenario(args.scenario), timesteps=args.timesteps, seed=args.seed, out=args.out,
-                   resume=args.resume, progress_bar=not (args.no_progress or args.quiet),
-                   baseline=not args.no_baseline)
+    previous = _interrupt_on_signals()
+    try:
+        run_dir = tune(_scenario(args.scenario), timesteps=args.timesteps, seed=args.seed, out=args.out,
+                       resume=args.resume, progress_bar=not (args.no_progress or args.quiet),
+                       baseline=not args.no_baseline)
+    finally:
+        for s, h in previous.items():
+            signal.signal(s, h)
     _say(args, (run_dir / "report.md").read_text())
     print(f"run directory: {run_dir}")
     return 0
@@ -271,6 +320,14 @@ def main(argv: list[str] | None = None) -> int:
     except OSError as exc:
         print(f"{PROG}: error: {_os_error_line(exc)}", file=sys.stderr)
         return 2
+    except Interrupted as exc:
+        import signal
+
+        resumable = exc.run_dir is not None and (exc.run_dir / "scenario.yaml").is_file()
+        where = (f"; continue the run with `{PROG} tune {exc.run_dir}/scenario.yaml --out {exc.run_dir} --resume`"
+                 if resumable else "")
+        print(f"\n{PROG}: interrupted by {signal.Signals(exc.signum).name}{where}", file=sys.stderr)
+        return 128 + exc.signum
     except KeyboardInterrupt:
         print(f"\n{PROG}: interrupted", file=sys.stderr)
         return 130

@@ -14,7 +14,7 @@ from typing import Optional
 from .control.reward import RewardWeights
 from .schema import model as _m
 from .schema.model import default as _d
-from .schema.types import Algorithm, AntiWindup, DisturbanceKind, GainMapping, GainScale, Smoothing, VecEnv
+from .schema.types import Algorithm, AntiWindup, DisturbanceKind, GainMapping, GainScale, Isolation, Smoothing, VecEnv
 
 INF = float("inf")
 
@@ -109,6 +109,9 @@ class TuningConfig:
     plant_parameters: dict = field(default_factory=dict)
     sample_time_s: float = _d(_m.PlantModel, "sample_time")
     fmi_version: int = _d(_m.PlantModel, "fmi_version")  # for bundled plants only
+    isolation: Isolation = _d(_m.PlantModel, "isolation")  # auto | process | none (prlpid_fmi.isolation)
+    leak_check_every: int = _d(_m.PlantModel, "leak_check_every")  # resets between leak checks; 0 = off
+    leak_limit_mb: float = _d(_m.PlantModel, "leak_limit_mb")  # growth [MB] over one check that re-instantiates
     prior: PriorConfig = PriorConfig()
     # controller
     anti_windup: AntiWindup = _d(_m.ControllerModel, "anti_windup")
@@ -169,6 +172,7 @@ class AgentConfig:
     buffer_size: int = _agent("buffer_size")
     learning_starts: int = _agent("learning_starts")
     checkpoint_every: int = _agent("checkpoint_every")
+    checkpoint_minutes: float = _agent("checkpoint_minutes")
     torch_threads: int = _agent("torch_threads")
     extra: dict = field(default_factory=dict)  # further keyword arguments for the SB3 algorithm
 

@@ -98,19 +98,11 @@ class LoopCore:
     """
 
     def __init__(self, config: TuningConfig, forecast_path: str = "auto"):
-        self.config = c = config
-        self.n_loops = n = c.n_loops
-        self.loop_names = [l.output for l in c.loops]
+        c = config
+        n = self.set_loop_constants(c)
         path = resolve_fmu(c.fmu, c.fmi_version)
-        self.inputs, outputs = [l.input for l in c.loops], [l.output for l in c.loops]
-        self.plant = FmuPlant(path, self.inputs, outputs, c.sample_time_s, c.plant_parameters, "plant")
-        self.scale = [float(l.measurement_scale) for l in c.loops]
-        self.bound = [float(l.divergence_bound) for l in c.loops]
-        self.u_min = [float(l.u_min) for l in c.loops]
-        self.u_max = [float(l.u_max) for l in c.loops]
-        self.u_scale = control_scales(c)
-        self.weights = c.reward
-        self.penalty = float(c.divergence_penalty)
+        self.plant = FmuPlant(path, self.inputs, self.loop_names, c.sample_time_s, c.plant_parameters, "plant")
+        self.plant.guard_leaks(c.leak_check_every, c.leak_limit_mb)
         pid_args = dict(sample_time_s=c.sample_time_s, u_min=self.u_min, u_max=self.u_max,
                         anti_windup=c.anti_windup, derivative_filter_N=c.derivative_filter_N)
         if c.coupled:
@@ -139,6 +131,22 @@ class LoopCore:
         self._rng = np.random.default_rng(0)
 
     # -- construction ---------------------------------------------------------------------------
+    def set_loop_constants(self, config: TuningConfig) -> int:
+        """config, n_loops, loop_names, inputs, scale, bound, u_min, u_max, u_scale, weights, penalty from
+        `config` (what every core exposes to its drivers); returns n_loops."""
+        c = self.config = config
+        self.n_loops = c.n_loops
+        self.loop_names = [l.output for l in c.loops]
+        self.inputs = [l.input for l in c.loops]
+        self.scale = [float(l.measurement_scale) for l in c.loops]
+        self.bound = [float(l.divergence_bound) for l in c.loops]
+        self.u_min = [float(l.u_min) for l in c.loops]
+        self.u_max = [float(l.u_max) for l in c.loops]
+        self.u_scale = control_scales(c)
+        self.weights = c.reward
+        self.penalty = float(c.divergence_penalty)
+        return self.n_loops
+
     def _make_prior(self, path: Path, forecast_path: str):
         from .control.forecast import make_forecast
 

@@ -21,6 +21,7 @@ from .actions import ActionMap, AnchoredActionMap, Gains, gains_from_values
 from .config import TuningConfig
 from .control import make_smoother
 from .core import LoopCore, resolve_fmu  # noqa: F401  (resolve_fmu: public import path)
+from .isolation import make_core
 
 OBS_CLIP = 10.0
 
@@ -57,7 +58,7 @@ class PidTuningEnv(gym.Env):
                  info: bool = True, forecast_path: str = "auto"):
         self.config = c = config
         self.render_mode = render_mode
-        self.core = LoopCore(config, forecast_path)
+        self.core = make_core(config, forecast_path)  # in this process, or in a worker (plant.isolation)
         self.action_map = make_action_map(config, anchor)
         self.smoother = make_smoother(c.smoothing, window=c.smoothing_window, alpha=c.smoothing_alpha,
                                       n_params=self.action_map.size)

@@ -19,5 +19,15 @@ class PlantError(PrlPidError):
     """An FMU cannot be loaded or used as a plant or prior."""
 
 
+class Interrupted(BaseException):
+    """SIGTERM or SIGINT during a command: unwinds like KeyboardInterrupt (a training saves a checkpoint on the
+    way); the CLI exits with 128 + the signal number. run_dir: the run being worked on, when known."""
+
+    def __init__(self, signum: int, run_dir=None):
+        super().__init__(signum)
+        self.signum = signum
+        self.run_dir = run_dir
+
+
 class RunError(PrlPidError):
     """A run directory or an output file cannot be used as asked (exists, missing files, owned by a run)."""

@@ -14,6 +14,7 @@ from gymnasium.utils.seeding import np_random
 
 from .config import TuningConfig
 from .core import LoopCore
+from .isolation import make_core
 from .env import PidTuningEnv
 from .metrics import compute_metrics
 
@@ -108,7 +109,7 @@ def gains_rollout(gains_fn: GainsFn, config: TuningConfig, seed: int = 0, core: 
     """
     own_core = core is None
     if own_core:
-        core = LoopCore(dataclasses.replace(config, forecast_horizon=0))
+        core = make_core(dataclasses.replace(config, forecast_horizon=0))
     try:
         core.reset(np_random(seed)[0], setpoint_schedule=setpoint_schedule)
         record = _Recorder(core)

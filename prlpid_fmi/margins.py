@@ -309,6 +309,16 @@ def loop_margins(config: TuningConfig, Kp: Sequence[float], Ti: Sequence[float],
     amplitudes = list(default_amplitude(c, Kp) if amplitude is None else amplitude)
     if len(amplitudes) != n or not all(a > 0 for a in amplitudes):
         raise ValueError(f"amplitude needs one positive value per loop ({n}), got {amplitude!r}")
+    if c.isolation == "process":  # the FMU in a worker process: a crash means no margins, not a dead tool
+        from .core import resolve_fmu
+        from .isolation import WorkerCrashed, call_in_worker
+
+        try:
+            return call_in_worker(loop_margins, dataclasses.replace(c, isolation="none"), Kp, Ti, Td, operating_point,
+                                  coupling, frequencies, amplitude, fmus=[resolve_fmu(c.fmu, c.fmi_version)],
+                                  what="the robustness margins' measurement")
+        except WorkerCrashed as exc:
+            return _no_margins(c.loops[0].output, amplitudes[0], str(exc))
     rig = ClosedLoopRig(c, Kp, Ti, Td, operating_point, coupling)
     try:
         settling = rig.settle()

@@ -155,11 +155,17 @@ def load_monitor_csvs(monitor_dir) -> tuple[np.ndarray, np.ndarray]:
     for f in sorted(Path(monitor_dir).glob("*.monitor.csv")):
         with open(f, newline="") as fh:
             lines = [line for line in fh if not line.startswith("#")]
+        offset = last = 0.0  # a resumed training appends with its clock restarted at 0: continue it
         for rec in csv.DictReader(lines):
             try:
-                rows.append((float(rec["t"]), float(rec["r"]), int(float(rec["l"]))))
+                t = float(rec["t"])
+                row = (t + offset if t + offset >= last else t + last, float(rec["r"]), int(float(rec["l"])))
             except (KeyError, TypeError, ValueError):
                 continue  # a line being written by a still-running training
+            if row[0] != t + offset:
+                offset = last
+            last = row[0]
+            rows.append(row)
     rows.sort(key=lambda r: r[0])
     rewards = np.array([r[1] for r in rows], float)
     steps = np.cumsum([r[2] for r in rows]).astype(float)

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from . import rundir as rd
-from .errors import PrlPidError, RunError
+from .errors import Interrupted, PrlPidError, RunError
 from .rundir import write_atomic, write_json
 from .scenario import Scenario, load_scenario, scenario_to_yaml
 
@@ -169,15 +169,28 @@ def tune(scenario_path: str | Path, timesteps: int | None = None, seed: int | No
         raise RunError(f"--seed: must not be negative (got {seed}; expected an integer >= 0)")
     scenario = load_scenario(scenario_path)
     run_dir, created = rd.prepare_run_dir(out, scenario.name, resume)
+    crashed = rd.mark_active(run_dir)
     try:
-        return _tune(scenario, Path(scenario_path), run_dir, timesteps, seed, resume, progress_bar, baseline)
-    except BaseException:
+        return _tune(scenario, Path(scenario_path), run_dir, timesteps, seed, resume, progress_bar, baseline,
+                     crashed and resume)
+    except BaseException as exc:
+        if isinstance(exc, Interrupted):
+            exc.run_dir = run_dir
         rd.discard_if_empty(run_dir, created)
         raise
+    finally:
+        rd.mark_inactive(run_dir)
+
+
+def _isolated(scenario: Scenario, isolation: str) -> Scenario:
+    """The scenario with plant.isolation `isolation` where it is "auto"."""
+    if scenario.tuning.isolation != "auto" or isolation == "auto":
+        return scenario
+    return dataclasses.replace(scenario, tuning=dataclasses.replace(scenario.tuning, isolation=isolation))
 
 
 def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None, seed: int | None, resume: bool,
-          progress_bar: bool, baseline: bool) -> Path:
+          progress_bar: bool, baseline: bool, crashed: bool = False) -> Path:
     from . import plots
     from .baseline import tune_fixed_pid
     from .progress import Progress
@@ -192,6 +205,13 @@ def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None
         scenario = load_scenario(run_dir / rd.SCENARIO)
         source = run_dir / rd.SCENARIO
         info = {**json.loads((run_dir / rd.RUN_INFO).read_text()), "resumed": rd.now()}
+        if crashed and scenario.tuning.isolation == "auto":
+            import warnings
+
+            warnings.warn(f"{run_dir}: the previous run ended abruptly (did the FMU crash it?); the plant now runs "
+                          "in a worker process (plant.isolation: process)", stacklevel=2)
+            info["isolation"] = "process"
+        scenario = _isolated(scenario, info.get("isolation", "auto"))
     agent = scenario.agent
     if seed is not None:
         agent = dataclasses.replace(agent, seed=seed)
@@ -312,7 +332,12 @@ def _candidates_table(sched, fixed) -> str:
 def _load_run(run_dir: Path) -> Scenario:
     if not (run_dir / rd.SCENARIO).is_file() or not (run_dir / rd.MODEL).is_file():
         raise RunError(f"{run_dir}: not a finished run directory (expected {rd.SCENARIO} and {rd.MODEL} from `tune`)")
-    return load_scenario(run_dir / rd.SCENARIO)
+    scenario = load_scenario(run_dir / rd.SCENARIO)
+    try:  # a run whose plant crashed the tool once keeps its plant in a worker process
+        isolation = json.loads((run_dir / rd.RUN_INFO).read_text()).get("isolation", "auto")
+    except (OSError, ValueError, AttributeError):
+        isolation = "auto"
+    return _isolated(scenario, isolation)
 
 
 def _on_other_evaluation(trained: Scenario, scenario_path: str | Path) -> Scenario:
@@ -322,9 +347,9 @@ def _on_other_evaluation(trained: Scenario, scenario_path: str | Path) -> Scenar
             or other.tuning.coupled != trained.tuning.coupled:
         raise RunError(f"{scenario_path}: plant.loops differ from the trained run's "
                        f"(got {[l.output for l in other.tuning.loops]}; expected the same loops and coupling)")
-    return dataclasses.replace(other, tuning=dataclasses.replace(
+    return _isolated(dataclasses.replace(other, tuning=dataclasses.replace(
         other.tuning, loops=trained.tuning.loops, coupled=trained.tuning.coupled,
-        coupling_range=trained.tuning.coupling_range))
+        coupling_range=trained.tuning.coupling_range)), trained.tuning.isolation)
 
 
 def evaluate_run(run_dir: str | Path, scenario_path: str | Path | None = None) -> Path:

@@ -11,6 +11,8 @@ Layout of a run directory (every name below is owned by the run; nothing else ma
   report.md        the comparison as a table
   *.png            response, control signal, gains over time, learning curve
   evaluations/<n>/ re-evaluations (`prlpid-fmi evaluate`), each with its own scenario, metrics and plots
+  .active          while `tune` works on the run: its process id (left behind only when that process
+                   died abruptly, e.g. an FMU crashed it: `tune --resume` then isolates the plant)
 
 Every file is written by `write_atomic`: a temporary file in the same folder, renamed over the target,
 so a reader never sees half a file; files get mode 0666 minus the umask (0644 usually).
@@ -50,7 +52,8 @@ CHECKPOINTS = "checkpoints"
 TENSORBOARD = "tensorboard"
 MONITOR = "monitor"
 EVALUATIONS = "evaluations"
-OWNED_FILES = frozenset({SCENARIO, RUN_INFO, MODEL, VECNORMALIZE, FIXED_PID, FIXED_PID_CSV, METRICS, GAINS, SCHEDULE, REPORT,
+ACTIVE = ".active"
+OWNED_FILES = frozenset({ACTIVE, SCENARIO, RUN_INFO, MODEL, VECNORMALIZE, FIXED_PID, FIXED_PID_CSV, METRICS, GAINS, SCHEDULE, REPORT,
                          RESPONSE_PLOT, CONTROL_SIGNAL_PLOT, GAINS_PLOT, LEARNING_CURVE_PLOT})
 OWNED_DIRS = frozenset({CHECKPOINTS, TENSORBOARD, MONITOR, EVALUATIONS})
 PACKAGES = ("prlpid-fmi", "fmpy", "numpy", "scipy", "torch", "stable-baselines3", "gymnasium", "pyyaml", "matplotlib")
@@ -177,6 +180,41 @@ def discard_if_empty(run_dir: Path, created: Path | None) -> None:
     already produced results there (holds_results)."""
     if created is not None and created.is_dir() and not holds_results(run_dir):
         shutil.rmtree(created, ignore_errors=True)
+
+
+def mark_active(run_dir: Path) -> bool:
+    """Record that this process works on the run (ACTIVE holds its process id).
+
+    Returns True when an earlier process left its mark behind, i.e. ended abruptly (a crash, SIGKILL).
+    Raises RunError when that process is still alive (two commands on one run directory).
+    """
+    marker = Path(run_dir) / ACTIVE
+    crashed = False
+    if marker.is_file():
+        try:
+            pid = int(marker.read_text().strip() or 0)
+        except ValueError:
+            pid = 0
+        if pid > 0 and pid != os.getpid() and _alive(pid):
+            raise RunError(f"{run_dir}: in use by process {pid} (expected no other `tune` on this run directory)")
+        crashed = True
+    write_atomic(marker, f"{os.getpid()}\n")
+    return crashed
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def mark_inactive(run_dir: Path) -> None:
+    """Remove this process's ACTIVE mark (the run ended normally, with an error or by a signal)."""
+    (Path(run_dir) / ACTIVE).unlink(missing_ok=True)
 
 
 def latest_checkpoint(run_dir: Path, trained_timesteps: int = 0) -> tuple[Path | None, int]:

@@ -471,11 +471,11 @@ def replay_schedule(schedule: GainSchedule, config: TuningConfig, seed: int = 0,
     if not math.isclose(schedule.sample_time_s, config.sample_time_s, rel_tol=1e-12):
         warnings.warn(f"the schedule was tuned at Ts = {schedule.sample_time_s} s, the config runs at "
                       f"Ts = {config.sample_time_s} s", stacklevel=2)
-    from .core import LoopCore
+    from .isolation import make_core
     from .evaluate import evaluate_gains
 
     config = dataclasses.replace(config, forecast_horizon=0)
-    core = LoopCore(config)
+    core = make_core(config)
     try:
         probe = _Probe(schedule.variable, core)
         values = []

@@ -18,7 +18,7 @@ from .config import AgentConfig, TuningConfig
 from .core import resolve_fmu
 from .env import PidTuningEnv, is_anchored
 from .fmu import describe_fmu
-from .errors import PrlPidError
+from .errors import PrlPidError, RunError
 from .progress import training_progress
 from .rundir import write_atomic
 
@@ -46,10 +46,12 @@ def _shared_mlp_class():
     return SharedMLP
 
 
-def make_vec_env(config: TuningConfig, agent: AgentConfig, monitor_dir: Path | None = None, anchor=None):
+def make_vec_env(config: TuningConfig, agent: AgentConfig, monitor_dir: Path | None = None, anchor=None,
+                 append: bool = False):
     """n_envs PidTuningEnvs (each with its own plant and prior FMU instances), seeded from agent.seed.
 
-    anchor: the tuned fixed PID's Gains the anchored gain map is centred on (None: absolute map)."""
+    anchor: the tuned fixed PID's Gains the anchored gain map is centred on (None: absolute map).
+    append: add to existing Monitor CSVs (a resumed training) instead of starting them afresh."""
     from stable_baselines3.common.env_util import make_vec_env as sb3_make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
@@ -57,7 +59,14 @@ def make_vec_env(config: TuningConfig, agent: AgentConfig, monitor_dir: Path | N
     if agent.envs > 1 and describe_fmu(resolve_fmu(config.fmu, config.fmi_version)).once_per_process:
         vec_cls = SubprocVecEnv  # canBeInstantiatedOnlyOncePerProcess: one env (one instance) per process
     return sb3_make_vec_env(functools.partial(PidTuningEnv, config, anchor=anchor, info=False), n_envs=agent.envs, seed=agent.seed,
-                            vec_env_cls=vec_cls, monitor_dir=str(monitor_dir) if monitor_dir else None)
+                            vec_env_cls=vec_cls, monitor_dir=str(monitor_dir) if monitor_dir else None,
+                            monitor_kwargs={"override_existing": not _monitors_exist(monitor_dir, agent.envs)}
+                            if append and monitor_dir else None)
+
+
+def _monitors_exist(monitor_dir: Path, n_envs: int) -> bool:
+    """Whether every env's Monitor CSV (SB3 names them <i>.monitor.csv) exists, so that all can be appended to."""
+    return all((Path(monitor_dir) / f"{i}.monitor.csv").is_file() for i in range(n_envs))
 
 
 def build_model(agent: AgentConfig, env, tensorboard_dir: Path | None = None, anchored: bool = False):
@@ -100,6 +109,39 @@ def load_model(path: Path, algorithm: str, env=None):
     return {"ppo": PPO, "sac": SAC, "td3": TD3}[algorithm].load(str(path), env=env, device="cpu")
 
 
+def _timed_checkpoints(run_dir: Path, agent: AgentConfig):
+    """A callback that saves a checkpoint every agent.checkpoint_minutes of wall time (beside the step-count
+    checkpoints), so that a long training killed between them loses little."""
+    import time
+
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    interval_s = 60.0 * agent.checkpoint_minutes
+
+    class TimedCheckpoint(BaseCallback):
+        def _on_training_start(self) -> None:
+            self.due = time.monotonic() + interval_s
+
+        def _on_step(self) -> bool:
+            if time.monotonic() >= self.due:
+                save_checkpoint(self.model, run_dir, agent.normalize)
+                self.due = time.monotonic() + interval_s
+            return True
+
+    return TimedCheckpoint()
+
+
+def save_checkpoint(model, run_dir: Path, normalize: bool) -> Path:
+    """checkpoints/model_<timesteps>_steps.zip (+ the VecNormalize statistics) atomically; returns its path."""
+    steps = int(model.num_timesteps)
+    path = write_atomic(Path(run_dir) / "checkpoints" / f"model_{steps}_steps.zip", lambda tmp: model.save(str(tmp)))
+    if normalize and model.get_vec_normalize_env() is not None:
+        stats = model.get_vec_normalize_env()
+        write_atomic(Path(run_dir) / "checkpoints" / f"model_vecnormalize_{steps}_steps.pkl",
+                     lambda tmp: stats.save(str(tmp)))
+    return path
+
+
 def train(config: TuningConfig, agent: AgentConfig, run_dir: Path, progress_bar: bool = False,
           resume_from: Path | None = None, total_timesteps: int | None = None, anchor=None):
     """Train an agent; checkpoints, TensorBoard logs and Monitor CSVs go under run_dir.
@@ -112,12 +154,18 @@ def train(config: TuningConfig, agent: AgentConfig, run_dir: Path, progress_bar:
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(agent.torch_threads)
-    env = make_vec_env(config, agent, run_dir / "monitor", anchor)
+    env = make_vec_env(config, agent, run_dir / "monitor", anchor, append=resume_from is not None)
     if agent.normalize:
         stats = run_dir / "vecnormalize.pkl"
         env = VecNormalize.load(str(stats), env) if resume_from and stats.exists() else VecNormalize(env, gamma=agent.gamma)
     if resume_from is not None:
-        model = load_model(resume_from, agent.algorithm, env)
+        try:
+            model = load_model(resume_from, agent.algorithm, env)
+        except Exception as exc:  # a damaged file fails in zipfile, pickle or torch: all mean the same here
+            env.close()
+            raise RunError(f"{resume_from}: cannot resume from this checkpoint ({type(exc).__name__}: "
+                           f"{' '.join(str(exc).split())}; expected a {agent.algorithm.upper()} model written by "
+                           "`tune`; delete it to resume from an earlier one)") from None
         model.tensorboard_log = str(run_dir / "tensorboard")
     else:
         model = build_model(agent, env, run_dir / "tensorboard", anchored=is_anchored(config, anchor))
@@ -125,10 +173,14 @@ def train(config: TuningConfig, agent: AgentConfig, run_dir: Path, progress_bar:
     checkpoint = CheckpointCallback(save_freq=max(agent.checkpoint_every // agent.envs, 1),
                                     save_path=str(run_dir / "checkpoints"), name_prefix="model",
                                     save_vecnormalize=agent.normalize)
-    callbacks = [checkpoint, training_progress()] if progress_bar else [checkpoint]
+    callbacks = [checkpoint, _timed_checkpoints(run_dir, agent)] + ([training_progress()] if progress_bar else [])
     try:
         model.learn(total_timesteps=steps, callback=callbacks, reset_num_timesteps=resume_from is None,
                     tb_log_name=agent.algorithm)
+    except BaseException:  # a signal (SIGTERM, SIGINT) or an error: keep what was learnt for --resume
+        if model.num_timesteps > 0:
+            save_checkpoint(model, run_dir, agent.normalize)
+        raise
     finally:
         write_atomic(run_dir / "model.zip", lambda tmp: model.save(str(tmp)))
         if agent.normalize:

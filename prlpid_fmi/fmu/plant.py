@@ -38,6 +38,23 @@ def _extract(path: Path) -> str:
     return _EXTRACTED[key]
 
 
+def rss_bytes() -> int | None:
+    """This process's resident memory [bytes] now (Linux /proc; None elsewhere)."""
+    try:
+        with open("/proc/self/statm", "rb") as f:
+            return int(f.read().split()[1]) * _PAGE_SIZE
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+try:
+    import os as _os
+
+    _PAGE_SIZE = _os.sysconf("SC_PAGE_SIZE")
+except (AttributeError, ValueError, OSError):
+    _PAGE_SIZE = 4096
+
+
 class StepRejected(Exception):
     """doStep returned discard (or worse): the FMU kept its last good state. Not a user error."""
 
@@ -83,6 +100,8 @@ class FmuPlant:
         self.time = 0.0
         self._state = None          # FMU state handle reused by copy_state_to / get_state
         self._incoming = None       # deserialized state handle reused when receiving a copy
+        self._leak_check = None     # [every_resets, limit_bytes, resets, bytes added] (guard_leaks)
+        self.reinstantiations = 0   # fresh instances the leak guard made
         self._instantiate(instance_name)
         self.reset()
 
@@ -142,15 +161,37 @@ class FmuPlant:
         return self._out_view.copy()
 
     # -- simulation ----------------------------------------------------------------------------
+    def guard_leaks(self, every_resets: int, limit_mb: float) -> None:
+        """Watch the memory (RSS) each reset adds; every `every_resets` resets, when they added more than
+        limit_mb [MB] together, free the instance and instantiate the FMU afresh (with a warning), which
+        returns what a leaking reset kept. every_resets 0: no guard."""
+        self._leak_check = [int(every_resets), float(limit_mb) * 2**20, 0, 0] if every_resets > 0 else None
+
+    def _reinstantiate(self) -> None:
+        name = self._fmi.instance_name
+        self._free_instance()
+        self._instantiate(name)
+
+    def _free_instance(self) -> None:
+        self._release_states()
+        try:
+            self._fmi.terminate()
+        except Exception:
+            pass
+        self._fmi.free()
+
     def reset(self, parameters: Mapping[str, float] | None = None) -> np.ndarray:
         """Back to t = 0 with start values, this plant's parameters (updated by `parameters`) applied.
 
-        Uses the FMU's reset; re-instantiates when the FMU's reset fails. Returns the outputs at t = 0.
+        Uses the FMU's reset; re-instantiates when the FMU's reset fails (or the leak guard finds the
+        resets' memory growing, see guard_leaks). Returns the outputs at t = 0.
         """
         if parameters:
             for name in parameters:
                 self.description.require(name, ("parameter", "input"), "a parameter")
             self.parameters.update(parameters)
+        check = self._leak_check
+        before = rss_bytes() if check is not None else None
         self._release_states()
         try:
             self._fmi.reset()
@@ -165,6 +206,19 @@ class FmuPlant:
             self._fmi.initialize(0.0)
         except Exception as exc:
             raise PlantError(f"{self.path.name}: initialisation failed: {exc} {self.last_message}".strip()) from None
+        if before is not None:
+            check[2] += 1
+            check[3] += max(rss_bytes() - before, 0)
+            if check[2] >= check[0]:
+                grown, check[2], check[3] = check[3], 0, 0
+                if grown > check[1]:
+                    import warnings
+
+                    warnings.warn(f"{self.path.name}: its last {check[0]} resets added {grown / 2**20:.0f} MB of "
+                                  "memory; the FMU is instantiated afresh", stacklevel=2)
+                    self.reinstantiations += 1
+                    self._reinstantiate()
+                    return self.reset()
         return self.read_outputs()
 
     def step(self, u: np.ndarray | Sequence[float]) -> np.ndarray:
@@ -256,12 +310,7 @@ class FmuPlant:
         """Free the FMU instance (idempotent)."""
         if getattr(self, "_fmi", None) is None:
             return
-        self._release_states()
-        try:
-            self._fmi.terminate()
-        except Exception:
-            pass
-        self._fmi.free()
+        self._free_instance()
         self._fmi = None
 
     def __enter__(self) -> "FmuPlant":

@@ -23,7 +23,7 @@ from ..control.smoothing import DEFAULT_ALPHA, DEFAULT_WINDOW
 from . import checks
 from .checks import check_variable, state_of
 from .types import (LOOP_TARGETS, Algorithm, AntiWindup, Count, DisturbanceType, Finite, Flag, Fraction,
-                    GainMapping, GainScale, Name, NonNegative, Positive, Smoothing, Steps, VecEnv, _number, number,
+                    GainMapping, GainScale, Isolation, Name, NonNegative, Positive, Smoothing, Steps, VecEnv, _number, number,
                     problem)
 
 _REWARD = RewardWeights()
@@ -191,6 +191,14 @@ class PlantModel(Section):
     parameters: dict[PlantParameter, Finite] = Field(
         default_factory=dict, description="{FMU parameter or input: value} set before every episode [FMU units]")
     loops: list[LoopModel] = Field(min_length=1, description="one loop per controlled output, at least one")
+    isolation: Isolation = Field(
+        "auto", description="where the FMU (plant and prior) runs: none = in this process (fastest); process = in a "
+                            "worker process, so a crashing FMU ends its episode instead of the tool; auto = in this "
+                            "process, switched to process when `tune --resume` finds the run ended in a crash")
+    leak_check_every: Steps = Field(
+        100, description="resets between checks of the memory the FMU's resets added; 0 = no check")
+    leak_limit_mb: Positive = Field(
+        64.0, description="memory [MB] the resets may add between two checks before the FMU is instantiated afresh")
 
     @model_validator(mode="before")
     @classmethod
@@ -223,8 +231,10 @@ class PriorModel(Section):
     """The model the reward forecast runs on (paper eq. 12-14)."""
 
     fmu: Optional[Name] = Field(
-        None, description="null: a second instance of the plant FMU that receives the plant's state each step "
-                          "(needs canGetAndSetFMUstate and canSerializeFMUstate); else a bundled name or a path of "
+        None, description="null: the plant FMU itself: a second instance that receives the plant's state each step "
+                          "(needs canGetAndSetFMUstate and canSerializeFMUstate), or, for an FMU that cannot serialize "
+                          "its state or may be instantiated only once per process, the plant's own instance rolled "
+                          "N steps and set back (needs canGetAndSetFMUstate); else a bundled name or a path of "
                           "another FMU with the same loop inputs and outputs")
     parameters: dict[PriorParameter, Finite] = Field(
         default_factory=dict, description="{prior parameter: value} applied after every state copy (model mismatch) "
@@ -391,6 +401,8 @@ class AgentModel(Section):
     buffer_size: Count = Field(200_000, description="SAC / TD3: replay buffer [transitions]")
     learning_starts: Steps = Field(1_000, description="SAC / TD3: env steps before learning starts")
     checkpoint_every: Count = Field(50_000, description="env steps between checkpoints")
+    checkpoint_minutes: Positive = Field(5.0, description="wall-clock minutes between checkpoints (whichever of "
+                                                          "checkpoint_every and this comes first)")
     torch_threads: Count = Field(1, description="CPU threads of torch (64-64 MLPs train fastest on one)")
     extra: dict[Annotated[Name, AfterValidator(lambda k, info: _extra_key(k, info))], Any] = Field(
         default_factory=dict, description="further keyword arguments of the Stable-Baselines3 algorithm's "

@@ -27,6 +27,7 @@ GainScale = Literal["log", "linear"]
 GainMapping = Literal["anchored", "absolute"]
 Algorithm = Literal["ppo", "sac", "td3"]
 VecEnv = Literal["dummy", "subproc"]
+Isolation = Literal["auto", "process", "none"]  # where the plant FMU runs (prlpid_fmi.isolation)
 DisturbanceType = Literal["step", "pulse", "parameter_change"]
 DisturbanceKind = Literal["fmu", "actuator", "measurement"]  # config.Disturbance.kind
 LOOP_TARGETS = ("actuator", "measurement")  # disturbance targets that act on a loop, not on the FMU
