@@ -33,7 +33,8 @@ linearly interpolated between samples.
 - SteadyStateError [y-unit]: mean |e| over the last 10 % of the segment's samples (at least one).
 
 Regulation segments: a segment that does not start with a setpoint step (zero step size, e.g. a
-plant that starts at its setpoint) or that starts at an *event* (``events``: sample indices where a
+plant that starts at its setpoint; for the first segment, a step from the initial measurement no
+larger than 5x the measured noise) or that starts at an *event* (``events``: sample indices where a
 disturbance begins; a disturbance inside a setpoint segment splits it) reports, instead of the step
 metrics above (which are NaN there):
 
@@ -139,12 +140,16 @@ def _noise(y_tail: np.ndarray) -> float:
 
 def _segment_metrics(t: np.ndarray, r_new: float, base: float, y: np.ndarray, settling_threshold: float,
                      rise_time_limits: tuple[float, float], steady_state_fraction: float,
-                     regulation: bool = False) -> dict:
+                     regulation: bool = False, first: bool = False) -> dict:
     """Step (or regulation) metrics of one segment: t, y (m,) from its first sample on; step from base to r_new."""
     m = y.size
     nan = math.nan
     delta = r_new - base
     zero = regulation or _zero_step(delta, r_new, base)
+    if not zero and first and m >= 3 and np.all(np.isfinite(y)):
+        # the first segment steps from the initial *measurement*: a step no larger than the noise
+        # (a plant that starts at its setpoint, measured with noise) is regulation, not a step
+        zero = abs(delta) <= NOISE_BAND * _noise(y[-max(math.ceil(steady_state_fraction * m), 3):])
     if m < MIN_SEGMENT_STEPS:
         return dict(Overshoot=nan, RiseTime=nan, SettlingTime=nan, SteadyStateError=nan, PeakDeviation=nan,
                     RecoveryTime=nan)
@@ -275,7 +280,8 @@ def compute_metrics(time_s, setpoint, measurement, control_signal, sample_time_s
         for s, end in zip(starts, ends):
             base = y[0, i] if s == 0 else r[s - 1, i]
             m = _segment_metrics(t[s:end], float(r[s, i]), float(base), y[s:end, i], settling_threshold,
-                                 tuple(rise_time_limits), steady_state_fraction, regulation=s in event_starts)
+                                 tuple(rise_time_limits), steady_state_fraction, regulation=s in event_starts,
+                                 first=s == 0)
             seg = {"loop": name, "start_step": int(s), "end_step": int(end), "start_time_s": float(t[s]),
                    "StepSize": float(r[s, i] - base) if math.isfinite(base) else math.nan, **m}
             loop_segments.append(seg)

@@ -235,3 +235,15 @@ def test_a_plant_starting_at_its_setpoint_reports_regulation_not_overshoot():
     res = compute_metrics(t, r, y, np.zeros(n), ts)
     assert math.isnan(res["overall"]["Overshoot"])
     assert res["overall"]["PeakDeviation"] == pytest.approx(np.max(np.abs(y - 10.0)))
+
+
+def test_a_noisy_start_at_the_setpoint_is_regulation_not_a_huge_overshoot():
+    rng = np.random.default_rng(3)
+    ts, n = 0.1, 200
+    t = np.arange(n) * ts
+    r = np.full(n, 10.0)
+    y = 10.0 + rng.normal(0.0, 0.05, n)  # starts "at" the setpoint, measured with noise
+    y[50:80] -= 1.0  # a disturbance
+    res = compute_metrics(t, r, y, np.zeros(n), ts)
+    assert math.isnan(res["overall"]["Overshoot"])  # not peak / (r - y[0]) = thousands of per cent
+    assert res["overall"]["PeakDeviation"] > 0.9
