@@ -245,8 +245,20 @@ def make_parser() -> argparse.ArgumentParser:
 
     command("schema", _schema, "print the JSON Schema of scenario files (for editors and other tools)")
 
-    p = command("init", _init, "print a ready scenario for an FMU (redirect it to a .yaml file)")
+    operating_point = dict(action="append", metavar="NAME=VALUE",
+                           help="a parameter or input start value for the operating point (repeatable)")
+    p = command("init", _init, "print a ready scenario for an FMU from a step and trim test (redirect it to a .yaml file)")
     p.add_argument("fmu", help="path to a .fmu file")
+    p.add_argument("--output", default=None, help="the output to control (default: the FMU's first output)")
+    p.add_argument("--set", **operating_point)
+
+    p = command("probe", _probe, "open-loop step and trim test: each input's gain, time constant or growth rate, "
+                                 "dead time, with a plot")
+    p.add_argument("fmu", help="path to a .fmu file")
+    p.add_argument("--output", default=None, help="the output to watch (default: the FMU's first output)")
+    p.add_argument("--input", action="append", help="probe only this input (repeatable; default: every input)")
+    p.add_argument("--set", **operating_point)
+    p.add_argument("--plot", default=None, help="PNG to write (default: <fmu name>-probe.png here)")
 
     p = command("tune", _tune, "train the adaptive PID, compare it with a tuned fixed PID, export the schedule")
     p.add_argument("scenario", help=SCENARIO_HELP)

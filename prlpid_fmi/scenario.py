@@ -291,12 +291,19 @@ def schema_uri() -> str:
     return (SCENARIO_DIR / SCHEMA_FILE_NAME).resolve().as_uri()
 
 
-def init_scenario(fmu_path: str | Path) -> str:
-    """YAML text of a ready-to-edit scenario for an FMU: its first real input/output as the loop.
+def init_scenario(fmu_path: str | Path, output: Optional[str] = None,
+                  start_values: Optional[dict] = None) -> str:
+    """YAML text of a ready-to-edit scenario for an FMU, from a step and trim test (prlpid_fmi.probe).
 
-    Raises ScenarioError when the FMU cannot be read or has no real input or output.
+    The loop's input is the one that moves `output` (default: the first output) most, never a
+    disturbance-like input while another one moves it; u_limits, setpoint range, sample time and gain
+    ranges come from the probe and the FMU's declared min, max and nominal values, each with a comment
+    saying where it came from. start_values {parameter or input: value}: the operating point to probe at
+    (parameters are written to plant.parameters). Raises ScenarioError with one line when the FMU cannot
+    be read or probed.
     """
     from .fmu import describe_fmu
+    from .probe import probe, propose_loop
 
     p = Path(fmu_path)
     try:
@@ -306,17 +313,21 @@ def init_scenario(fmu_path: str | Path) -> str:
     problems = d.plant_problems()
     if problems:
         raise ScenarioError(f"{fmu_path}: cannot be a plant: {'; '.join(problems)} "
-                            f"(got {d.model_name!r}; expected a co-simulation FMU with real inputs and outputs)")
-    ins, outs = d.input_names, d.output_names
-    ts = d.default_step_size_s or default(m.PlantModel, "sample_time")
+                            f"(got {d.model_name!r}; expected an FMU with real inputs and outputs)")
+    start_values = dict(start_values or {})
+    try:
+        loop = propose_loop(probe(p, output=output, start_values=start_values))
+    except PlantError as exc:
+        raise ScenarioError(f"{fmu_path}: the step and trim test failed: {exc}") from None
     tunable = [v for v in d.parameters if v.variability == "tunable" and v.type in ("Real", "Float64")]
 
     def unit(name):
         v = d.variable(name)
         return f" [{v.unit}]" if v is not None and v.unit else ""
 
-    pairs = "\n".join(f"    #   {i}{unit(i)} -> {o}{unit(o)}" for i in ins for o in outs[:8])
     params = "\n".join(f"  #   {v.name}: {v.start}{'   # ' + v.unit if v.unit else ''}" for v in tunable[:20])
+    given = {k: v for k, v in start_values.items() if k not in d.input_names}
+    others = "\n".join(f"    #   {line}" for line in loop.others) or "    #   none"
     strategies, agent = m.StrategiesModel(), m.AgentModel()
     n_train = default(m.TrainingModel, "episode_steps")
     n_eval = 2 * n_train
@@ -327,33 +338,37 @@ def init_scenario(fmu_path: str | Path) -> str:
     else:
         forecast = f"forecast_horizon: {strategies.forecast_horizon}   # reward forecast over N steps on a copy of the FMU; 0 = off"
     fmu_text = yaml.safe_dump(str(p.resolve()), default_style='"').strip()
-    step_note = "the FMU's DefaultExperiment stepSize" if d.default_step_size_s else "the FMU gives no stepSize: ADJUST"
     name = re.sub(r"[^A-Za-z0-9_.-]+", "-", d.model_name).strip("-") or "my-plant"
+    lo, hi = loop.setpoint_range
+    sp1, sp2 = (float(f"{lo + f * (hi - lo):.4g}") for f in (0.3, 0.7))
+    parameters = "{" + ", ".join(f"{k}: {v!r}" for k, v in given.items()) + "}"
+    gains = {g: f"[{a!r}, {b!r}, {s}]" for g, (a, b, s) in loop.gains.items()}
+    w = loop.why
     return f"""\
 # yaml-language-server: $schema={schema_uri()}
-# Scenario for {d.model_name} ({p.name}), written by init_scenario.
-# Check it with `prlpid-fmi validate <this file>`. Every key, unit and default: docs/scenarios.md.
-# Lines marked ADJUST need your plant's numbers.
+# Scenario for {d.model_name} ({p.name}), written by `prlpid-fmi init` from an open-loop step and trim test
+# (`prlpid-fmi probe` shows it with a plot). Check it with `prlpid-fmi validate <this file>`.
+# Every key, unit and default: docs/scenarios.md. Lines marked ADJUST need your plant's numbers.
 name: {name}
 plant:
   fmu: {fmu_text}   # a relative path resolves against this file's folder
-  sample_time: {ts!r}   # s, control period ({step_note})
-  parameters: {{}}   # {{FMU parameter: value}} set before each episode
+  sample_time: {loop.sample_time_s!r}   # s, control period: {w['sample_time']}
+  parameters: {parameters}   # {{FMU parameter: value}} set before each episode
   # tunable parameters of this FMU (start values):
 {params or '  #   none'}
   loops:
-    # one loop per controlled output; input -> output pairs this FMU offers:
-{pairs}
-    - input: {ins[0]}                 # FMU input the PID drives{unit(ins[0])}
-      output: {outs[0]}                # FMU output it measures{unit(outs[0])}
-      u_limits: [-10.0, 10.0]         # ADJUST: actuator saturation [input units]
-      setpoint_range: [0.0, 1.0]      # ADJUST: training setpoints are drawn from here [output units]
-      measurement_scale: 1.0          # ADJUST: typical setpoint step [output units]; normalises errors
-      divergence_bound: 10.0          # |error| / measurement_scale that ends an episode as diverged
-      gains:                          # ranges the agent's actions map into; widen them if needed
-        Kp: [0.01, 100.0, log]        # use a negative linear range for a plant with negative gain
-        Ti: [0.1, 1000.0, log]        # s
-        Td: [0.0, 10.0, linear]       # s
+    # inputs not chosen (each held at its start value; a disturbance can be stepped in training.disturbances):
+{others}
+    - input: {loop.input}   # FMU input the PID drives{unit(loop.input)}: {w['input']}
+      output: {loop.output}   # FMU output it measures{unit(loop.output)}
+      u_limits: [{loop.u_limits[0]!r}, {loop.u_limits[1]!r}]   # actuator saturation{unit(loop.input)}: {w['u_limits']}
+      setpoint_range: [{lo!r}, {hi!r}]   # training setpoints{unit(loop.output)}: {w['setpoint_range']}
+      measurement_scale: {loop.measurement_scale!r}   # typical setpoint step{unit(loop.output)}: half the setpoint range
+      divergence_bound: 10.0   # |error| / measurement_scale that ends an episode as diverged
+      gains:   # ranges the agent's actions map into: {w['gains']}
+        Kp: {gains['Kp']}
+        Ti: {gains['Ti']}   # s
+        Td: {gains['Td']}   # s
 controller:
   anti_windup: {default(m.ControllerModel, 'anti_windup')}   # {' | '.join(ANTI_WINDUP_MODES)}
 strategies:
@@ -364,13 +379,13 @@ agent:
   total_timesteps: {agent.total_timesteps}
   seed: {agent.seed}
 training:
-  episode_steps: {n_train}   # ADJUST: a few settling times of the closed loop [samples]
+  episode_steps: {n_train}   # a few closed-loop settling times at the sample time above [samples]
   setpoint_hold_steps: {default(m.TrainingModel, 'setpoint_hold_steps')}   # samples between random setpoint changes
 evaluation:
   episode_steps: {n_eval}
   setpoints:   # value: a number (one loop) or a list with one number per loop
-    - {{at_step: 0, value: 0.5}}
-    - {{at_step: {n_eval // 2}, value: 1.0}}
+    - {{at_step: 0, value: {sp1!r}}}
+    - {{at_step: {n_eval // 2}, value: {sp2!r}}}
   intervals: [[0, {n_eval // 2}], [{n_eval // 2}, {n_eval}]]
 """
 

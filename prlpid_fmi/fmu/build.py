@@ -63,6 +63,13 @@ class Variable:
     start: float | None = None
     unit: str | None = None
     description: str = ""
+    min: float | None = None       # declared range and nominal value (written to the modelDescription)
+    max: float | None = None
+    nominal: float | None = None
+
+    def declared(self) -> dict[str, str]:
+        """The min, max and nominal attributes that are set, as modelDescription strings."""
+        return {k: _fmt(getattr(self, k)) for k in ("min", "max", "nominal") if getattr(self, k) is not None}
 
 
 @dataclass(frozen=True)
@@ -212,6 +219,7 @@ def _model_description_fmi2(spec: PlantSpec, token: str, capabilities: dict | No
             outputs.append(vr + 1)  # 1-based index into ModelVariables
         if v.unit:
             real["unit"] = v.unit
+        real.update(v.declared())
         ET.SubElement(ET.SubElement(variables, "ScalarVariable", attrs), "Real", real)
     states, derivatives = _me_state_variables(variables, spec) if interface == "model-exchange" else ([], [])
     structure = ET.SubElement(root, "ModelStructure")
@@ -296,6 +304,7 @@ def _model_description_fmi3(spec: PlantSpec, token: str, capabilities: dict | No
             outputs.append(vr)
         if v.unit:
             attrs["unit"] = v.unit
+        attrs.update(v.declared())
         ET.SubElement(variables, "Float64", attrs)
     structure = ET.SubElement(root, "ModelStructure")
     for tag in ("Output", "InitialUnknown"):
