@@ -129,7 +129,7 @@ def test_init_scenario_loads_back(tmp_path):
     text = init_scenario(bundled_fmu("TwoTank", 3))
     s = load_scenario(_write(tmp_path, text, "two_tank_init.yaml"))
     assert s.tuning.loops[0].input == "q_in" and s.tuning.loops[0].output == "h1"
-    assert s.tuning.sample_time_s == 0.1
+    assert s.tuning.sample_time_s > 0 and "sample_time: " in text and "(probe)" in text  # from the step test
     assert Path(s.tuning.fmu) == bundled_fmu("TwoTank", 3).resolve()
     assert "ADJUST" in text and "q_d" in text  # other pairs listed as comments
 
