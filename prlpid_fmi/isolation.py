@@ -33,6 +33,12 @@ _SNAPSHOT = ("k", "setpoint", "measurement", "previous_error", "applied_setpoint
              "forecast_reward", "step_reward", "termination")
 _context = None
 _warned: set[str] = set()
+_in_worker = False
+
+
+def in_worker() -> bool:
+    """True inside a worker process of this module."""
+    return _in_worker
 
 
 def runs_isolated(config: TuningConfig) -> bool:
@@ -84,6 +90,8 @@ def _extracted_for(paths) -> dict:
 
 
 def _run_one(conn, fn, args, extracted: dict) -> None:
+    global _in_worker
+    _in_worker = True
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     from .fmu import plant as fmu_plant
 
@@ -127,6 +135,8 @@ def _snapshot(core: LoopCore) -> tuple:
 
 def _serve(conn, config: TuningConfig, forecast_path: str, extracted: dict) -> None:
     """Worker main: build a LoopCore, then answer (operation, arguments) messages until "close" or EOF."""
+    global _in_worker
+    _in_worker = True
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when to stop
     from .fmu import plant as fmu_plant
 

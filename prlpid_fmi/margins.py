@@ -309,13 +309,18 @@ def loop_margins(config: TuningConfig, Kp: Sequence[float], Ti: Sequence[float],
     amplitudes = list(default_amplitude(c, Kp) if amplitude is None else amplitude)
     if len(amplitudes) != n or not all(a > 0 for a in amplitudes):
         raise ValueError(f"amplitude needs one positive value per loop ({n}), got {amplitude!r}")
-    if c.isolation == "process":  # the FMU in a worker process: a crash means no margins, not a dead tool
-        from .core import resolve_fmu
-        from .isolation import WorkerCrashed, call_in_worker
+    # in a worker process when the FMU runs isolated (a crash: no margins, not a dead tool) or may be
+    # instantiated only once per process (the caller may hold an instance, e.g. the fixed-PID search)
+    from .core import resolve_fmu
+    from .fmu import describe_fmu
 
+    path = resolve_fmu(c.fmu, c.fmi_version)
+    from .isolation import WorkerCrashed, call_in_worker, in_worker
+
+    if not in_worker() and (c.isolation == "process" or describe_fmu(path).once_per_process):
         try:
-            return call_in_worker(loop_margins, dataclasses.replace(c, isolation="none"), Kp, Ti, Td, operating_point,
-                                  coupling, frequencies, amplitude, fmus=[resolve_fmu(c.fmu, c.fmi_version)],
+            return call_in_worker(loop_margins, dataclasses.replace(c, isolation="none", fmu=str(path)), Kp, Ti, Td,
+                                  operating_point, coupling, frequencies, amplitude, fmus=[path],
                                   what="the robustness margins' measurement")
         except WorkerCrashed as exc:
             return _no_margins(c.loops[0].output, amplitudes[0], str(exc))

@@ -1,0 +1,253 @@
+"""Misbehaving FMUs (plant_sources/common/faults.h, compiled in by -D switches), signals and resume.
+
+Each FMU is the bundled first-order plant dx/dt = x + u with one fault from t = FAULT_S on; the
+truth each test checks comes from the switch (its time, its kind), not from the code under test.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from prlpid_fmi.cli import main
+from prlpid_fmi.core import LoopCore
+from prlpid_fmi.evaluate import constant_gains, gains_rollout
+from prlpid_fmi.fmu import FmuPlant, build_fmu, describe_fmu, format_description
+from prlpid_fmi.fmu.plant import rss_bytes
+from prlpid_fmi.scenario import load_scenario
+
+FAULT_S = 3.0
+TS = 0.1
+LEAK_BYTES = 1 << 20
+FAULTS = {  # name: (C switches, modelDescription flags)
+    "nan": ({"PRLPID_FAULT_NAN_AFTER_S": FAULT_S}, {}),
+    "discard": ({"PRLPID_FAULT_DISCARD_AFTER_S": FAULT_S}, {}),
+    "crash": ({"PRLPID_FAULT_CRASH_AFTER_S": FAULT_S}, {}),
+    "no_state": ({"PRLPID_FAULT_NO_STATE": None}, {"canGetAndSetFMUstate": False, "canSerializeFMUstate": False}),
+    "no_serialize": ({"PRLPID_FAULT_NO_SERIALIZE": None}, {"canSerializeFMUstate": False}),
+    "once": ({"PRLPID_FAULT_ONCE_PER_PROCESS": None}, {"canBeInstantiatedOnlyOncePerProcess": True}),
+    "leak": ({"PRLPID_FAULT_RESET_LEAK_BYTES": LEAK_BYTES}, {}),
+}
+ENV = {**os.environ, "PYTHONFAULTHANDLER": ""}
+
+
+@pytest.fixture(scope="module")
+def faulty(tmp_path_factory):
+    """{fault: FMU path}, each built once per test module."""
+    root = tmp_path_factory.mktemp("faulty")
+    return {name: build_fmu("FirstOrderUnstable", out_dir=root / name, defines=d, capabilities=c)
+            for name, (d, c) in FAULTS.items()}
+
+
+def scenario_file(folder: Path, fmu, **plant) -> Path:
+    """A tiny first-order scenario on `fmu` (episodes of 50 samples, so a fault at 3 s hits every one)."""
+    doc = {
+        "name": "faulty",
+        "plant": {"fmu": str(fmu), "sample_time": TS, "parameters": {"a": 1.0}, **plant.pop("plant", {}),
+                  "loops": [{"input": "u", "output": "y", "u_limits": [-10, 10], "setpoint_range": [-1, 1],
+                             "measurement_scale": 1.0, "divergence_bound": 5.0,
+                             "gains": {"Kp": [0.5, 30, "log"], "Ti": [0.2, 20, "log"], "Td": [0.0, 0.2, "linear"]}}]},
+        "strategies": {"forecast_horizon": plant.pop("forecast_horizon", 3)},
+        "agent": {"algorithm": "ppo", "total_timesteps": 256, "seed": 0, "n_envs": plant.pop("n_envs", 1),
+                  "n_steps": 128, "batch_size": 64, "n_epochs": 1},
+        "training": {"episode_steps": 50, "setpoint_hold_steps": 25},
+        "evaluation": {"episode_steps": 50, "setpoints": [{"at_step": 0, "value": 0.5}], "intervals": [[0, 25], [25, 50]]},
+        "baseline": {"episodes": 1, "maxiter": 1, "popsize": 2},
+    }
+    path = folder / "scenario.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+def cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "prlpid_fmi", *args], capture_output=True, text=True, env=ENV,
+                          timeout=600)
+
+
+def complete(run_dir: Path) -> None:
+    for name in ("metrics.json", "report.md", "gains.csv", "response.png", "learning_curve.png", "model.zip",
+                 "fixed_pid.json"):
+        assert (run_dir / name).is_file(), name
+
+
+@pytest.mark.parametrize("fault", ["nan", "discard"])
+def test_tune_and_evaluate_end_early_with_a_reason(faulty, tmp_path, fault, capsys):
+    run = tmp_path / "run"
+    assert main(["-q", "tune", str(scenario_file(tmp_path, faulty[fault])), "--out", str(run)]) == 0
+    complete(run)
+    metrics = json.loads((run / "metrics.json").read_text())
+    for who in (metrics["policy"], metrics["fixed_pid"]["metrics"]):
+        t = who["termination"]
+        assert t["kind"] == fault
+        assert FAULT_S - 1e-9 <= t["time_s"] <= FAULT_S + TS + 1e-9  # the switch's time, to one sample
+        assert t["step"] == round(t["time_s"] / TS) + (1 if fault == "discard" else 0)
+        # metrics cover the samples before the failure: the first interval whole, the second cut at its end
+        first, second = who["intervals"]
+        assert (first["start_step"], first["end_step"]) == (0, 25) and "requested_end_step" not in first
+        assert second["end_step"] == t["step"] and second["requested_end_step"] == 50
+        assert np.isfinite(who["overall"]["ISE"])
+    assert metrics["deployed"] in ("none", "fixed PID", "gain schedule")
+    assert not metrics["fixed_pid_assessment"]["metrics"]["terminated"] or metrics["deployed"] != "fixed PID"
+    report = (run / "report.md").read_text()
+    assert "ended early" in report and f"t = {metrics['policy']['termination']['time_s']:g} s" in report
+    assert main(["-q", "evaluate", str(run)]) == 0
+    again = json.loads((run / "evaluations" / "1" / "metrics.json").read_text())
+    assert again["policy"]["termination"]["kind"] == fault
+    assert "Traceback" not in capsys.readouterr().err
+
+
+def test_a_forecast_on_an_fmu_without_state_is_one_line_and_without_it_a_complete_run(faulty, tmp_path, capsys):
+    refused = scenario_file(tmp_path, faulty["no_state"])
+    assert main(["validate", str(refused)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "strategies.forecast_horizon" in err[0] and "canGetAndSetFMUstate" in err[0]
+    (tmp_path / "n0").mkdir()
+    run = tmp_path / "run"
+    assert main(["-q", "tune", str(scenario_file(tmp_path / "n0", faulty["no_state"], forecast_horizon=0)),
+                 "--out", str(run)]) == 0
+    complete(run)
+    assert main(["-q", "evaluate", str(run)]) == 0
+
+
+def test_rollback_prior_leaves_the_plant_bit_identical_and_forecasts_like_a_copy(faulty, tmp_path):
+    """An FMU that cannot serialize its state forecasts on its own instance (hold, roll N, restore): the plant's
+    trajectory equals the one without a forecast bit for bit, and every forecast equals the one a second
+    instance of the regular plant computes through the FMI path."""
+    base = load_scenario(scenario_file(tmp_path, "FirstOrderUnstable")).tuning
+    base = dataclasses.replace(base, measurement_noise_std=0.01, episode_steps=25)  # before the fault time
+    gains = constant_gains(3.0, 1.0, 0.05)
+    for fault in ("no_serialize", "once"):
+        config = dataclasses.replace(base, fmu=str(faulty[fault]))
+        core = LoopCore(config)
+        assert core.prior is core.plant
+        with_forecast = gains_rollout(gains, config, seed=4, core=core)
+        core.close()
+        without = gains_rollout(gains, dataclasses.replace(config, forecast_horizon=0), seed=4)
+        for key in ("measurement", "control_signal", "pid_output"):
+            assert np.array_equal(with_forecast[key], without[key]), key
+
+        copy_core, roll_core = LoopCore(base, forecast_path="fmi"), LoopCore(config)
+        assert copy_core.prior is not copy_core.plant
+        forecasts = []
+        for core in (copy_core, roll_core):
+            core.reset(np.random.default_rng(7))
+            forecasts.append([])
+            for _ in range(20):
+                core.step([3.0], [1.0], [0.05])
+                forecasts[-1].append(core.forecast_reward)
+            core.close()
+        assert forecasts[0] == forecasts[1]
+        text = format_description(describe_fmu(faulty[fault]))
+        assert "As prior     yes: single-instance rollback" in text
+
+
+def test_once_per_process_is_read_and_training_runs_one_instance_per_process(faulty, tmp_path, capsys):
+    d = describe_fmu(faulty["once"])
+    assert d.once_per_process and d.prior_mode == "rollback"
+    with FmuPlant(faulty["once"], ["u"], ["y"], TS):
+        with pytest.raises(Exception, match="only one instance"):
+            FmuPlant(faulty["once"], ["u"], ["y"], TS)
+    run = tmp_path / "run"
+    assert main(["-q", "tune", str(scenario_file(tmp_path, faulty["once"], n_envs=2)), "--out", str(run)]) == 0
+    complete(run)
+    assert main(["-q", "evaluate", str(run)]) == 0
+
+
+def test_leak_guard_reinstantiates_an_fmu_whose_resets_grow(faulty, tmp_path):
+    """Each reset of this FMU keeps 1 MB until the instance is freed: without the guard 60 resets hold 60 MB,
+    with a check every 10 resets and a 4 MB limit the memory stays near 10 MB and a warning says why."""
+    config = load_scenario(scenario_file(tmp_path, faulty["leak"], plant={"leak_check_every": 0})).tuning
+    core = LoopCore(config)
+    start = rss_bytes()
+    for _ in range(60):
+        core.reset(np.random.default_rng(0))
+    unguarded = rss_bytes() - start
+    core.close()
+    core = LoopCore(dataclasses.replace(config, leak_check_every=10, leak_limit_mb=4.0))
+    start = rss_bytes()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for _ in range(60):
+            core.reset(np.random.default_rng(0))
+    guarded = rss_bytes() - start
+    assert core.plant.reinstantiations >= 5
+    assert any("instantiated afresh" in str(w.message) for w in caught)
+    core.close()
+    assert unguarded >= 50 * LEAK_BYTES
+    assert guarded <= 20 * LEAK_BYTES
+    run = tmp_path / "run"
+    assert main(["-q", "tune", str(scenario_file(tmp_path, faulty["leak"])), "--out", str(run)]) == 0
+    complete(run)
+
+
+def test_segfault_kills_an_unisolated_run_and_resume_isolates_it(faulty, tmp_path):
+    """In this process the FMU's segfault ends the tool (exit by SIGSEGV, the run directory kept); --resume sees
+    the abrupt end, runs the plant in a worker process and completes, every episode ended by the crash."""
+    scenario = scenario_file(tmp_path, faulty["crash"])
+    run = tmp_path / "run"
+    first = cli("-q", "tune", str(scenario), "--out", str(run))
+    assert first.returncode == -signal.SIGSEGV, first.stderr[-2000:]
+    assert (run / "scenario.yaml").is_file() and (run / ".active").is_file()
+    resumed = cli("-q", "tune", str(scenario), "--out", str(run), "--resume")
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    assert "Traceback" not in resumed.stderr
+    assert "worker process" in resumed.stderr and "crashed (SIGSEGV)" in resumed.stderr
+    complete(run)
+    assert not (run / ".active").exists()
+    assert json.loads((run / "run.json").read_text())["isolation"] == "process"
+    metrics = json.loads((run / "metrics.json").read_text())
+    t = metrics["policy"]["termination"]
+    assert t["kind"] == "crash" and "FirstOrderUnstable.fmu crashed (SIGSEGV)" in t["message"]
+    assert FAULT_S - 1 <= t["time_s"] <= FAULT_S + TS + 1e-9  # the forecast's prior reaches 3 s N steps early
+    evaluated = cli("-q", "evaluate", str(run))
+    assert evaluated.returncode == 0 and "Traceback" not in evaluated.stderr, evaluated.stderr[-2000:]
+
+
+def _monitor_rows(run: Path) -> list[str]:
+    return [line for line in (run / "monitor" / "0.monitor.csv").read_text().splitlines()[2:] if line]
+
+
+def test_sigterm_saves_a_checkpoint_and_resume_completes_to_the_target(tmp_path):
+    scenario = scenario_file(tmp_path, "FirstOrderUnstable")
+    run = tmp_path / "run"
+    proc = subprocess.Popen([sys.executable, "-m", "prlpid_fmi", "-q", "tune", str(scenario), "--out", str(run),
+                             "--timesteps", "1000000"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=ENV)
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and proc.poll() is None:
+        if (run / "monitor" / "0.monitor.csv").is_file() and len(_monitor_rows(run)) >= 12:
+            break
+        time.sleep(0.2)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 128 + signal.SIGTERM, err[-2000:]
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1 and "interrupted by SIGTERM" in lines[0] and "--resume" in lines[0]
+    checkpoints = sorted((run / "checkpoints").glob("model_*_steps.zip"))
+    assert checkpoints
+    done = max(int(p.stem.split("_")[1]) for p in checkpoints)
+    before = _monitor_rows(run)
+    assert done >= 12 * 50 and len(before) >= 12
+    target = done + 300
+    resumed = cli("-q", "tune", str(scenario), "--out", str(run), "--resume", "--timesteps", str(target))
+    assert resumed.returncode == 0, resumed.stderr[-3000:]
+    trained = json.loads((run / "run.json").read_text())["trained_timesteps"]
+    assert target <= trained < target + 128  # PPO collects whole rollouts of n_steps = 128
+    after = _monitor_rows(run)
+    assert after[:len(before)] == before and len(after) >= len(before) + 300 // 50 - 1
+    # a damaged checkpoint: one line naming it
+    (run / "checkpoints" / f"model_{10 * target}_steps.zip").write_bytes(b"not a zip")
+    damaged = cli("tune", str(scenario), "--out", str(run), "--resume", "--timesteps", str(20 * target))
+    assert damaged.returncode == 2
+    err = [line for line in damaged.stderr.splitlines() if line.strip()]
+    assert len(err) == 1 and f"model_{10 * target}_steps.zip: cannot resume from this checkpoint" in err[0]
