@@ -238,10 +238,16 @@ def _merge(into: dict, key: str, value: Any) -> None:
 
 
 def _resolve_base(arg: str, sweep_dir: Path) -> Path:
-    from ..presets import resolve_scenario
+    """The base scenario: a file (relative to the sweep file's folder) wins over a bundled scenario's name."""
+    from ..presets import SCENARIO_DIR, bundled_scenario_names
 
-    local = (sweep_dir / arg)
-    return local if local.is_file() else resolve_scenario(arg)
+    local = sweep_dir / Path(arg).expanduser()
+    if local.is_file():
+        return local
+    if arg in bundled_scenario_names():
+        return SCENARIO_DIR / f"{arg}.yaml"
+    raise ScenarioError(f"no such scenario file or bundled scenario (got {arg!r}; expected a path relative to the "
+                        f"sweep file or one of: {', '.join(bundled_scenario_names())})")
 
 
 def resolve_sweep(arg: str | Path) -> Path:
@@ -255,8 +261,8 @@ def resolve_sweep(arg: str | Path) -> Path:
     if bundled.is_file():
         return bundled
     names = ", ".join(bundled_sweep_names()) or "none found"
-    raise ScenarioError(f"{arg}: no such sweep file or bundled sweep (expected a path to a .yaml file or one of: "
-                        f"{names})")
+    raise ScenarioError(f"{arg}: no such sweep file or bundled sweep (got {str(arg)!r}; expected a path to a .yaml "
+                        f"file or one of: {names})")
 
 
 def bundled_sweep_names() -> list[str]:
@@ -369,13 +375,21 @@ def _overlaps(a: tuple, b: tuple) -> bool:
     return a[:n] == b[:n]
 
 
+def _leaves(loc: tuple, value: Any) -> list[tuple]:
+    """The key paths a value sets at `loc`: a mapping (merged into the base's) sets its leaves, anything else `loc`."""
+    if isinstance(value, dict) and value:
+        return [leaf for k, v in value.items() for leaf in _leaves(loc + (k,), v)]
+    return [loc]
+
+
 def _overlap_lines(file: str, model: SweepModel) -> list[str]:
     """A key in `vary` that a named variant also sets would make equal trials: refused."""
     lines = []
-    for key in model.vary:
+    for key, values in model.vary.items():
+        varied = {leaf for v in values for leaf in _leaves(parse_key(key), v)}
         for vname, vkeys in model.variants.items():
-            for other in vkeys:
-                if _overlaps(parse_key(key), parse_key(other)):
+            for other, value in vkeys.items():
+                if any(_overlaps(a, b) for a in varied for b in _leaves(parse_key(other), value)):
                     lines.append(f"{file}: vary.{key}: also set by variants.{vname}.{other} (got both; expected each "
                                  "key in vary or in variants, not both)")
     return lines
