@@ -18,8 +18,7 @@ from .errors import Interrupted, PrlPidError, RunError
 from .rundir import write_atomic, write_json
 from .scenario import Scenario, load_scenario, scenario_to_yaml
 
-METRIC_COLUMNS = ("ISE", "IAE", "ITAE", "Overshoot", "SettlingTime", "RiseTime", "SteadyStateError",
-                  "PeakDeviation", "RecoveryTime", "ControlEffort", "TotalVariation")
+from .report import candidates_table, loop_units, render_report
 
 
 # -- trajectories to CSV ---------------------------------------------------------------------------
@@ -80,46 +79,6 @@ def _policy(run_dir: Path, algorithm: str):
     return model_policy(model, vecnorm)
 
 
-def _report(scenario: Scenario, policy_m: dict, fixed_m: dict | None, fixed_gains: dict | None,
-            source: Path | None = None) -> str:
-    loops = policy_m["loops"]
-    keys = [k for k in policy_m["overall"] if k.split("[")[0] in METRIC_COLUMNS]
-    lines = [f"# {scenario.name}: adaptive PRL-PID policy vs tuned fixed PID", ""]
-    if source is not None:
-        lines += [f"Scenario file: `{source}`.", ""]
-    lines += [f"Evaluation: {scenario.evaluation_config().episode_steps} steps at Ts = "
-             f"{scenario.tuning.sample_time_s:g} s; loops: {', '.join(loops)}.", ""]
-    lines += ended_early_lines([("adaptive policy", policy_m), ("fixed PID", fixed_m)])
-    if fixed_gains:
-        lines += ["Fixed PID (differential evolution on the training distribution): " +
-                  ", ".join(f"{k} = {np.round(np.asarray(v), 4).tolist()}" for k, v in fixed_gains.items()), ""]
-    lines += ["| metric | adaptive policy | fixed PID | ratio |", "|---|---|---|---|"]
-    for k in keys:
-        p = policy_m["overall"][k]
-        f = fixed_m["overall"][k] if fixed_m else float("nan")
-        ratio = p / f if fixed_m and f not in (0.0,) and np.isfinite(f) else float("nan")
-        lines.append(f"| {k} | {p:.4g} | {f:.4g} | {ratio:.3g} |")
-    for name, m in (("adaptive policy", policy_m), ("fixed PID", fixed_m)):
-        if m and m.get("intervals"):
-            lines += ["", f"Per interval ({name}):", "", "| steps | ISE | IAE |", "|---|---|---|"]
-            for iv in m["intervals"]:
-                ise = sum(v for k, v in iv.items() if k.split("[")[0] == "ISE")
-                iae = sum(v for k, v in iv.items() if k.split("[")[0] == "IAE")
-                lines.append(f"| {iv['start_step']}–{iv['end_step']} | {ise:.4g} | {iae:.4g} |")
-    return "\n".join(lines) + "\n"
-
-
-def ended_early_lines(named_metrics) -> list[str]:
-    """Report lines for evaluations that ended before their last sample: when, why, what the metrics cover."""
-    lines = []
-    for name, m in named_metrics:
-        t = (m or {}).get("termination")
-        if t:
-            lines += [f"**The {name}'s evaluation ended early** at step {t['step']} (t = {t['time_s']:g} s): "
-                      f"{t['message']}. Its metrics cover the samples before that.", ""]
-    return lines
-
-
 def evaluate_into(run_dir: Path, scenario: Scenario, out_dir: Path, policy, fixed: dict | None,
                   source: Path | None = None, anchor=None) -> dict:
     """Evaluate `policy` (and the fixed PID) on the scenario's evaluation; write metrics, CSV, plots, report.
@@ -148,7 +107,8 @@ def evaluate_into(run_dir: Path, scenario: Scenario, out_dir: Path, policy, fixe
     plots.plot_control_signal(traj, config, out_dir / rd.CONTROL_SIGNAL_PLOT, baseline_traj=fixed_traj)
     plots.plot_gains(traj, config, out_dir / rd.GAINS_PLOT)
     write_atomic(out_dir / rd.REPORT,
-                 _report(scenario, policy_m, fixed_m, fixed["gains"] if fixed else None, source))
+                 render_report(scenario, policy_m, fixed_m, fixed["gains"] if fixed else None, source,
+                               loop_units(config), learning_curve=out_dir == run_dir))
     return metrics
 
 
@@ -279,7 +239,7 @@ def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None
         write_json(run_dir / rd.METRICS, metrics)
         title, _, body = report.partition("\n")
         report = "\n".join([title, "", verdict(decision, sched_c, fixed_c, limit).rstrip(), "",
-                             _candidates_table(sched_c, fixed_c), body.lstrip("\n")])
+                             candidates_table(sched_c, fixed_c, loop_units(scenario.tuning)), body.lstrip("\n")])
     elif schedule is not None:
         write_schedule_csv(schedule, run_dir / rd.SCHEDULE)
     if note:
@@ -303,30 +263,6 @@ def gains_from_dict(g: dict):
     from .actions import gains_from_values
 
     return gains_from_values(g["Kp"], g["Ti"], g["Td"], g.get("coupling"))
-
-
-def _candidates_table(sched, fixed) -> str:
-    """Both deployable controllers side by side (plain PIDs, no neural network)."""
-    from .deliver import overall_metric
-
-    rows = [("ISE", "ISE", ""), ("IAE", "IAE", ""), ("Overshoot", "Overshoot", "%"),
-            ("SettlingTime", "settling time", "s"), ("PeakDeviation", "peak deviation (regulation)", ""),
-            ("RecoveryTime", "recovery time (regulation)", "s"), ("TotalVariation", "total variation of u", "")]
-    cands = [c for c in (sched, fixed) if c is not None]
-    lines = ["| metric (evaluation) | " + " | ".join(c.name for c in cands) + " |",
-             "|---|" + "---|" * len(cands)]
-    for key, label, unit in rows:
-        cells = [f"{overall_metric(c.metrics['overall'], key):.4g}" for c in cands]
-        lines.append(f"| {label}{f' [{unit}]' if unit else ''} | " + " | ".join(cells) + " |")
-    lines.append("| worst Ms (limit in the verdict) | " + " | ".join(f"{c.worst_Ms:.3g}" for c in cands) + " |")
-    if any(c.monte_carlo for c in cands):
-        lines.append("| mean ISE, Monte-Carlo set | " + " | ".join(
-            f"{sum(overall_metric(m['overall'], 'ISE') for m in c.monte_carlo) / max(len(c.monte_carlo), 1):.4g}"
-            for c in cands) + " |")
-        lines.append("| worst ISE, Monte-Carlo set | " + " | ".join(
-            f"{max((overall_metric(m['overall'], 'ISE') for m in c.monte_carlo), default=float('nan')):.4g}"
-            for c in cands) + " |")
-    return "\n".join(lines) + "\n"
 
 
 def _load_run(run_dir: Path) -> Scenario:

@@ -1,0 +1,145 @@
+"""report.md rendering: the evaluation table, both deployable controllers, early ends and the plots.
+
+Every metric carries its unit (the loop's output unit y and input unit u from the FMU); the ratio column
+is adaptive policy ÷ fixed PID, where lower is better for every metric shown; a missing value is "–",
+never `nan`; gains are numbers with their units. The run workflows (run.py) call these functions.
+"""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from . import rundir as rd
+
+METRIC_COLUMNS = ("ISE", "IAE", "ITAE", "Overshoot", "SettlingTime", "RiseTime", "SteadyStateError",
+                  "PeakDeviation", "RecoveryTime", "ControlEffort", "TotalVariation")
+# unit of each metric from the output unit y and the input unit u (prlpid_fmi.metrics docstring)
+METRIC_UNITS = {"ISE": "{y}²·s", "IAE": "{y}·s", "ITAE": "{y}·s²", "Overshoot": "%", "SettlingTime": "s",
+                "RiseTime": "s", "SteadyStateError": "{y}", "PeakDeviation": "{y}", "RecoveryTime": "s",
+                "ControlEffort": "{u}²·s", "TotalVariation": "{u}"}
+GAIN_UNITS = {"Kp": "{u}/{y}", "Ti": "s", "Td": "s"}
+PLOTS = ((rd.RESPONSE_PLOT, "measurement and setpoint, both controllers"),
+         (rd.CONTROL_SIGNAL_PLOT, "control signal, both controllers"),
+         (rd.GAINS_PLOT, "Kp, Ti, Td set by the adaptive policy"),
+         (rd.LEARNING_CURVE_PLOT, "training reward"))
+
+
+def number(value, digits: int = 4) -> str:
+    """A metric as text: `digits` significant digits, "–" for a missing or non-finite value."""
+    if value is None:
+        return "–"
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        return "–"
+    return f"{v:.{digits}g}" if math.isfinite(v) else "–"
+
+
+def unit_label(key: str, y_unit: str, u_unit: str) -> str:
+    """The metric's unit with the loop's units filled in ("" units become "y-unit" / "u-unit")."""
+    base = key.split("[")[0]
+    return METRIC_UNITS.get(base, "").format(y=y_unit or "y-unit", u=u_unit or "u-unit")
+
+
+def _gains_text(gains: dict, y_unit: str, u_unit: str) -> str:
+    parts = []
+    for name, value in gains.items():
+        if value is None:
+            continue
+        values = [float(v) for v in np.atleast_1d(np.asarray(value, dtype=float))]
+        text = ", ".join(f"{v:.4g}" for v in values)
+        unit = GAIN_UNITS.get(name, "").format(y=y_unit or "y-unit", u=u_unit or "u-unit")
+        parts.append(f"{name} = {text}{' ' + unit if unit else ''}")
+    return "; ".join(parts)
+
+
+def ended_early_lines(named_metrics) -> list[str]:
+    """Report lines for evaluations that ended before their last sample: when, why, what the metrics cover."""
+    lines = []
+    for name, m in named_metrics:
+        t = (m or {}).get("termination")
+        if t:
+            lines += [f"**The {name}'s evaluation ended early** at step {t['step']} (t = {t['time_s']:g} s): "
+                      f"{t['message']}. Its metrics cover the samples before that.", ""]
+    return lines
+
+
+def plot_links() -> list[str]:
+    """Markdown links to the run's plots."""
+    return ["Plots:", ""] + [f"- [{name}]({name}): {what}" for name, what in PLOTS] + [""]
+
+
+def render_report(scenario, policy_m: dict, fixed_m: dict | None, fixed_gains: dict | None,
+                  source: Path | None = None, units: tuple[str, str] = ("", ""),
+                  learning_curve: bool = True) -> str:
+    """report.md of one evaluation: the metric table with units and the ratio adaptive ÷ fixed."""
+    y_unit, u_unit = units
+    loops = policy_m["loops"]
+    keys = [k for k in policy_m["overall"] if k.split("[")[0] in METRIC_COLUMNS]
+    lines = [f"# {scenario.name}: adaptive PRL-PID policy vs tuned fixed PID", ""]
+    if source is not None:
+        lines += [f"Scenario file: `{source}`.", ""]
+    lines += [f"Evaluation: {scenario.evaluation_config().episode_steps} steps at sample time "
+              f"{scenario.tuning.sample_time_s:g} s; loops: {', '.join(loops)}"
+              f"{f' (output in {y_unit}, control signal in {u_unit})' if y_unit or u_unit else ''}.", ""]
+    lines += ended_early_lines([("adaptive policy", policy_m), ("fixed PID", fixed_m)])
+    if fixed_gains:
+        lines += ["Fixed PID (differential evolution on the training distribution): "
+                  + _gains_text(fixed_gains, y_unit, u_unit) + ".", ""]
+    lines += ["Ratio = adaptive policy ÷ fixed PID; lower is better for every metric here "
+              "(below 1: the adaptive policy is better). – = not defined (no setpoint step, no baseline, "
+              "or a zero divisor).", "",
+              "| metric | unit | adaptive policy | fixed PID | ratio (adaptive ÷ fixed) |", "|---|---|---|---|---|"]
+    for k in keys:
+        p = policy_m["overall"][k]
+        f = fixed_m["overall"].get(k) if fixed_m else None
+        ratio = None
+        if f is not None and p is not None and math.isfinite(f) and math.isfinite(p) and f != 0:
+            ratio = p / f
+        lines.append(f"| {k} | {unit_label(k, y_unit, u_unit)} | {number(p)} | {number(f)} | {number(ratio, 3)} |")
+    for name, m in (("adaptive policy", policy_m), ("fixed PID", fixed_m)):
+        if m and m.get("intervals"):
+            ise_u, iae_u = unit_label("ISE", y_unit, u_unit), unit_label("IAE", y_unit, u_unit)
+            lines += ["", f"Per interval ({name}):", "", f"| steps | ISE [{ise_u}] | IAE [{iae_u}] |", "|---|---|---|"]
+            for iv in m["intervals"]:
+                ise = sum(v for k, v in iv.items() if k.split("[")[0] == "ISE")
+                iae = sum(v for k, v in iv.items() if k.split("[")[0] == "IAE")
+                lines.append(f"| {iv['start_step']}–{iv['end_step']} | {number(ise)} | {number(iae)} |")
+    lines += [""] + [line for line in plot_links() if learning_curve or rd.LEARNING_CURVE_PLOT not in line]
+    return "\n".join(lines)
+
+
+def candidates_table(sched, fixed, units: tuple[str, str] = ("", "")) -> str:
+    """Both deployable controllers side by side (plain PIDs, no neural network), metrics with units."""
+    from .deliver import overall_metric
+
+    y_unit, u_unit = units
+    rows = [("ISE", "ISE"), ("IAE", "IAE"), ("Overshoot", "overshoot"), ("SettlingTime", "settling time"),
+            ("PeakDeviation", "peak deviation (regulation)"), ("RecoveryTime", "recovery time (regulation)"),
+            ("TotalVariation", "total variation of u")]
+    cands = [c for c in (sched, fixed) if c is not None]
+    lines = ["| metric (evaluation) | unit | " + " | ".join(c.name for c in cands) + " |",
+             "|---|---|" + "---|" * len(cands)]
+    for key, label in rows:
+        cells = [number(overall_metric(c.metrics["overall"], key)) for c in cands]
+        lines.append(f"| {label} | {unit_label(key, y_unit, u_unit)} | " + " | ".join(cells) + " |")
+    lines.append("| worst Ms (limit in the verdict) | – | " + " | ".join(number(c.worst_Ms, 3) for c in cands) + " |")
+    if any(c.monte_carlo for c in cands):
+        ise = unit_label("ISE", y_unit, u_unit)
+        lines.append(f"| mean ISE, Monte-Carlo set | {ise} | " + " | ".join(
+            number(sum(overall_metric(m["overall"], "ISE") for m in c.monte_carlo) / len(c.monte_carlo))
+            if c.monte_carlo else "–" for c in cands) + " |")
+        lines.append(f"| worst ISE, Monte-Carlo set | {ise} | " + " | ".join(
+            number(max((overall_metric(m["overall"], "ISE") for m in c.monte_carlo), default=None))
+            for c in cands) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def loop_units(config) -> tuple[str, str]:
+    """(output unit, input unit) of the first loop, joined with "/" over loops whose units differ."""
+    from .plots import _units
+
+    ys, us = _units(config)
+    return "/".join(dict.fromkeys(ys)) if any(ys) else "", "/".join(dict.fromkeys(us)) if any(us) else ""
