@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import dataclasses
+import os
 
 import gymnasium
 
@@ -9,13 +10,19 @@ __version__ = "0.1.0"
 ENV_ID = "prlpid_fmi/PidTuning-v0"
 
 
-def make_env(config="first_order", **overrides):
-    """A PidTuningEnv for a TuningConfig or a preset name, with TuningConfig fields overridden by keyword."""
+def make_env(config="first_order", scenario=None, **overrides):
+    """A PidTuningEnv for a TuningConfig, a preset name or a scenario file path (`config`, or `scenario`:
+    a path or a bundled scenario's name), with TuningConfig fields overridden by keyword."""
     from .config import TuningConfig
     from .env import PidTuningEnv
-    from .presets import preset
+    from .presets import preset, resolve_scenario
+    from .scenario import load_scenario
 
-    if not isinstance(config, TuningConfig):
+    if scenario is not None:
+        config = load_scenario(resolve_scenario(str(scenario))).tuning
+    elif isinstance(config, (str, os.PathLike)) and (os.path.isfile(config) or str(config).endswith((".yaml", ".yml"))):
+        config = load_scenario(config).tuning
+    elif not isinstance(config, TuningConfig):
         config = preset(config)
     if overrides:
         config = dataclasses.replace(config, **overrides)
