@@ -58,6 +58,13 @@ def _inspect(args: argparse.Namespace) -> int:
     from .fmu import describe_fmu, format_description
 
     print(format_description(describe_fmu(args.fmu)))
+    if args.probe:
+        from .fmu.dynamic_check import dynamic_check, failed, format_findings
+
+        findings = dynamic_check(args.fmu)
+        print("Dynamic checks (--probe):")
+        print(format_findings(findings))
+        return 1 if failed(findings) else 0
     return 0
 
 
@@ -239,6 +246,9 @@ def make_parser() -> argparse.ArgumentParser:
 
     p = command("inspect", _inspect, "show what an FMU offers and whether it can be a plant and a prior")
     p.add_argument("fmu", help="path to a .fmu file")
+    p.add_argument("--probe", action="store_true",
+                   help="also run it: state save/restore, independent instances, reset, memory after 100 resets "
+                        "(one line per finding; exit code 1 when one fails)")
 
     p = command("validate", _validate, "check a scenario file; one clear line per mistake")
     p.add_argument("scenario", help=SCENARIO_HELP)

@@ -59,7 +59,7 @@ def _mp_context():
         methods = multiprocessing.get_all_start_methods()
         _context = multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
         if "forkserver" in methods:
-            _context.set_forkserver_preload(["prlpid_fmi.core"])
+            _context.set_forkserver_preload(["prlpid_fmi.core", "prlpid_fmi.margins"])
     return _context
 
 

@@ -251,3 +251,23 @@ def test_sigterm_saves_a_checkpoint_and_resume_completes_to_the_target(tmp_path)
     assert damaged.returncode == 2
     err = [line for line in damaged.stderr.splitlines() if line.strip()]
     assert len(err) == 1 and f"model_{10 * target}_steps.zip: cannot resume from this checkpoint" in err[0]
+
+
+def test_inspect_probe_gives_one_line_per_finding_with_a_verdict(faulty, capsys):
+    from prlpid_fmi.fmu.dynamic_check import dynamic_check
+
+    assert main(["inspect", "--probe", str(faulty["crash"])]) == 1  # the run to 4 s passes the crash at 3 s
+    out = capsys.readouterr()
+    probe = out.out.split("Dynamic checks (--probe):\n")[1].splitlines()
+    assert all(line.split()[0] in ("PASS", "FAIL", "WARN", "SKIP") for line in probe)
+    assert any(line.startswith("FAIL  state") and "crashed (SIGSEGV)" in line for line in probe)
+    assert "Traceback" not in out.err
+
+    by_check = {(f.check, f.verdict): f.message for f in dynamic_check(faulty["nan"])}
+    assert "y is NaN at t = 3 s" in by_check[("outputs", "FAIL")]
+    assert ("state", "PASS") in by_check and ("reset", "PASS") in by_check and ("instances", "PASS") in by_check
+
+    leak = {f.check: f for f in dynamic_check(faulty["leak"])}
+    assert leak["memory"].verdict == "WARN"
+    per_reset_kb = float(leak["memory"].message.split("(")[1].split(" kB")[0])
+    assert 0.9 * LEAK_BYTES / 1024 <= per_reset_kb <= 1.2 * LEAK_BYTES / 1024  # the switch's 1 MB per reset
