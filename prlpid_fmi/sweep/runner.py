@@ -30,13 +30,14 @@ from pathlib import Path
 from typing import Callable, Iterator, Optional
 
 from .. import rundir as rd
-from ..errors import PrlPidError, RunError
+from ..errors import Interrupted, PrlPidError, RunError
 from ..rundir import write_atomic, write_json
 from .spec import Sweep
 
 SWEEP_COPY = "sweep.yaml"
 SWEEP_INFO = "sweep.json"
 NEW, UNFINISHED, FINISHED, STALE = "new", "unfinished", "finished", "stale"
+STOP_TIMEOUT_S = 60.0  # how long a stopped sweep waits for its workers to save their checkpoints
 
 
 @dataclass(frozen=True)
@@ -140,6 +141,23 @@ def _one_thread() -> None:
         os.environ[var] = "1"
 
 
+def _local_worker() -> None:
+    """Initializer of a local worker process: one thread; Ctrl-C is for the sweep's process, which stops the
+    workers with SIGTERM; SIGTERM raises Interrupted, so the trial unwinds as `tune` does on Ctrl-C (the training
+    saves a checkpoint, the run is marked as ended cleanly) and `--resume` continues it."""
+    import signal
+
+    from ..errors import Interrupted
+
+    def stop(signum, frame):
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)  # once: let the checkpoint be written
+        raise Interrupted(signum)
+
+    _one_thread()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, stop)
+
+
 def run_trial(trial: Trial) -> dict:
     """Run (or resume) one trial with run.tune; never raises for a failed trial.
 
@@ -164,6 +182,8 @@ def run_trial(trial: Trial) -> dict:
         text = " ".join(str(exc).split())
         error = text if isinstance(exc, PrlPidError) else f"{type(exc).__name__}: {text}"
         return {"status": "failed", "wall_s": time.perf_counter() - start, "error": error}
+    except Interrupted as exc:  # the sweep is stopping: the trial has unwound; this worker takes no further trial
+        os._exit(128 + exc.signum)
     return {"status": "resumed" if status == UNFINISHED else "done", "wall_s": time.perf_counter() - start}
 
 
@@ -174,7 +194,7 @@ def run_local(trials: list[Trial], workers: int) -> Iterator[tuple[Trial, dict]]
     from concurrent.futures import ProcessPoolExecutor, as_completed
 
     pool = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context("spawn"),
-                               initializer=_one_thread)
+                               initializer=_local_worker)
     try:
         futures = {pool.submit(run_trial, t): t for t in trials}
         for fut in as_completed(futures):
@@ -183,8 +203,13 @@ def run_local(trials: list[Trial], workers: int) -> Iterator[tuple[Trial, dict]]
             except Exception as exc:  # the worker process died (killed, out of memory, a crash in native code)
                 result = {"status": "failed", "wall_s": 0.0, "error": f"{type(exc).__name__}: {exc}"}
             yield futures[fut], result
-    except BaseException:
+    except BaseException:  # Ctrl-C or an error here: stop the running trials (they resume on the next start)
+        workers_now = list((pool._processes or {}).values())  # ProcessPoolExecutor has no public kill before 3.14
         pool.shutdown(wait=False, cancel_futures=True)
+        for process in workers_now:
+            process.terminate()
+        for process in workers_now:
+            process.join(STOP_TIMEOUT_S)
         raise
     pool.shutdown()
 
