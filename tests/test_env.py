@@ -252,7 +252,11 @@ def test_forecast_reward_equals_hand_replay(name, horizon):
         # replay eq. 12-14 on an independent instance from the plant's state before the step
         third.set_state(blob)
         e0 = r - y
-        pid = HandPID(dt, loop.u_min, loop.u_max, float(pid_state.integral[0]),
+        integral = float(pid_state.integral[0])
+        u0 = min(max(float(c.plant_parameters.get(loop.input, 0.0)), loop.u_min), loop.u_max)
+        if k == 0 and u0 != 0.0:  # bumpless start: the integral term Kp/Ti * I equals the trim input u0
+            integral = u0 / (Kp / Ti)
+        pid = HandPID(dt, loop.u_min, loop.u_max, integral,
                       float(pid_state.last_error[0]) if pid_state.initialized else e0)
         y_hat, prev_norm_error, rewards = y, e0 / scale, []
         for _ in range(horizon):
