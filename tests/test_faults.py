@@ -271,3 +271,29 @@ def test_inspect_probe_gives_one_line_per_finding_with_a_verdict(faulty, capsys)
     assert leak["memory"].verdict == "WARN"
     per_reset_kb = float(leak["memory"].message.split("(")[1].split(" kB")[0])
     assert 0.9 * LEAK_BYTES / 1024 <= per_reset_kb <= 1.2 * LEAK_BYTES / 1024  # the switch's 1 MB per reset
+
+
+def test_an_isolated_loop_gives_the_same_trajectories_as_in_process(tmp_path):
+    """The worker draws the episode's setpoints and noise from the generator's state it is handed: policy
+    rollouts with the forecast and fixed-gain rollouts are bit-identical isolated or not, episode after episode."""
+    from prlpid_fmi.env import PidTuningEnv
+    from prlpid_fmi.isolation import IsolatedCore
+
+    config = dataclasses.replace(load_scenario(scenario_file(tmp_path, "FirstOrderUnstable")).tuning,
+                                 measurement_noise_std=0.02)
+    runs = {}
+    for isolation in ("none", "process"):
+        env = PidTuningEnv(dataclasses.replace(config, isolation=isolation), info=False)
+        assert isinstance(env.core, IsolatedCore) == (isolation == "process")
+        obs, _ = env.reset(seed=5)
+        rows = []
+        for episode in range(2):  # the second episode continues the same generator
+            for k in range(config.episode_steps):
+                obs, reward, terminated, truncated, _ = env.step(np.sin([0.3 * k, 0.2 * k, 0.1 * k]))
+                rows.append((*obs, reward, env.core.forecast_reward))
+                if terminated or truncated:
+                    break
+            obs, _ = env.reset()
+        env.close()
+        runs[isolation] = np.array(rows, float)
+    assert np.array_equal(runs["none"], runs["process"])
