@@ -22,6 +22,7 @@ from prlpid_fmi.deliver import overall_metric
 from prlpid_fmi.errors import PrlPidError
 from prlpid_fmi.scenario import load_scenario
 from prlpid_fmi.sweep import bundled_sweep_names, load_sweep, resolve_sweep, run_sweep, trial_status
+from prlpid_fmi.sweep.runner import Trial, run_trial
 from prlpid_fmi.sweep.summary import band, mean_ci
 
 # the tiniest budget that still trains, tunes a fixed PID and evaluates every controller
@@ -300,6 +301,16 @@ def test_sweep_arguments(tmp_path, capsys):
     assert _lines(capsys)[0].startswith("prlpid-fmi: error: no_such_sweep: no such sweep file or bundled sweep "
                                         "(got 'no_such_sweep'; expected a path to a .yaml file or one of: "
                                         "experiment_first_order, ")
+
+
+def test_a_failed_trial_is_a_result_not_a_crash(tmp_path):
+    """run_trial (what each worker runs) reports a trial that cannot run as one line and leaves no folder."""
+    trial = Trial("v", 0, str(tmp_path / "gone.yaml"), str(tmp_path / "v" / "seed0"), 256)
+    result = run_trial(trial)
+    assert result["status"] == "failed" and result["error"] == (
+        f"{tmp_path / 'gone.yaml'}: scenario file not found (got '{tmp_path / 'gone.yaml'}'; expected a path to a "
+        ".yaml file)")
+    assert not (tmp_path / "v").exists()
 
 
 def test_ray_runs_the_same_trials(local_sweep, tmp_path):

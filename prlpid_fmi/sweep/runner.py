@@ -225,7 +225,9 @@ def run_ray(trials: list[Trial], address: Optional[str]) -> Iterator[tuple[Trial
                        "\"prlpid-fmi[ray]\"` or `pip install \"ray[default]\"`)") from None
     started = not ray.is_initialized()
     if started:
-        kwargs: dict = {"address": address, "log_to_driver": False}
+        import logging
+
+        kwargs: dict = {"address": address, "log_to_driver": False, "logging_level": logging.WARNING}
         if address is None and not os.environ.get("RAY_ADDRESS"):
             kwargs["include_dashboard"] = False  # a new local instance: no web dashboard
         try:

@@ -193,7 +193,27 @@ def _markdown(sweep, out: Path, stats: list[dict], finished: dict, deployed: dic
                         lines.append(f"| {v} | {cname} | " + " | ".join(cells) + " |")
             lines.append("")
     lines += ["## Figures", "", "![learning curves](learning_curves.png)", "", "![overall metrics](metrics.png)", ""]
+    invocations = _invocations(out)
+    if invocations:
+        lines += ["## Invocations", "", "| started (UTC) | command | backend | trials run | failed | wall time [s] |",
+                  "|---|---|---|---|---|---|"]
+        for inv in invocations:
+            command = " ".join(["prlpid-fmi", *inv.get("command", [])[1:]])
+            backend = inv.get("backend", "")
+            backend += f" ({inv['workers']} processes)" if inv.get("workers") and inv.get("trials_run") else (
+                f" ({inv['ray_address']})" if inv.get("ray_address") else "")
+            lines.append(f"| {inv.get('started', '')} | `{command}` | {backend} | {inv.get('trials_run', '')} | "
+                         f"{len(inv.get('failed', {}))} | {inv.get('wall_s', float('nan')):.1f} |")
+        lines.append("")
     return "\n".join(lines)
+
+
+def _invocations(out: Path) -> list[dict]:
+    """The invocation records of sweep.json (runner.py), oldest first."""
+    try:
+        return json.loads((out / "sweep.json").read_text()).get("invocations", [])
+    except (OSError, json.JSONDecodeError):
+        return []
 
 
 # -- figures ---------------------------------------------------------------------------------------
