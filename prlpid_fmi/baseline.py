@@ -12,13 +12,14 @@ with w_cv = reward.control_variation_weight, the same weight the agent's reward 
 does not buy ISE with a chattering actuator. A diverging episode costs DIVERGED_COST.
 
 Robustness: with `max_sensitivity` given, the result must have a peak sensitivity Ms (measured on the
-FMU at the middle of the setpoint range, prlpid_fmi.margins) at most that limit. The final DE
-population is tried in order of cost; if no member qualifies, the best one is detuned (Kp / lambda,
-Ti * lambda, lambda = 1.15, 1.15^2, ...: a slower loop) until it does.
+FMU at the middle of the setpoint range, prlpid_fmi.margins) at most that limit. The cheapest few
+members of the final DE population are tried in order of cost; if none qualifies, the best one is
+detuned (Kp / lambda, Ti * lambda: a slower loop) by the smallest lambda that meets the limit.
 """
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -67,12 +68,15 @@ def _cost(vector: np.ndarray, core: LoopCore, gain_map: ActionMap, seeds: list[i
     return _cost_of(gain_map.values(vector.tolist()), core, seeds)
 
 
-DETUNE_STEP = 1.15
-DETUNE_STEPS = 30
+ROBUST_CANDIDATES = 4  # cheapest DE population members whose Ms is measured before detuning
+DETUNE_MAX = 64.0  # largest detuning factor lambda (Kp / lambda, Ti * lambda)
+DETUNE_BISECTIONS = 6  # bisection steps on log(lambda): lambda to within a factor 64**(1/64) ~ 1.07
 
 
 def _robust(config: TuningConfig, gain_map: ActionMap, population, energies, limit: float):
-    """(vector, gains tuple, Ms) of the cheapest population member with Ms <= limit, else the detuned best."""
+    """(vector, gains tuple) of the cheapest of the ROBUST_CANDIDATES cheapest population members with
+    Ms <= limit; else the best member detuned by the smallest lambda in [1, DETUNE_MAX] (bisection on
+    log lambda, gains clipped into their ranges) that meets the limit; else the best member as it is."""
     from .margins import loop_margins
 
     point = [0.5 * (l.setpoint_range[0] + l.setpoint_range[1]) for l in config.loops]
@@ -81,17 +85,27 @@ def _robust(config: TuningConfig, gain_map: ActionMap, population, energies, lim
         return loop_margins(config, g[0], g[1], g[2], point, coupling=g[3]).Ms
 
     order = np.argsort(energies)
-    for i in order:
+    for i in order[:ROBUST_CANDIDATES]:
         g = gain_map.values(population[i].tolist())
         if ms(g) <= limit:
             return population[i], g
-    Kp, Ti, Td, coupling = gain_map.values(population[order[0]].tolist())
-    for k in range(1, DETUNE_STEPS + 1):
-        lam = DETUNE_STEP ** k
-        g = ([x / lam for x in Kp], [x * lam for x in Ti], Td, coupling)
-        if ms(g) <= limit:
-            return population[order[0]], g
-    return population[order[0]], gain_map.values(population[order[0]].tolist())
+    best = population[order[0]]
+    Kp, Ti, Td, coupling = gain_map.values(best.tolist())
+
+    def detuned(lam):
+        return ([max(x / lam, l.Kp.low) for x, l in zip(Kp, config.loops)],
+                [min(x * lam, l.Ti.high) for x, l in zip(Ti, config.loops)], Td, coupling)
+
+    if not ms(detuned(DETUNE_MAX)) <= limit:
+        return best, gain_map.values(best.tolist())
+    low, high = 0.0, math.log(DETUNE_MAX)  # ms fails at exp(low) (the best itself), meets it at exp(high)
+    for _ in range(DETUNE_BISECTIONS):
+        mid = 0.5 * (low + high)
+        if ms(detuned(math.exp(mid))) <= limit:
+            high = mid
+        else:
+            low = mid
+    return best, detuned(math.exp(high))
 
 
 def tune_fixed_pid(config: TuningConfig, seed: int = 0, episodes: int = 3, maxiter: int = 20,

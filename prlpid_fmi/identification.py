@@ -236,32 +236,39 @@ class ClosedLoopRig:
         u reached a limit (then it is clipped there); diverged: the loop left the divergence bound.
         """
         n, K = self.n_loops, len(d)
-        us, ys = np.zeros((K, n)), np.zeros((K, n))
+        us, ys = [], []
         lo, hi = self.u_min.tolist(), self.u_max.tolist()
         r, scale, bound = self.setpoint.tolist(), self.scale.tolist(), self.bound.tolist()
-        y = self.y
+        Kp, Ti, Td = [float(x) for x in self.Kp], [float(x) for x in self.Ti], [float(x) for x in self.Td]
+        coupling = None if self.coupling is None else [float(x) for x in self.coupling]
+        pid, plant = self.pid, self.plant
+        y = [float(x) for x in self.y]
         saturated = diverged = False
-        k = 0
-        while k < K:
-            u = self._control(y)
-            u[loop] += d[k]
+        # the same arithmetic as _control / FmuPlant.step, on plain floats (this loop runs ~1e5 times)
+        for dk in (d.tolist() if hasattr(d, "tolist") else list(d)):
+            if coupling is not None:
+                u = pid.step_values(r, y, Kp, Ti, Td, coupling)
+            else:
+                u = pid.step_values([r[i] - y[i] for i in range(n)], Kp, Ti, Td)
+            u[loop] += dk
             for i in range(n):
                 if not lo[i] < u[i] < hi[i]:
                     saturated = True
                     u[i] = min(max(u[i], lo[i]), hi[i])
-            us[k] = u
-            ys[k] = y
-            k += 1
+            us.append(u)
+            ys.append(y)
             try:
-                y = self.plant.step(u)
+                y = plant.step_values(u)
             except StepRejected:
                 diverged = True
                 break
             if not all(abs(y[i] - r[i]) <= bound[i] * scale[i] for i in range(n)):  # NaN fails too
                 diverged = True
                 break
-        self.y = y
-        return us[:k].T, ys[:k].T, saturated, diverged
+        k = len(us)
+        us, ys = np.array(us, float).reshape(k, n), np.array(ys, float).reshape(k, n)
+        self.y = np.array(y, float)
+        return us.T, ys.T, saturated, diverged
 
 
 def default_amplitude(config: TuningConfig, Kp: Sequence[float]) -> list[float]:
