@@ -23,7 +23,7 @@ from prlpid_fmi.errors import PrlPidError
 from prlpid_fmi.scenario import load_scenario
 from prlpid_fmi.sweep import bundled_sweep_names, load_sweep, resolve_sweep, run_sweep, trial_status
 from prlpid_fmi.sweep.runner import Trial, run_trial
-from prlpid_fmi.sweep.summary import band, mean_ci
+from prlpid_fmi.sweep.summary import aggregate, band, mean_ci
 
 # the tiniest budget that still trains, tunes a fixed PID and evaluates every controller
 TINY = """\
@@ -192,6 +192,12 @@ def test_statistics_against_hand_computation():
     n, mean, half = mean_ci([2.0, 4.0, 6.0, math.inf])  # t(0.975, 2) = 4.302652729911275; s = 2
     assert (n, mean) == (3, 4.0) and half == pytest.approx(4.302652729911275 * 2 / math.sqrt(3))
     assert mean_ci([5.0])[0:2] == (1, 5.0) and math.isnan(mean_ci([5.0])[2])
+    # NaN = not defined (no segment there): not a seed's value; inf = failed (never settles): counted, not averaged
+    rows = [{"variant": "v", "controller": "policy", "interval": "overall", "metric": "SettlingTime", "value": v,
+             "ended_early": False} for v in (math.nan, math.inf, 2.0, 4.0)]
+    (stat,) = aggregate(rows, ["v"])
+    assert (stat["n"], stat["n_finite"], stat["mean"]) == (3, 2, 3.0)
+    assert stat["ci95_half_width"] == pytest.approx(T_975_DF1 * 1.0)
     grid, m, s = band([([0.0, 10.0], [0.0, 10.0]), ([0.0, 5.0, 12.0], [2.0, 7.0, 14.0])], points=3)
     assert list(grid) == [0.0, 5.0, 10.0]  # the steps both curves cover
     assert list(m) == [1.0, 6.0, 11.0] and list(s) == [1.0, 1.0, 1.0]

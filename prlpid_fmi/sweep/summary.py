@@ -10,7 +10,8 @@ Controllers, from each trial's metrics.json:
 Metrics: ISE, IAE, overshoot [%], settling time [s], and for regulation segments (no setpoint step)
 peak deviation and recovery time; overall (summed over loops for ISE / IAE, worst loop otherwise:
 deliver.overall_metric) and per evaluation interval. For each (variant, controller, interval, metric):
-n = seeds with a value, n_finite = those with a finite value (a loop that never settles has an infinite
+n = seeds where the metric is defined (not NaN: e.g. no overshoot without a setpoint step, no segment
+starting in the interval), n_finite = those with a finite value (a loop that never settles has an infinite
 settling time), mean and the Student-t 95 % interval mean ± t(0.975, n_finite - 1) · s / sqrt(n_finite)
 over the finite values (none for fewer than two). ended_early counts the trials whose evaluation of that
 controller stopped before its last sample (their integral metrics cover fewer samples).
@@ -104,8 +105,9 @@ def aggregate(rows: list[dict], variants: list[str]) -> list[dict]:
     for key in sorted(groups, key=lambda k: (order[k[0]], controllers.index(k[1]), k[2] != OVERALL,
                                              _interval_start(k[2]), METRICS.index(k[3]))):
         g = groups[key]
-        n_finite, mean, half = mean_ci([r["value"] for r in g])
-        out.append(dict(zip(SUMMARY_COLUMNS, (*key, len(g), n_finite, mean, mean - half, mean + half, half,
+        defined = [r["value"] for r in g if not math.isnan(r["value"])]  # NaN: not defined there (see metrics.py)
+        n_finite, mean, half = mean_ci(defined)
+        out.append(dict(zip(SUMMARY_COLUMNS, (*key, len(defined), n_finite, mean, mean - half, mean + half, half,
                                               sum(r["ended_early"] for r in g)))))
     return out
 
@@ -259,7 +261,7 @@ def plot_learning_curves(sweep, out: Path, path: Path) -> Path:
     else:
         ax.legend(loc="best", fontsize=8)
     ax.set_xlabel("training steps [samples]")
-    ax.set_ylabel(f"episode reward, rolling mean of {ROLLING_EPISODES} episodes [1]")
+    ax.set_ylabel(f"episode reward, rolling mean of up to {ROLLING_EPISODES} episodes [1]")
     ax.set_title(f"{sweep.name}: learning curves, mean over seeds ± 1 standard deviation")
     ax.grid(True, alpha=0.3)
     fig.tight_layout()
