@@ -319,6 +319,21 @@ def test_a_failed_trial_is_a_result_not_a_crash(tmp_path):
     assert not (tmp_path / "v").exists()
 
 
+def test_an_unreachable_ray_address_is_one_line_before_anything_is_written(tmp_path, capsys):
+    pytest.importorskip("ray", reason="Ray is not installed (pip install \"prlpid-fmi[ray]\")")
+    import socket
+
+    with socket.socket() as s:  # a port nobody listens on: bound, never listening
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+        f = _write(tmp_path / "tiny.yaml", TINY.format(seeds=1))
+        assert main(["sweep", str(f), "--out", str(tmp_path / "out"), "--ray", f"127.0.0.1:{port}"]) == 2
+    assert _lines(capsys) == [f"prlpid-fmi: error: --ray 127.0.0.1:{port}: cannot reach a Ray cluster there (got "
+                              "Connection refused; expected the address of a running Ray cluster: host:6379, "
+                              "ray://host:10001 or auto)"]
+    assert not (tmp_path / "out").exists()
+
+
 def test_ray_runs_the_same_trials(local_sweep, tmp_path):
     """On a new local Ray instance, seed 0 of both variants gives the very numbers the local processes gave."""
     pytest.importorskip("ray", reason="Ray is not installed (pip install \"prlpid-fmi[ray]\")")

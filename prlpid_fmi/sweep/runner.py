@@ -38,6 +38,7 @@ SWEEP_COPY = "sweep.yaml"
 SWEEP_INFO = "sweep.json"
 NEW, UNFINISHED, FINISHED, STALE = "new", "unfinished", "finished", "stale"
 STOP_TIMEOUT_S = 60.0  # how long a stopped sweep waits for its workers to save their checkpoints
+CONNECT_TIMEOUT_S = 5.0  # how long `--ray host:port` may take to answer before the sweep gives up
 
 
 @dataclass(frozen=True)
@@ -214,27 +215,53 @@ def run_local(trials: list[Trial], workers: int) -> Iterator[tuple[Trial, dict]]
     pool.shutdown()
 
 
-def run_ray(trials: list[Trial], address: Optional[str]) -> Iterator[tuple[Trial, dict]]:
-    """Trials as Ray tasks (1 CPU each) on the cluster at `address` (None: Ray's default, i.e. RAY_ADDRESS or a
-    new local instance); yields (trial, result) as each one ends. A Ray already initialised in this process is
-    used as it is."""
+def _unreachable(address: str) -> Optional[str]:
+    """Why a "host:port" or "ray://host:port" address cannot be reached (None: it can, or another form such as
+    "auto"). ray.init retries an unreachable address for minutes; this answers in seconds."""
+    import socket
+
+    host, sep, port = address.removeprefix("ray://").rpartition(":")
+    if not sep or not port.isdigit():
+        return None
+    try:
+        socket.create_connection((host, int(port)), timeout=CONNECT_TIMEOUT_S).close()
+    except OSError as exc:
+        return exc.strerror or str(exc) or type(exc).__name__
+    return None
+
+
+def connect_ray(address: Optional[str]) -> bool:
+    """ray.init on the cluster at `address` (None: Ray's default: RAY_ADDRESS, else a new local instance without
+    dashboard). Returns True when this call initialised Ray (then run_ray shuts it down); a Ray already
+    initialised in this process is used as it is."""
     try:
         import ray
     except ImportError:
         raise RunError("--ray: Ray is not installed (got no module 'ray'; expected `pip install "
                        "\"prlpid-fmi[ray]\"` or `pip install \"ray[default]\"`)") from None
-    started = not ray.is_initialized()
-    if started:
-        import logging
+    if ray.is_initialized():
+        return False
+    expected = "expected the address of a running Ray cluster: host:6379, ray://host:10001 or auto"
+    reason = _unreachable(address) if address else None
+    if reason:
+        raise RunError(f"--ray {address}: cannot reach a Ray cluster there (got {reason}; {expected})")
+    import logging
 
-        kwargs: dict = {"address": address, "log_to_driver": False, "logging_level": logging.WARNING}
-        if address is None and not os.environ.get("RAY_ADDRESS"):
-            kwargs["include_dashboard"] = False  # a new local instance: no web dashboard
-        try:
-            ray.init(**kwargs)
-        except (ConnectionError, RuntimeError, ValueError) as exc:
-            raise RunError(f"--ray {address or ''}: cannot connect to a Ray cluster ({' '.join(str(exc).split())}; "
-                           "expected the address of a running cluster, e.g. auto or ray://host:10001)") from None
+    kwargs: dict = {"address": address, "log_to_driver": False, "logging_level": logging.WARNING}
+    if address is None and not os.environ.get("RAY_ADDRESS"):
+        kwargs["include_dashboard"] = False  # a new local instance: no web dashboard
+    try:
+        ray.init(**kwargs)
+    except (ConnectionError, RuntimeError, ValueError) as exc:
+        raise RunError(f"--ray {address or ''}: cannot connect (got {' '.join(str(exc).split())}; {expected})") from None
+    return True
+
+
+def run_ray(trials: list[Trial], started: bool) -> Iterator[tuple[Trial, dict]]:
+    """Trials as Ray tasks (1 CPU each) on the cluster connect_ray joined; yields (trial, result) as each one
+    ends. started: connect_ray's answer (Ray is shut down at the end when this sweep started it)."""
+    import ray
+
     try:
         remote = ray.remote(num_cpus=1, max_retries=0)(run_trial)
         pending = {remote.remote(t): t for t in trials}
@@ -292,13 +319,15 @@ def run_sweep(path: str | Path, out: str | Path | None = None, workers: Optional
     if mismatched:
         raise RunError("\n".join(mismatched))
 
+    status = {t: trial_status(t.run_dir) for t in trials}
+    todo = [t for t in trials if status[t] != FINISHED]
+    ray_started = connect_ray(ray_address) if ray and todo else False  # before anything is written
+
     from ..scenario import scenario_to_yaml
 
     write_atomic(out / SWEEP_COPY, Path(path).read_text(encoding="utf-8"))
     for v in sweep.variants:
         write_atomic(variant_dir(out, v.name) / rd.SCENARIO, scenario_to_yaml(v.scenario))
-    status = {t: trial_status(t.run_dir) for t in trials}
-    todo = [t for t in trials if status[t] != FINISHED]
     n_workers = min(workers or os.cpu_count() or 1, max(len(todo), 1))
     where = f"Ray ({ray_address or 'default address'})" if ray else f"{n_workers} local process(es)"
     log(f"sweep {sweep.name}: {len(sweep.variants)} variant(s) x {len(sweep.seeds)} seed(s) = {len(trials)} trials; "
@@ -309,7 +338,7 @@ def run_sweep(path: str | Path, out: str | Path | None = None, workers: Optional
     record = {"started": started, "command": sys.argv, "backend": "ray" if ray else "local",
               "ray_address": ray_address, "workers": None if ray else n_workers, "trials_run": len(todo)}
     if todo:
-        results = run_ray(todo, ray_address) if ray else run_local(todo, n_workers)
+        results = run_ray(todo, ray_started) if ray else run_local(todo, n_workers)
         for i, (trial, result) in enumerate(results, 1):
             line = f"[{i}/{len(todo)}] {trial.label}: {result['status']} in {result['wall_s']:.1f} s"
             if result["status"] == "failed":
