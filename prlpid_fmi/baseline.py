@@ -69,14 +69,17 @@ def _cost(vector: np.ndarray, core: LoopCore, gain_map: ActionMap, seeds: list[i
 
 
 ROBUST_CANDIDATES = 4  # cheapest DE population members whose Ms is measured before detuning
-DETUNE_MAX = 64.0  # largest detuning factor lambda (Kp / lambda, Ti * lambda)
-DETUNE_BISECTIONS = 6  # bisection steps on log(lambda): lambda to within a factor 64**(1/64) ~ 1.07
+DETUNE_STEP = 1.15  # detuning factors lambda = DETUNE_STEP**k (Kp / lambda, Ti * lambda) ...
+DETUNE_SCAN = (1, 2, 4, 8, 16, 30)  # ... scanned at these k (lambda 1.15 to 66), then bisected
+DETUNE_BISECTIONS = 4
 
 
 def _robust(config: TuningConfig, gain_map: ActionMap, population, energies, limit: float):
     """(vector, gains tuple) of the cheapest of the ROBUST_CANDIDATES cheapest population members with
-    Ms <= limit; else the best member detuned by the smallest lambda in [1, DETUNE_MAX] (bisection on
-    log lambda, gains clipped into their ranges) that meets the limit; else the best member as it is."""
+    Ms <= limit; else the best member detuned by the smallest lambda that meets the limit (scan of k in
+    DETUNE_SCAN, then bisection on k between the last failing and the first passing value; gains clipped
+    into their ranges; an unstable plant fails at both ends, so the scan starts small); else the best
+    member as it is (the deliverable then reports its Ms)."""
     from .margins import loop_margins
 
     point = [0.5 * (l.setpoint_range[0] + l.setpoint_range[1]) for l in config.loops]
@@ -92,20 +95,24 @@ def _robust(config: TuningConfig, gain_map: ActionMap, population, energies, lim
     best = population[order[0]]
     Kp, Ti, Td, coupling = gain_map.values(best.tolist())
 
-    def detuned(lam):
+    def detuned(k):
+        lam = DETUNE_STEP ** k
         return ([max(x / lam, l.Kp.low) for x, l in zip(Kp, config.loops)],
                 [min(x * lam, l.Ti.high) for x, l in zip(Ti, config.loops)], Td, coupling)
 
-    if not ms(detuned(DETUNE_MAX)) <= limit:
-        return best, gain_map.values(best.tolist())
-    low, high = 0.0, math.log(DETUNE_MAX)  # ms fails at exp(low) (the best itself), meets it at exp(high)
-    for _ in range(DETUNE_BISECTIONS):
-        mid = 0.5 * (low + high)
-        if ms(detuned(math.exp(mid))) <= limit:
-            high = mid
-        else:
-            low = mid
-    return best, detuned(math.exp(high))
+    low = 0.0  # k known to fail (the best member itself)
+    for k in DETUNE_SCAN:
+        if ms(detuned(k)) <= limit:
+            high = float(k)
+            for _ in range(DETUNE_BISECTIONS):
+                mid = 0.5 * (low + high)
+                if ms(detuned(mid)) <= limit:
+                    high = mid
+                else:
+                    low = mid
+            return best, detuned(high)
+        low = float(k)
+    return best, gain_map.values(best.tolist())
 
 
 def tune_fixed_pid(config: TuningConfig, seed: int = 0, episodes: int = 3, maxiter: int = 20,

@@ -196,3 +196,4 @@ class DeployConfig:
     """When a tuned controller may be deployed: its peak sensitivity Ms = max |S(jw)| stays <= max_sensitivity."""
 
     max_sensitivity: float = _d(_m.DeployModel, "max_sensitivity")
+    schedule_points: int = _d(_m.DeployModel, "schedule_points")

@@ -216,7 +216,8 @@ def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None
     evaluate_into(run_dir, scenario, run_dir, policy, fixed, source, anchor=anchor)
     schedule, note = None, ""
     try:
-        schedule = extract_schedule(policy, scenario.tuning, seed=agent.seed, anchor=anchor)
+        schedule = extract_schedule(policy, scenario.tuning, points=scenario.deploy.schedule_points,
+                                    seed=agent.seed, anchor=anchor)
         if schedule.excluded:
             note = ("The closed loop diverged at setpoint(s) " + ", ".join(f"{v:g}" for v in schedule.excluded)
                     + ": left out of the schedule.\n")

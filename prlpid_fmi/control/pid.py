@@ -269,9 +269,13 @@ def _coupling_rows(c: list) -> list:
 
 
 def _coupled_errors(r: list, y: list, c: list) -> list:
-    """Eq. 27 on lists: e_i = (r_i - y_i) + sum_j C[i][j] * y_j, summed left to right (C's diagonal is 0)."""
-    C = _coupling_rows(c)
-    return [r[i] - y[i] + C[i][0] * y[0] + C[i][1] * y[1] + C[i][2] * y[2] for i in range(3)]
+    """Eq. 27 on lists: e_i = (r_i - y_i) + sum_j C[i][j] * y_j, summed left to right (C's diagonal is 0,
+    kept in the sum so that the arithmetic is exactly the matrix form's and the C forecast's)."""
+    c_rp, c_ry, c_pr, c_py, c_yr, c_yp = c
+    y0, y1, y2 = y
+    return [r[0] - y0 + 0.0 * y0 + c_rp * y1 + c_ry * y2,
+            r[1] - y1 + c_pr * y0 + 0.0 * y1 + c_py * y2,
+            r[2] - y2 + c_yr * y0 + c_yp * y1 + 0.0 * y2]
 
 
 class CoupledPID:

@@ -638,6 +638,9 @@ class DeployModel(Section):
 
     max_sensitivity: number(gt=1) = Field(2.0, description="limit of the peak sensitivity Ms = max |S(jw)|; a "
                                                            "controller above it is never deployed")
+    schedule_points: Count = Field(9, description="operating points (rows) of the gain schedule `tune` reads from "
+                                                  "the policy: setpoints evenly spaced over the first loop's "
+                                                  "setpoint_range; Ms is measured at each")
 
 
 class ScenarioModel(Section):
