@@ -29,7 +29,7 @@ from .actions import ActionMap, Gains, gains_from_values
 from .config import TuningConfig
 from .core import LoopCore
 from .isolation import make_core
-from .evaluate import gains_rollout
+from .evaluate import Trajectory, gains_rollout
 
 DIVERGED_COST = 1e6
 
@@ -49,18 +49,18 @@ class FixedPid:
         return (g.Kp.tolist(), g.Ti.tolist(), g.Td.tolist(), None if g.coupling is None else g.coupling.tolist())
 
 
-def episode_cost(traj: dict, core: LoopCore) -> float:
+def episode_cost(traj: Trajectory, core: LoopCore) -> float:
     """J of one trajectory (see module docstring), DIVERGED_COST scaled by the steps missing when it diverged."""
     config = core.config
     scale = np.asarray(core.scale)
-    e = (traj["setpoint"] - traj["measurement"]) / scale
+    e = (traj.setpoint - traj.measurement) / scale
     cost = float(np.sum(e ** 2) * config.sample_time_s)
     weight = config.reward.control_variation_weight
     if weight:
-        du = np.abs(np.diff(traj["pid_output"], axis=0)) / np.asarray(core.u_scale)
+        du = np.abs(np.diff(traj.pid_output, axis=0)) / np.asarray(core.u_scale)
         cost += weight * float(np.sum(np.minimum(du, 1.0)) * config.sample_time_s) / config.n_loops
-    if traj["terminated"]:
-        cost += DIVERGED_COST * (1.0 + (config.episode_steps - len(traj["reward"])) / config.episode_steps)
+    if traj.terminated:
+        cost += DIVERGED_COST * (1.0 + (config.episode_steps - traj.steps) / config.episode_steps)
     return cost
 
 

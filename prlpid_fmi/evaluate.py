@@ -13,7 +13,7 @@ import numpy as np
 from gymnasium.utils.seeding import np_random
 
 from .config import TuningConfig
-from .core import LoopCore
+from .core import LoopCore, Termination
 from .isolation import make_core
 from .env import PidTuningEnv
 from .metrics import compute_metrics
@@ -33,6 +33,53 @@ def model_policy(model, vecnormalize=None) -> Policy:
     return act
 
 
+@dataclasses.dataclass
+class Trajectory:
+    """The signals of one closed-loop episode of n control steps on n_loops loops (after python-control's
+    TimeResponseData: named arrays instead of a dict of string keys).
+
+    Row k of time_s, setpoint, measurement and control_signal is the value at t = k·Ts:
+    time_s (n+1,) [s]; setpoint, measurement (n+1, n_loops) [output unit]; control_signal (n+1, n_loops)
+    [input unit], what the plant received (after saturation, actuator offsets and noise; the last row
+    repeats); pid_output (n, n_loops) the controller's command; reward (n,); gains {"Kp", "Ti", "Td":
+    (n, n_loops), "coupling": (n, 6) when coupled} in physical units (Kp [u/y], Ti and Td [s]).
+    terminated: the episode ended before its last sample; termination: why and when (core.Termination),
+    None when it ran to the end; after a rejected step or a non-finite output the last measurement row
+    is NaN. scheduling_value (n,): the scheduling variable read before each step of a schedule replay
+    (schedule.replay_schedule), None otherwise.
+
+    ``traj["measurement"]`` reads a field by name, as the dicts this replaces did.
+    """
+
+    time_s: np.ndarray
+    setpoint: np.ndarray
+    measurement: np.ndarray
+    control_signal: np.ndarray
+    pid_output: np.ndarray
+    reward: np.ndarray
+    gains: dict
+    terminated: bool = False
+    termination: Termination | None = None
+    scheduling_value: np.ndarray | None = None
+
+    @property
+    def steps(self) -> int:
+        """Control steps taken (n)."""
+        return len(self.reward)
+
+    def __getitem__(self, name: str):
+        if name not in _TRAJECTORY_FIELDS:
+            raise KeyError(name)
+        return getattr(self, name)
+
+    def get(self, name: str, default=None):
+        """A field by name, `default` for a name that is not a field (dict.get's behaviour)."""
+        return getattr(self, name) if name in _TRAJECTORY_FIELDS else default
+
+
+_TRAJECTORY_FIELDS = frozenset(f.name for f in dataclasses.fields(Trajectory))
+
+
 class _Recorder:
     """Collects the signals of one episode from a LoopCore (row k of each signal is its value at t = k·Ts)."""
 
@@ -50,7 +97,7 @@ class _Recorder:
         self.rewards.append(reward)
         self.gains.append(gains)
 
-    def trajectory(self, terminated: bool) -> dict:
+    def trajectory(self, terminated: bool) -> Trajectory:
         n = len(self.rewards)
         termination = self.core.termination if terminated else None
         if termination is not None and termination.invalid_sample:  # no measurement after the failed step
@@ -58,29 +105,22 @@ class _Recorder:
         controls = self.controls + [self.controls[-1]] if self.controls else [list(self.core.control_signal)]
         gains = {name: np.array([g[i] for g in self.gains], float) for i, name in enumerate(GAIN_NAMES)
                  if self.gains and self.gains[0][i] is not None}
-        return {
-            "time_s": np.arange(n + 1) * self.core.config.sample_time_s,
-            "setpoint": np.array(self.setpoints), "measurement": np.array(self.measurements),
-            "control_signal": np.array(controls), "reward": np.array(self.rewards),
-            "pid_output": np.array(self.commands).reshape(n, -1),
-            "gains": gains, "terminated": bool(terminated),
-            "termination": termination.as_dict() if termination is not None else None,
-        }
+        return Trajectory(
+            time_s=np.arange(n + 1) * self.core.config.sample_time_s,
+            setpoint=np.array(self.setpoints), measurement=np.array(self.measurements),
+            control_signal=np.array(controls), pid_output=np.array(self.commands).reshape(n, -1),
+            reward=np.array(self.rewards), gains=gains, terminated=bool(terminated), termination=termination)
 
 
 def rollout(policy: Policy, config: TuningConfig, seed: int = 0, forecast: bool = False,
-            env: PidTuningEnv | None = None, anchor=None) -> dict[str, np.ndarray]:
+            env: PidTuningEnv | None = None, anchor=None) -> Trajectory:
     """One episode of `policy` on `config` (forecast off unless asked: it does not change the plant).
 
     env: an open PidTuningEnv built from this config to reuse (it is not closed); default: a new one,
     with the anchored gain map centred on `anchor` (the fixed-PID Gains the policy was trained around).
 
-    Returns arrays: time_s (n+1,), setpoint, measurement, control_signal (n+1, n_loops) — row k is the
-    signal at t = k·Ts (control_signal's last row repeats; it is what the plant received, actuator
-    offsets and noise included) — pid_output (n, n_loops, the controller's command), gains {Kp, Ti,
-    Td: (n, n_loops), coupling}, reward (n,), terminated (bool), termination (None, or core.Termination's
-    dict: kind, step, time_s, message; after a rejected step or a non-finite output the last measurement
-    row is NaN).
+    Returns the episode's Trajectory (a NaN last measurement row after a rejected step or a
+    non-finite output).
     """
     own_env = env is None
     if own_env:
@@ -101,8 +141,8 @@ def rollout(policy: Policy, config: TuningConfig, seed: int = 0, forecast: bool 
 
 
 def gains_rollout(gains_fn: GainsFn, config: TuningConfig, seed: int = 0, core: LoopCore | None = None,
-                  setpoint_schedule=None) -> dict[str, np.ndarray]:
-    """One episode with gains in physical units from `gains_fn(core)` before every step; rollout's layout.
+                  setpoint_schedule=None) -> Trajectory:
+    """One episode with gains in physical units from `gains_fn(core)` before every step.
 
     core: an open LoopCore of this config to reuse (not closed); default: a new one with the forecast off.
     setpoint_schedule: overrides config.setpoint_schedule for this episode (((step, setpoints), ...)).
@@ -133,7 +173,7 @@ def constant_gains(Kp, Ti, Td, coupling=None) -> GainsFn:
     return lambda core: gains
 
 
-def measure(traj: dict, config: TuningConfig, intervals=None) -> dict:
+def measure(traj: Trajectory, config: TuningConfig, intervals=None) -> dict:
     """compute_metrics on a trajectory of `config`, plus whether and why the episode terminated.
 
     An episode that ended early is measured over the samples it has: a last sample without a
@@ -141,9 +181,9 @@ def measure(traj: dict, config: TuningConfig, intervals=None) -> dict:
     (an entry then holds "requested_end_step") and intervals starting after it are left out.
     Adds "terminated" (bool) and "termination" (None or {kind, step, time_s, message}).
     """
-    termination = traj.get("termination")
-    n = len(traj["time_s"])
-    if termination is not None and termination["kind"] != "diverged" and n > 1:
+    termination = traj.termination
+    n = len(traj.time_s)
+    if termination is not None and termination.invalid_sample and n > 1:
         n -= 1
     windows, cut = [], {}
     for iv in intervals or []:
@@ -152,20 +192,20 @@ def measure(traj: dict, config: TuningConfig, intervals=None) -> dict:
             windows.append((a, min(b, n)))
             if b > n:
                 cut[(a, min(b, n))] = b
-    metrics = compute_metrics(traj["time_s"][:n], traj["setpoint"][:n], traj["measurement"][:n],
-                              traj["control_signal"][:n], config.sample_time_s, intervals=windows or None,
+    metrics = compute_metrics(traj.time_s[:n], traj.setpoint[:n], traj.measurement[:n],
+                              traj.control_signal[:n], config.sample_time_s, intervals=windows or None,
                               loop_names=[l.output for l in config.loops],
                               events=sorted({d.start_step for d in config.disturbances}))
     for iv in metrics["intervals"]:
         if (iv["start_step"], iv["end_step"]) in cut:
             iv["requested_end_step"] = cut[(iv["start_step"], iv["end_step"])]
-    metrics["terminated"] = traj["terminated"]
-    metrics["termination"] = termination
+    metrics["terminated"] = traj.terminated
+    metrics["termination"] = termination.as_dict() if termination is not None else None
     return metrics
 
 
 def evaluate(policy: Policy, config: TuningConfig, seed: int = 0, intervals=None,
-             env: PidTuningEnv | None = None, anchor=None) -> tuple[dict, dict]:
+             env: PidTuningEnv | None = None, anchor=None) -> tuple[dict, Trajectory]:
     """Roll out (on `env` if given; anchor as in rollout) and compute metrics (compute_metrics).
 
     Returns (metrics, trajectory)."""
@@ -174,7 +214,7 @@ def evaluate(policy: Policy, config: TuningConfig, seed: int = 0, intervals=None
 
 
 def evaluate_gains(gains_fn: GainsFn, config: TuningConfig, seed: int = 0, intervals=None,
-                   core: LoopCore | None = None) -> tuple[dict, dict]:
+                   core: LoopCore | None = None) -> tuple[dict, Trajectory]:
     """gains_rollout + metrics: (metrics, trajectory)."""
     traj = gains_rollout(gains_fn, config, seed, core=core)
     return measure(traj, config, intervals), traj

@@ -458,7 +458,7 @@ def replay_schedule(schedule: GainSchedule, config: TuningConfig, seed: int = 0,
     directly. No action smoothing and no action <-> gain mapping is involved, so the replay of a
     table with constant gains reproduces the rollout of the policy that produced them bit for bit.
 
-    The trajectory has rollout's layout plus "scheduling_value" (n,). Metrics: compute_metrics, as
+    The Trajectory (evaluate.Trajectory) holds scheduling_value (n,). Metrics: compute_metrics, as
     evaluate() computes them. Raises PrlPidError when the table's loops or coupling do not match config.
     """
     from .env import PidTuningEnv
@@ -489,5 +489,5 @@ def replay_schedule(schedule: GainSchedule, config: TuningConfig, seed: int = 0,
         metrics, traj = evaluate_gains(table_gains, config, seed=seed, intervals=intervals, core=core)
     finally:
         core.close()
-    traj["scheduling_value"] = np.array(values)
+    traj.scheduling_value = np.array(values)
     return metrics, traj
