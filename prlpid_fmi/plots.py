@@ -1,12 +1,15 @@
 """Report figures (matplotlib, Agg backend: no display needed), each written to a PNG atomically.
 
-Trajectories are the dicts of prlpid_fmi.evaluate.rollout / evaluate (or schedule.replay_schedule):
-time_s (n+1,), setpoint, measurement, control_signal (n+1, n_loops), gains {Kp, Ti, Td: (n, n_loops),
-coupling: (n, 6)}. Signal names and units come from the config's loops (the FMU variable names).
+Trajectories are evaluate.Trajectory: time_s (n+1,), setpoint, measurement, control_signal (n+1,
+n_loops), gains {Kp, Ti, Td: (n, n_loops), coupling: (n, 6)}. Signal names and units come from the
+config's loops (the FMU variable names). Every figure names its controllers the same way: "adaptive
+policy" (the trained policy), "fixed PID" (the baseline with constant gains) and "gain schedule" (a
+schedule replay); the disturbances of the config are marked where they act.
 """
 from __future__ import annotations
 
 import csv
+import math
 from pathlib import Path
 from typing import Optional
 
@@ -15,15 +18,26 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib import ticker  # noqa: E402
+from matplotlib.transforms import blended_transform_factory  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .config import TuningConfig  # noqa: E402
+from .config import Disturbance, TuningConfig  # noqa: E402
 from .control import COUPLING_NAMES  # noqa: E402
 from .rundir import write_atomic  # noqa: E402
 
 DPI = 110
+POLICY, FIXED, SCHEDULE = "adaptive policy", "fixed PID", "gain schedule"  # the legends' controller names
+COLORS = {POLICY: "tab:blue", FIXED: "tab:orange", SCHEDULE: "tab:green"}
+DISTURBANCE_COLOR = "tab:red"
+# A gain axis shows at least this share of the gain's range (in decades on a log range) ...
+MIN_SPAN_OF_RANGE = 0.1
+# ... and at least this share of the gain's magnitude (a factor 1 + this on a log range), so that a
+# nearly constant gain draws as a nearly flat line instead of noise blown up to full height.
+MIN_SPAN_OF_VALUE = 0.2
+LOG_AXIS_MIN_RATIO = 10.0  # a log-scale gain gets a log axis only when the axis spans this factor
 
-__all__ = ["plot_response", "plot_control_signal", "plot_gains", "plot_learning_curve", "load_monitor_csvs"]
+__all__ = ["plot_response", "plot_control_signal", "plot_gains", "plot_learning_curve", "load_monitor_csvs",
+           "response_figure", "control_signal_figure", "gains_figure", "gain_axis_limits", "disturbance_label"]
 
 
 def _save(fig, path) -> Path:
@@ -56,93 +70,288 @@ def _label(name: str, unit: str) -> str:
 
 
 def _axes(n: int, height: float = 2.6):
-    fig, axes = plt.subplots(n, 1, figsize=(8, 0.8 + height * n), sharex=True, squeeze=False)
+    fig, axes = plt.subplots(n, 1, figsize=(10, 0.8 + height * n), sharex=True, squeeze=False)
     return fig, axes[:, 0]
 
 
-def plot_response(traj: dict, config: TuningConfig, path, title: str = "Closed-loop response",
-                  baseline_traj: Optional[dict] = None, baseline_label: str = "fixed PID") -> Path:
-    """Measurement and setpoint against time, one panel per loop; optional baseline measurement overlay."""
+# -- gain axes ---------------------------------------------------------------------------------------
+def gain_axis_limits(values, low: float, high: float, scale: str = "linear") -> tuple[float, float, bool]:
+    """Y-axis limits for a gain: (bottom, top, log axis?).
+
+    values: every value drawn on the axis (the policy's gains, the fixed PID's); low, high: the gain's
+    range in the scenario; scale: its "log" or "linear" range. The axis spans the values, but at least
+    MIN_SPAN_OF_RANGE of the range and MIN_SPAN_OF_VALUE of the gain's magnitude (both in log10 on a
+    log range), centred on the values and moved inside the range where the values allow; a range limit
+    within a quarter span of the axis is brought on scale. A log axis only when top/bottom >=
+    LOG_AXIS_MIN_RATIO (on a narrower one, log ticks would repeat one label).
+    """
+    v = np.asarray(values, float).ravel()
+    v = v[np.isfinite(v)]
+    log = scale == "log" and low > 0 and v.size > 0 and bool(np.all(v > 0))
+    f = np.log10 if log else (lambda x: x)
+    if v.size == 0:
+        v = np.array([low, high], float)
+    lo_v, hi_v = float(f(v.min())), float(f(v.max()))
+    lo_r, hi_r = (float(f(low)), float(f(high))) if np.isfinite([low, high]).all() else (-np.inf, np.inf)
+    if log:
+        floor = max(MIN_SPAN_OF_RANGE * (hi_r - lo_r), math.log10(1 + MIN_SPAN_OF_VALUE))
+    else:
+        magnitude = max(abs(lo_v), abs(hi_v))
+        width = hi_r - lo_r if np.isfinite(hi_r - lo_r) else 0.0
+        floor = max(MIN_SPAN_OF_RANGE * width, MIN_SPAN_OF_VALUE * magnitude) or 1.0
+    span = max(hi_v - lo_v, floor)
+    bottom = (lo_v + hi_v - span) / 2
+    bottom = max(bottom, min(lo_r, lo_v))  # move inside the range (never cutting a value off)
+    bottom = min(bottom, max(hi_r, hi_v) - span)
+    top = bottom + span
+    for limit in (lo_r, hi_r):  # a limit just off the axis: bring it on
+        if np.isfinite(limit) and bottom - span / 4 <= limit < bottom:
+            bottom = limit
+        elif np.isfinite(limit) and top < limit <= top + span / 4:
+            top = limit
+    pad = 0.06 * (top - bottom)
+    bottom, top = bottom - pad, top + pad
+    if log:
+        bottom, top = 10 ** bottom, 10 ** top
+    return bottom, top, bool(log and top / bottom >= LOG_AXIS_MIN_RATIO)
+
+
+def _format_gain_axis(ax, log: bool) -> None:
+    """Tick labels that differ from each other: plain numbers, no offset, log ticks at 1-2-5 steps."""
+    if log:
+        ax.set_yscale("log")
+        ax.yaxis.set_major_locator(ticker.LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+        ax.yaxis.set_major_formatter(ticker.FormatStrFormatter("%g"))
+        ax.yaxis.set_minor_formatter(ticker.NullFormatter())
+    else:
+        ax.yaxis.set_major_locator(ticker.MaxNLocator(nbins=5))
+        ax.yaxis.set_major_formatter(ticker.ScalarFormatter(useOffset=False))
+
+
+def _shade_outside(ax, low: float, high: float) -> None:
+    """Grey bands beyond a gain range's limits where a limit is on scale; the legend gives the range
+    either way ("off scale" when neither limit is)."""
+    bottom, top = ax.get_ylim()
+    text = f"{low:g} … {high:g}"
+    label = f"outside the gain range {text}"
+    if np.isfinite(high) and high < top:
+        ax.axhspan(high, top, color="0.5", alpha=0.18, lw=0, label=label, gid="gain range")
+        label = None
+    if np.isfinite(low) and low > bottom:
+        ax.axhspan(bottom, low, color="0.5", alpha=0.18, lw=0, label=label, gid="gain range")
+        label = None
+    if label is not None:  # both limits off scale: name the range in the legend without drawing it
+        ax.plot([], [], ls="none", label=f"gain range {text} (off scale)", gid="gain range")
+    ax.set_ylim(bottom, top)
+
+
+# -- disturbances and early ends ----------------------------------------------------------------------
+def disturbance_label(d: Disturbance, config: TuningConfig) -> str:
+    """Short text for a disturbance: what changes by how much, e.g. "q_d = -20" (an FMU input or
+    parameter set to a value), "q_in +5 (actuator offset)" (added to the loop's control signal),
+    "h2 +0.1 (measurement offset)"."""
+    if d.kind == "fmu":
+        return f"{d.target} = {d.value:g}"
+    loop = next((l for l in config.loops if l.output == d.target), None)
+    name = loop.input if (loop is not None and d.kind == "actuator") else d.target
+    return f"{name} {d.value:+g} ({d.kind} offset)"
+
+
+def _mark_disturbances(axes, config: TuningConfig, t_end: float, loop_panels: bool = True) -> None:
+    """A vertical line at each disturbance's start, a band over a pulse's duration, a label in the
+    panel of the loop it acts on when the panels are the loops (loop_panels), else in the top panel."""
+    ts = config.sample_time_s
+    for j, d in enumerate(config.disturbances):
+        t0 = d.start_step * ts
+        if t0 > t_end:
+            continue
+        t1 = None if d.end_step is None else min(d.end_step * ts, t_end)
+        panel = next((i for i, l in enumerate(config.loops) if loop_panels and d.kind != "fmu"
+                      and l.output == d.target), 0)
+        for i, ax in enumerate(axes):
+            ax.axvline(t0, color=DISTURBANCE_COLOR, ls="-.", lw=1.0, alpha=0.8, gid="disturbance",
+                       label="disturbance" if j == 0 else None)
+            if t1 is not None:
+                ax.axvspan(t0, t1, color=DISTURBANCE_COLOR, alpha=0.12, lw=0, gid="disturbance")
+            if i == panel:
+                text = disturbance_label(d, config) + ("" if t1 is None else f" for {t1 - t0:g} s")
+                ax.text(t0, 0.98, " " + text, transform=blended_transform_factory(ax.transData, ax.transAxes),
+                        ha="left", va="top", fontsize=7, color=DISTURBANCE_COLOR, gid="disturbance",
+                        bbox=dict(boxstyle="square,pad=0.1", fc="white", ec="none", alpha=0.7))
+
+
+def _mark_end(axes, traj, name: str) -> None:
+    """A vertical line where an episode ended early, labelled with why."""
+    t = traj.termination
+    if t is None:
+        return
+    for ax in axes:
+        ax.axvline(t.time_s, color=COLORS.get(name, "k"), ls=":", lw=1.5, label=f"{name} ended: {t.kind}")
+
+
+def _controllers(traj, baseline_traj, baseline_label: str, schedule_traj, label: str) -> list:
+    """(name, trajectory) in drawing order: the comparisons first, the main trajectory on top."""
+    out = [(baseline_label, baseline_traj), (SCHEDULE, schedule_traj), (label, traj)]
+    return [(name, t) for name, t in out if t is not None]
+
+
+def _ended_note(pairs) -> str:
+    ended = [f"{name} ended early ({t.termination.kind}, t = {t.termination.time_s:g} s)"
+             for name, t in pairs if t.termination is not None]
+    return f" ({'; '.join(ended)})" if ended else ""
+
+
+def _legend(ax, **kw) -> None:
+    """The axes' legend with the adaptive policy first and the disturbances and limits last."""
+    handles, labels = ax.get_legend_handles_labels()
+    first = ("setpoint", POLICY, FIXED, SCHEDULE)
+    rank = {name: i for i, name in enumerate(first)}
+    order = sorted(range(len(labels)), key=lambda i: (rank.get(labels[i].split(":")[0], len(first)), i))
+    ax.legend([handles[i] for i in order], [labels[i] for i in order], loc="upper left", bbox_to_anchor=(1.01, 1.0),
+              borderaxespad=0.0, fontsize=8, **kw)  # beside the axes: it never hides a signal or a label
+
+
+# -- figures -------------------------------------------------------------------------------------------
+def plot_response(traj, config: TuningConfig, path, title: str = "Closed-loop response", **kw) -> Path:
+    """response_figure written to `path` (PNG)."""
+    return _save(response_figure(traj, config, title, **kw), path)
+
+
+def response_figure(traj, config: TuningConfig, title: str = "Closed-loop response", baseline_traj=None,
+                    baseline_label: str = FIXED, schedule_traj=None, label: str = POLICY):
+    """Measurement and setpoint against time, one panel per loop, for the adaptive policy and, when
+    given, the fixed PID (baseline_traj) and a gain-schedule replay (schedule_traj); disturbances marked."""
     y_units, _ = _units(config)
     fig, axes = _axes(config.n_loops)
-    t = traj["time_s"]
+    pairs = _controllers(traj, baseline_traj, baseline_label, schedule_traj, label)
     for i, (ax, loop) in enumerate(zip(axes, config.loops)):
-        ax.plot(t, traj["setpoint"][:, i], "k--", lw=1.2, label=f"setpoint {loop.output}")
-        if baseline_traj is not None:
-            ax.plot(baseline_traj["time_s"], baseline_traj["measurement"][:, i], color="tab:orange", lw=1.3,
-                    label=f"{loop.output} ({baseline_label})")
-        ax.plot(t, traj["measurement"][:, i], color="tab:blue", lw=1.5, label=f"{loop.output} (tuned)")
+        ax.plot(traj.time_s, traj.setpoint[:, i], "k--", lw=1.2, label="setpoint")
+        for name, t in pairs:
+            ax.plot(t.time_s, t.measurement[:, i], color=COLORS.get(name), lw=1.5 if t is traj else 1.2,
+                    label=name)
         ax.set_ylabel(_label(loop.output, y_units[i]))
         ax.grid(True, alpha=0.3)
-        ax.legend(loc="best", fontsize=8)
+    _mark_disturbances(axes, config, float(traj.time_s[-1]))
+    for name, t in pairs:
+        _mark_end(axes, t, name)
+    for ax in axes:
+        _legend(ax)
     axes[-1].set_xlabel("time [s]")
-    axes[0].set_title(title + (" (terminated: diverged)" if traj.get("terminated") else ""))
+    axes[0].set_title(title + _ended_note(pairs), fontsize=11)
     fig.tight_layout()
-    return _save(fig, path)
+    return fig
 
 
-def plot_control_signal(traj: dict, config: TuningConfig, path, baseline_traj: Optional[dict] = None,
-                        title: str = "Control signal", baseline_label: str = "fixed PID") -> Path:
-    """Control signal (after saturation) per loop as a zero-order hold, with the output limits."""
+def plot_control_signal(traj, config: TuningConfig, path, title: str = "Control signal", **kw) -> Path:
+    """control_signal_figure written to `path` (PNG)."""
+    return _save(control_signal_figure(traj, config, title, **kw), path)
+
+
+def control_signal_figure(traj, config: TuningConfig, title: str = "Control signal", baseline_traj=None,
+                          baseline_label: str = FIXED, schedule_traj=None, label: str = POLICY):
+    """Control signal (after saturation) per loop as a zero-order hold, with the output limits, for the
+    same controllers as response_figure; disturbances marked."""
     _, u_units = _units(config)
     fig, axes = _axes(config.n_loops)
+    pairs = _controllers(traj, baseline_traj, baseline_label, schedule_traj, label)
     for i, (ax, loop) in enumerate(zip(axes, config.loops)):
-        if baseline_traj is not None:
-            ax.step(baseline_traj["time_s"], baseline_traj["control_signal"][:, i], where="post",
-                    color="tab:orange", lw=1.1, label=f"{loop.input} ({baseline_label})")
-        ax.step(traj["time_s"], traj["control_signal"][:, i], where="post", color="tab:blue", lw=1.3,
-                label=f"{loop.input} (tuned)")
-        for limit in (loop.u_min, loop.u_max):
-            if np.isfinite(limit):
-                ax.axhline(limit, color="gray", ls=":", lw=1)
+        for name, t in pairs:
+            ax.step(t.time_s, t.control_signal[:, i], where="post", color=COLORS.get(name),
+                    lw=1.3 if t is traj else 1.1, label=name)
+        limits = [v for v in (loop.u_min, loop.u_max) if np.isfinite(v)]
+        for k, limit in enumerate(limits):
+            ax.axhline(limit, color="gray", ls=":", lw=1, label="actuator limits" if k == 0 else None)
         ax.set_ylabel(_label(loop.input, u_units[i]))
         ax.grid(True, alpha=0.3)
-        ax.legend(loc="best", fontsize=8)
+    _mark_disturbances(axes, config, float(traj.time_s[-1]))
+    for name, t in pairs:
+        _mark_end(axes, t, name)
+    for ax in axes:
+        _legend(ax)
     axes[-1].set_xlabel("time [s]")
-    axes[0].set_title(title)
+    axes[0].set_title(title + _ended_note(pairs), fontsize=11)
     fig.tight_layout()
-    return _save(fig, path)
+    return fig
 
 
-def plot_gains(traj: dict, config: TuningConfig, path, title: str = "PID parameters set by the policy") -> Path:
+def plot_gains(traj, config: TuningConfig, path, title: str = "PID parameters set by the adaptive policy",
+               baseline_gains: Optional[dict] = None, schedule_traj=None) -> Path:
+    """gains_figure written to `path` (PNG)."""
+    return _save(gains_figure(traj, config, title, baseline_gains, schedule_traj), path)
+
+
+def _held(traj, key: str) -> tuple[np.ndarray, np.ndarray]:
+    """(t (n+1,), gains (n+1, m)): a gain trajectory as a zero-order hold (step k's gains from k·Ts to
+    (k+1)·Ts; the last row repeats)."""
+    v = np.asarray(traj.gains[key], float)
+    return np.asarray(traj.time_s[: len(v) + 1]), (np.vstack([v, v[-1:]]) if len(v) else v)
+
+
+def gains_figure(traj, config: TuningConfig, title: str = "PID parameters set by the adaptive policy",
+                 baseline_gains: Optional[dict] = None, schedule_traj=None):
     """Kp, Ti, Td against time (one panel each, one line per loop), plus the coupling coefficients if present.
 
-    Gains of step k apply from t = k*Ts to (k+1)*Ts, drawn as a zero-order hold.
+    Gains of step k apply from t = k*Ts to (k+1)*Ts, drawn as a zero-order hold. baseline_gains: the
+    fixed PID's {Kp, Ti, Td: (n_loops,), coupling: (6,)} (fixed_pid.json), drawn dashed; schedule_traj:
+    a gain-schedule replay, whose table gains are drawn dotted. Each axis follows gain_axis_limits; what
+    lies outside a loop's gain range (loop.Kp.low/high, ...) is shaded.
     """
     y_units, u_units = _units(config)
-    g = traj["gains"]
-    n = len(g["Kp"])
-    t = np.asarray(traj["time_s"][: n + 1])
-    panels = [("Kp", None), ("Ti", "s"), ("Td", "s")] + ([("coupling", "1")] if "coupling" in g else [])
+    panels = [("Kp", None), ("Ti", "s"), ("Td", "s")] + ([("coupling", "1")] if "coupling" in traj.gains else [])
     fig, axes = _axes(len(panels), height=2.0)
-
-    def hold(v):
-        return np.append(v, v[-1]) if len(v) else v
+    base = baseline_gains or {}
+    multi = config.n_loops > 1
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
 
     for ax, (key, unit) in zip(axes, panels):
-        values = np.asarray(g[key])
+        t, values = _held(traj, key)
+        fixed = None if base.get(key) is None else np.atleast_1d(np.asarray(base[key], float))
+        t_s, scheduled = _held(schedule_traj, key) if schedule_traj is not None else (None, None)
+        names = COUPLING_NAMES if key == "coupling" else [l.output for l in config.loops]
+        # several lines: a colour per loop (coefficient), solid = adaptive policy, dashed = fixed PID;
+        # one line: the controllers' colours of the other figures
+        per_line = multi or key == "coupling"
+        for j, name in enumerate(names):
+            color = colors[j % len(colors)] if per_line else COLORS[POLICY]
+            ax.step(t, values[:, j], where="post", lw=1.3, color=color, label=name if per_line else POLICY)
+            if fixed is not None and j < fixed.size:
+                ax.axhline(fixed[j], color=color if per_line else COLORS[FIXED], ls="--", lw=1.2,
+                           label=None if per_line else FIXED)
+            if scheduled is not None:
+                ax.step(t_s, scheduled[:, j], where="post", ls=":", lw=1.6,
+                        color=color if per_line else COLORS[SCHEDULE], label=None if per_line else SCHEDULE)
+        if per_line:  # the line styles' meaning, once
+            ax.plot([], [], color="k", lw=1.3, label=POLICY)
+            if fixed is not None:
+                ax.plot([], [], color="k", ls="--", lw=1.2, label=FIXED)
+            if scheduled is not None:
+                ax.plot([], [], color="k", ls=":", lw=1.6, label=SCHEDULE)
         if key == "coupling":
-            for j, name in enumerate(COUPLING_NAMES):
-                ax.step(t, hold(values[:, j]), where="post", lw=1.2, label=name)
+            c = float(config.coupling_range)
+            ranges, scale = [(-c, c)], "linear"
             ax.set_ylabel("coupling [1]")
         else:
-            for i, loop in enumerate(config.loops):
-                ax.step(t, hold(values[:, i]), where="post", lw=1.3, label=loop.output)
+            rng = [getattr(l, key) for l in config.loops]
+            ranges = sorted({(r.low, r.high) for r in rng})
+            scale = "log" if all(r.scale == "log" for r in rng) else "linear"
             if key == "Kp":
                 units = {f"{u or 'u'}/{y or 'y'}" for u, y in zip(u_units, y_units)}
                 unit = units.pop() if len(units) == 1 else "u/y"
             ax.set_ylabel(f"{key} [{unit}]")
-            rng = [getattr(l, key) for l in config.loops]
-            if all(r.scale == "log" for r in rng) and np.all(values > 0):
-                ax.set_yscale("log")
-                ax.yaxis.set_major_formatter(ticker.FormatStrFormatter("%g"))
-                ax.yaxis.set_minor_formatter(ticker.LogFormatter(labelOnlyBase=False, minor_thresholds=(1, 0.5)))
-        ax.grid(True, alpha=0.3, which="both")
-        ax.legend(loc="best", fontsize=8, ncol=3 if key == "coupling" else 1)
+        drawn = np.concatenate([v.ravel() for v in (values, fixed, scheduled) if v is not None])
+        bottom, top, log = gain_axis_limits(drawn, min(r[0] for r in ranges), max(r[1] for r in ranges), scale)
+        _format_gain_axis(ax, log)
+        ax.set_ylim(bottom, top)
+        for low, high in ranges:
+            _shade_outside(ax, low, high)
+        ax.grid(True, alpha=0.3, which="major")
+    _mark_disturbances(axes, config, float(traj.time_s[-1]), loop_panels=False)
+    for ax, (key, _) in zip(axes, panels):
+        _legend(ax, ncol=2 if key == "coupling" else 1)
     axes[-1].set_xlabel("time [s]")
-    axes[0].set_title(title)
+    axes[0].set_title(title, fontsize=11)
     fig.tight_layout()
-    return _save(fig, path)
+    return fig
 
 
 def load_monitor_csvs(monitor_dir) -> tuple[np.ndarray, np.ndarray]:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import decimal
 import io
 import json
 import sys
@@ -22,10 +23,18 @@ from .report import candidates_table, loop_units, render_report
 
 
 # -- trajectories to CSV ---------------------------------------------------------------------------
-def trajectory_csv(traj: dict, loop_names: list[str]) -> str:
-    """gains.csv text: one row per control step k (t = k·Ts): setpoint, measurement, u and gains."""
-    gains = traj["gains"]
-    n = len(traj["reward"])
+def sample_times(steps: int, sample_time_s: float) -> np.ndarray:
+    """t = k·Ts for k = 0..steps-1 [s], rounded to the decimals of Ts (0.3, not 0.30000000000000004)."""
+    decimals = max(0, -decimal.Decimal(repr(float(sample_time_s))).as_tuple().exponent)
+    return np.round(np.arange(steps) * sample_time_s, decimals)
+
+
+def trajectory_csv(traj, loop_names: list[str], sample_time_s: float) -> str:
+    """gains.csv text of an evaluate.Trajectory: one row per control step k (t = k·Ts, rounded to the
+    sample time's decimals): setpoint, measurement, control signal and gains (Ki = Kp/Ti, Kd = Kp·Td)."""
+    gains = traj.gains
+    n = traj.steps
+    times = sample_times(n, sample_time_s)
     header = ["step", "time_s"]
     for name in loop_names:
         header += [f"setpoint[{name}]", f"measurement[{name}]", f"control_signal[{name}]",
@@ -38,11 +47,11 @@ def trajectory_csv(traj: dict, loop_names: list[str]) -> str:
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(header)
     for k in range(n):
-        row = [k, repr(float(traj["time_s"][k]))]
+        row = [k, repr(float(times[k]))]
         for i in range(len(loop_names)):
             kp, ti, td = gains["Kp"][k][i], gains["Ti"][k][i], gains["Td"][k][i]
-            row += [repr(float(v)) for v in (traj["setpoint"][k][i], traj["measurement"][k][i],
-                                            traj["control_signal"][k][i], kp, ti, td, kp / ti, kp * td)]
+            row += [repr(float(v)) for v in (traj.setpoint[k][i], traj.measurement[k][i],
+                                            traj.control_signal[k][i], kp, ti, td, kp / ti, kp * td)]
         if coupling is not None:
             row += [repr(float(v)) for v in coupling[k]]
         w.writerow(row)
@@ -99,13 +108,15 @@ def evaluate_into(run_dir: Path, scenario: Scenario, out_dir: Path, policy, fixe
         fixed_m, fixed_traj = evaluate_gains(constant_gains(g["Kp"], g["Ti"], g["Td"], g.get("coupling")), config, seed=seed,
                                        intervals=intervals)
     loop_names = [l.output for l in config.loops]
-    write_atomic(out_dir / rd.GAINS, trajectory_csv(traj, loop_names))
+    write_atomic(out_dir / rd.GAINS, trajectory_csv(traj, loop_names, config.sample_time_s))
     metrics = {"policy": policy_m, "fixed_pid": {"gains": fixed["gains"], "metrics": fixed_m} if fixed else None}
     write_json(out_dir / rd.METRICS, metrics)
     plots.plot_response(traj, config, out_dir / rd.RESPONSE_PLOT, title=f"{scenario.name}: response",
                         baseline_traj=fixed_traj)
-    plots.plot_control_signal(traj, config, out_dir / rd.CONTROL_SIGNAL_PLOT, baseline_traj=fixed_traj)
-    plots.plot_gains(traj, config, out_dir / rd.GAINS_PLOT)
+    plots.plot_control_signal(traj, config, out_dir / rd.CONTROL_SIGNAL_PLOT, baseline_traj=fixed_traj,
+                              title=f"{scenario.name}: control signal")
+    plots.plot_gains(traj, config, out_dir / rd.GAINS_PLOT, baseline_gains=fixed["gains"] if fixed else None,
+                     title=f"{scenario.name}: PID gains set by the adaptive policy")
     write_atomic(out_dir / rd.REPORT,
                  render_report(scenario, policy_m, fixed_m, fixed["gains"] if fixed else None, source,
                                loop_units(config), learning_curve=out_dir == run_dir))

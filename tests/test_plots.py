@@ -1,19 +1,33 @@
-"""Report figures: valid, non-trivial PNGs written atomically, for SISO, MIMO (coupled) and training logs."""
+"""Report figures: valid, non-trivial PNGs written atomically, for SISO, MIMO (coupled) and training logs;
+what an engineer reads off them (gain axes, baseline and range limits, disturbance markers, legends);
+the Trajectory record and gains.csv's times."""
+import csv
 import dataclasses
+import io
 import json
+from decimal import Decimal
 
 import matplotlib.image
+import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
-from prlpid_fmi.evaluate import rollout
-from prlpid_fmi.plots import (load_monitor_csvs, plot_control_signal, plot_gains, plot_learning_curve,
-                              plot_response)
+from prlpid_fmi.config import Disturbance
+from prlpid_fmi.core import Termination
+from prlpid_fmi.evaluate import Trajectory, constant_gains, gains_rollout, rollout
+from prlpid_fmi.plots import (control_signal_figure, gain_axis_limits, gains_figure, load_monitor_csvs,
+                              plot_control_signal, plot_gains, plot_learning_curve, plot_response,
+                              response_figure)
 from prlpid_fmi.presets import preset
+from prlpid_fmi.run import trajectory_csv
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 SISO = dataclasses.replace(preset("first_order"), setpoint_schedule=((0, (0.5,)), (60, (-0.5,))), episode_steps=120)
 QUAD = dataclasses.replace(preset("quadrotor"), setpoint_schedule=((0, (0.2, -0.1, 0.0)),), episode_steps=60)
+# an actuator pulse from step 80 to 90 and a measurement step at 100 (Ts = 0.1 s: t = 8 s, 9 s, 10 s)
+DISTURBED = dataclasses.replace(SISO, disturbances=(Disturbance("actuator", "y", 80, -2.0, 90),
+                                                    Disturbance("measurement", "y", 100, 0.1)))
+FIXED = {"Kp": [2.0], "Ti": [0.4], "Td": [0.01]}  # Ti 0.4 s constant: once drawn as "4e-01" on every tick
 
 
 def varying(obs):
@@ -26,8 +40,10 @@ def varying(obs):
 
 @pytest.fixture(scope="module")
 def trajs():
+    fixed = constant_gains(FIXED["Kp"], FIXED["Ti"], FIXED["Td"])
     return {"siso": rollout(varying, SISO), "baseline": rollout(lambda o: np.array([0.0, 0.0, -1.0], np.float32), SISO),
-            "quad": rollout(varying, QUAD)}
+            "quad": rollout(varying, QUAD), "fixed": gains_rollout(fixed, DISTURBED),
+            "disturbed": rollout(varying, DISTURBED)}
 
 
 def assert_png(path):
@@ -87,3 +103,121 @@ def test_learning_curve_of_an_empty_run_still_draws(tmp_path):
     (tmp_path / "monitor").mkdir()
     path = plot_learning_curve(tmp_path / "monitor", tmp_path / "learning.png")
     assert path.read_bytes()[:8] == PNG_MAGIC
+
+
+# -- what the figures say ------------------------------------------------------------------------------
+def test_a_nearly_constant_gain_draws_nearly_flat():
+    # Td = 0.1 s moving by 0.001 s on the range [0, 5] s: at least a tenth of the range is shown
+    bottom, top, log = gain_axis_limits([0.1, 0.1005, 0.101], 0.0, 5.0, "linear")
+    assert not log and bottom <= 0.1 and top >= 0.101
+    assert 0.001 / (top - bottom) < 0.01
+    # the magnitude rule alone (an unbounded range): the axis spans at least 20 % of |value|
+    bottom, top, _ = gain_axis_limits([100.0, 100.001], -np.inf, np.inf, "linear")
+    assert top - bottom >= 20.0 and bottom < 100.0 < top
+    # a constant gain on a log range: a real interval, at least a factor 1.2, on a linear axis
+    bottom, top, log = gain_axis_limits([0.4] * 50, 0.1, 20.0, "log")
+    assert bottom < 0.4 < top and top / bottom >= 1.2 and not log
+
+
+def test_a_gain_that_moves_fills_its_axis_and_a_wide_one_gets_log_ticks():
+    bottom, top, log = gain_axis_limits(np.linspace(2.0, 6.0, 30), 0.5, 50.0, "log")
+    assert bottom <= 2.0 and top >= 6.0 and (6.0 - 2.0) / (top - bottom) > 0.8 and not log
+    bottom, top, log = gain_axis_limits([0.3, 40.0], 0.1, 100.0, "log")
+    assert log and bottom <= 0.3 and top >= 40.0
+
+
+def test_the_axis_moves_inside_the_gain_range_and_shows_a_near_limit():
+    # Td = 0.0017 s near the low limit 0 of [0, 0.2]: the axis starts at the limit, not at -0.01
+    bottom, top, _ = gain_axis_limits([0.0017], 0.0, 0.2, "linear")
+    assert bottom < 0.0 < bottom + 0.1 * (top - bottom) and top - bottom >= 0.02
+    # a negative linear Kp range [-1, -0.01]
+    bottom, top, _ = gain_axis_limits([-0.2], -1.0, -0.01, "linear")
+    assert bottom < -0.2 < top and top - bottom >= 0.099 and top <= -0.01 + 0.1
+
+
+def _visible_tick_labels(ax):
+    ax.figure.canvas.draw()
+    lo, hi = sorted(ax.get_ylim())
+    return [t.get_text() for t in ax.get_yticklabels(which="both") if lo <= t.get_position()[1] <= hi and t.get_text()]
+
+
+def test_gains_figure_baseline_range_and_readable_ticks(trajs):
+    fig = gains_figure(trajs["fixed"], DISTURBED, baseline_gains=FIXED)
+    try:
+        kp_ax, ti_ax, td_ax = fig.axes[:3]
+        for ax, key in ((kp_ax, "Kp"), (ti_ax, "Ti"), (td_ax, "Td")):
+            labels = _visible_tick_labels(ax)
+            assert len(labels) >= 2 and len(set(labels)) == len(labels), (key, labels)
+            dashed = [l for l in ax.get_lines() if l.get_linestyle() == "--"]
+            assert [list(l.get_ydata()) for l in dashed] == [[FIXED[key][0]] * 2], key
+            legend = [t.get_text() for t in ax.get_legend().get_texts()]
+            assert legend[:2] == ["adaptive policy", "fixed PID"]
+            loop = DISTURBED.loops[0]
+            rng = getattr(loop, key)
+            assert any(f"{rng.low:g} … {rng.high:g}" in text for text in legend), (key, legend)
+        # Td's range [0, 0.2] starts on scale: shaded below 0; Kp's [0.5, 30] is off scale around Kp = 2
+        shaded = [a for a in td_ax.patches if a.get_gid() == "gain range"]
+        assert len(shaded) == 1 and shaded[0].get_extents().height > 0
+        assert not [a for a in kp_ax.patches if a.get_gid() == "gain range"]
+        assert "gain range 0.5 … 30 (off scale)" in [t.get_text() for t in kp_ax.get_legend().get_texts()]
+    finally:
+        plt.close(fig)
+
+
+def _disturbance_artists(ax):
+    lines = [l for l in ax.get_lines() if l.get_gid() == "disturbance"]
+    spans = [p for p in ax.patches if p.get_gid() == "disturbance"]
+    texts = [t.get_text().strip() for t in ax.texts if t.get_gid() == "disturbance"]
+    return sorted(float(l.get_xdata()[0]) for l in lines), spans, texts
+
+
+@pytest.mark.parametrize("figure", [response_figure, control_signal_figure])
+def test_disturbances_marked_and_both_controllers_named(trajs, figure):
+    fig = figure(trajs["disturbed"], DISTURBED, baseline_traj=trajs["fixed"], schedule_traj=trajs["fixed"])
+    try:
+        (ax,) = fig.axes
+        starts, spans, texts = _disturbance_artists(ax)
+        assert starts == pytest.approx([8.0, 10.0])  # start_step · Ts
+        assert len(spans) == 1  # the pulse's duration; the step lasts to the end
+        assert (spans[0].get_x(), spans[0].get_x() + spans[0].get_width()) == pytest.approx((8.0, 9.0))
+        assert texts == ["u -2 (actuator offset) for 1 s", "y +0.1 (measurement offset)"]  # u: the loop's input
+        legend = [t.get_text() for t in ax.get_legend().get_texts()]
+        assert {"adaptive policy", "fixed PID", "gain schedule", "disturbance"} <= set(legend)
+        words = " ".join(legend + [t.get_text() for a in fig.axes for t in a.texts] + [ax.get_title()])
+        assert "tuned" not in words
+    finally:
+        plt.close(fig)
+
+
+def test_an_early_end_is_marked_where_it_happened(trajs):
+    ended = dataclasses.replace(trajs["siso"], terminated=True,
+                                termination=Termination("diverged", 50, 5.0, "diverged"))
+    fig = response_figure(ended, SISO, "t")
+    try:
+        ax = fig.axes[0]
+        assert "adaptive policy ended: diverged" in [t.get_text() for t in ax.get_legend().get_texts()]
+        assert "ended early (diverged, t = 5 s)" in ax.get_title()
+    finally:
+        plt.close(fig)
+
+
+# -- the Trajectory record and gains.csv ------------------------------------------------------------------
+def test_trajectory_fields_by_attribute_and_by_name(trajs):
+    t = trajs["siso"]
+    assert isinstance(t, Trajectory) and t.steps == SISO.episode_steps == len(t.reward)
+    assert t["measurement"] is t.measurement and t["gains"]["Kp"] is t.gains["Kp"]
+    assert t.time_s.shape == (t.steps + 1,) and t.setpoint.shape == t.measurement.shape == (t.steps + 1, 1)
+    assert t.pid_output.shape == (t.steps, 1) and t.termination is None and not t.terminated
+    assert t.scheduling_value is None and t.get("nope", 7) == 7
+    with pytest.raises(KeyError):
+        t["nope"]
+
+
+def test_gains_csv_times_are_multiples_of_the_sample_time(trajs):
+    text = trajectory_csv(trajs["siso"], ["y"], SISO.sample_time_s)
+    rows = list(csv.DictReader(io.StringIO(text)))
+    assert len(rows) == SISO.episode_steps
+    ts = Decimal(repr(SISO.sample_time_s))
+    for k, row in enumerate(rows):  # the decimal k·Ts, written as such: 0.3, never 0.30000000000000004
+        assert row["time_s"] == repr(float(k * ts)), row["time_s"]
+    assert rows[3]["time_s"] == "0.3"
