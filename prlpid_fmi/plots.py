@@ -28,6 +28,7 @@ from .rundir import write_atomic  # noqa: E402
 DPI = 110
 POLICY, FIXED, SCHEDULE = "adaptive policy", "fixed PID", "gain schedule"  # the legends' controller names
 COLORS = {POLICY: "tab:blue", FIXED: "tab:orange", SCHEDULE: "tab:green"}
+LINESTYLES = {SCHEDULE: (0, (4, 2))}  # signals of the controllers; "-" for those not named here
 DISTURBANCE_COLOR = "tab:red"
 # A gain axis shows at least this share of the gain's range (in decades on a log range) ...
 MIN_SPAN_OF_RANGE = 0.1
@@ -190,8 +191,9 @@ def _mark_end(axes, traj, name: str) -> None:
 
 
 def _controllers(traj, baseline_traj, baseline_label: str, schedule_traj, label: str) -> list:
-    """(name, trajectory) in drawing order: the comparisons first, the main trajectory on top."""
-    out = [(baseline_label, baseline_traj), (SCHEDULE, schedule_traj), (label, traj)]
+    """(name, trajectory) in drawing order: the fixed PID, the main trajectory over it, then the gain
+    schedule, dashed (LINESTYLES): it replays the policy's gains and often lies right on the policy's line."""
+    out = [(baseline_label, baseline_traj), (label, traj), (SCHEDULE, schedule_traj)]
     return [(name, t) for name, t in out if t is not None]
 
 
@@ -227,8 +229,8 @@ def response_figure(traj, config: TuningConfig, title: str = "Closed-loop respon
     for i, (ax, loop) in enumerate(zip(axes, config.loops)):
         ax.plot(traj.time_s, traj.setpoint[:, i], "k--", lw=1.2, label="setpoint")
         for name, t in pairs:
-            ax.plot(t.time_s, t.measurement[:, i], color=COLORS.get(name), lw=1.5 if t is traj else 1.2,
-                    label=name)
+            ax.plot(t.time_s, t.measurement[:, i], color=COLORS.get(name), ls=LINESTYLES.get(name, "-"),
+                    lw=1.5 if t is traj else 1.2, label=name)
         ax.set_ylabel(_label(loop.output, y_units[i]))
         ax.grid(True, alpha=0.3)
     _mark_disturbances(axes, config, float(traj.time_s[-1]))
@@ -257,7 +259,7 @@ def control_signal_figure(traj, config: TuningConfig, title: str = "Control sign
     for i, (ax, loop) in enumerate(zip(axes, config.loops)):
         for name, t in pairs:
             ax.step(t.time_s, t.control_signal[:, i], where="post", color=COLORS.get(name),
-                    lw=1.3 if t is traj else 1.1, label=name)
+                    ls=LINESTYLES.get(name, "-"), lw=1.3 if t is traj else 1.1, label=name)
         limits = [v for v in (loop.u_min, loop.u_max) if np.isfinite(v)]
         for k, limit in enumerate(limits):
             ax.axhline(limit, color="gray", ls=":", lw=1, label="actuator limits" if k == 0 else None)

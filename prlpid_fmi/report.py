@@ -20,9 +20,9 @@ METRIC_UNITS = {"ISE": "{y}²·s", "IAE": "{y}·s", "ITAE": "{y}·s²", "Oversho
                 "RiseTime": "s", "SteadyStateError": "{y}", "PeakDeviation": "{y}", "RecoveryTime": "s",
                 "ControlEffort": "{u}²·s", "TotalVariation": "{u}"}
 GAIN_UNITS = {"Kp": "{u}/{y}", "Ti": "s", "Td": "s"}
-PLOTS = ((rd.RESPONSE_PLOT, "measurement and setpoint, both controllers"),
-         (rd.CONTROL_SIGNAL_PLOT, "control signal, both controllers"),
-         (rd.GAINS_PLOT, "Kp, Ti, Td set by the adaptive policy"),
+PLOTS = ((rd.RESPONSE_PLOT, "measurement and setpoint of each controller, disturbances marked"),
+         (rd.CONTROL_SIGNAL_PLOT, "control signal of each controller, actuator limits and disturbances marked"),
+         (rd.GAINS_PLOT, "Kp, Ti, Td set by the adaptive policy, beside the fixed PID's and the gain ranges"),
          (rd.LEARNING_CURVE_PLOT, "training reward"))
 
 

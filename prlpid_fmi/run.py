@@ -89,14 +89,16 @@ def _policy(run_dir: Path, algorithm: str):
 
 
 def evaluate_into(run_dir: Path, scenario: Scenario, out_dir: Path, policy, fixed: dict | None,
-                  source: Path | None = None, anchor=None) -> dict:
+                  source: Path | None = None, anchor=None, schedule=None) -> dict:
     """Evaluate `policy` (and the fixed PID) on the scenario's evaluation; write metrics, CSV, plots, report.
 
-    source: the scenario file the evaluation comes from, named in the report.
+    source: the scenario file the evaluation comes from, named in the report. schedule: the policy's
+    GainSchedule, replayed on the same evaluation and drawn in the plots as "gain schedule".
     """
     from . import plots
     from .evaluate import constant_gains, evaluate_gains
     from .evaluate import evaluate
+    from .schedule import replay_schedule
 
     config = scenario.evaluation_config()
     intervals = list(scenario.evaluation.intervals) or None
@@ -107,16 +109,19 @@ def evaluate_into(run_dir: Path, scenario: Scenario, out_dir: Path, policy, fixe
         g = fixed["gains"]
         fixed_m, fixed_traj = evaluate_gains(constant_gains(g["Kp"], g["Ti"], g["Td"], g.get("coupling")), config, seed=seed,
                                        intervals=intervals)
+    schedule_traj = None
+    if schedule is not None:
+        _, schedule_traj = replay_schedule(schedule, config, seed=seed, intervals=intervals)
     loop_names = [l.output for l in config.loops]
     write_atomic(out_dir / rd.GAINS, trajectory_csv(traj, loop_names, config.sample_time_s))
     metrics = {"policy": policy_m, "fixed_pid": {"gains": fixed["gains"], "metrics": fixed_m} if fixed else None}
     write_json(out_dir / rd.METRICS, metrics)
     plots.plot_response(traj, config, out_dir / rd.RESPONSE_PLOT, title=f"{scenario.name}: response",
-                        baseline_traj=fixed_traj)
+                        baseline_traj=fixed_traj, schedule_traj=schedule_traj)
     plots.plot_control_signal(traj, config, out_dir / rd.CONTROL_SIGNAL_PLOT, baseline_traj=fixed_traj,
-                              title=f"{scenario.name}: control signal")
+                              schedule_traj=schedule_traj, title=f"{scenario.name}: control signal")
     plots.plot_gains(traj, config, out_dir / rd.GAINS_PLOT, baseline_gains=fixed["gains"] if fixed else None,
-                     title=f"{scenario.name}: PID gains set by the adaptive policy")
+                     schedule_traj=schedule_traj, title=f"{scenario.name}: PID gains set by the adaptive policy")
     write_atomic(out_dir / rd.REPORT,
                  render_report(scenario, policy_m, fixed_m, fixed["gains"] if fixed else None, source,
                                loop_units(config), learning_curve=out_dir == run_dir))
@@ -222,9 +227,8 @@ def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None
         info["trained_timesteps"] = int(model.num_timesteps)
         write_json(run_dir / rd.RUN_INFO, info)
 
-    # 3. evaluate the policy, read its gain schedule, choose what to deploy
+    # 3. read the policy's gain schedule, evaluate both (and the fixed PID), choose what to deploy
     policy = _policy(run_dir, agent.algorithm)
-    evaluate_into(run_dir, scenario, run_dir, policy, fixed, source, anchor=anchor)
     schedule, note = None, ""
     try:
         schedule = extract_schedule(policy, scenario.tuning, points=scenario.deploy.schedule_points,
@@ -235,6 +239,7 @@ def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None
     except PrlPidError as exc:
         note = f"No gain schedule: {exc}\n"
         info["schedule_error"] = str(exc)
+    evaluate_into(run_dir, scenario, run_dir, policy, fixed, source, anchor=anchor, schedule=schedule)
     report = (run_dir / rd.REPORT).read_text(encoding="utf-8")
     if fixed is not None:
         decision, sched_c, fixed_c = assess(scenario, schedule, gains_from_dict(fixed["gains"]))

@@ -164,6 +164,26 @@ def test_gains_figure_baseline_range_and_readable_ticks(trajs):
         plt.close(fig)
 
 
+def test_gains_figure_draws_a_schedule_replay_dotted_and_each_loop_once(trajs):
+    fig = gains_figure(trajs["quad"], QUAD, baseline_gains={"Kp": [1.0, 2.0, 3.0]}, schedule_traj=trajs["quad"])
+    try:
+        kp_ax = fig.axes[0]
+        legend = [t.get_text() for t in kp_ax.get_legend().get_texts()]
+        # colours name the loops, line styles the controllers, each once
+        assert legend[:3] == ["adaptive policy", "fixed PID", "gain schedule"]
+        assert [x for x in legend if x in ("phi", "theta", "psi")] == ["phi", "theta", "psi"]
+        dotted = [l for l in kp_ax.get_lines() if l.get_linestyle() == ":" and len(l.get_xdata())]
+        assert len(dotted) == 3
+        assert np.array_equal(dotted[1].get_ydata()[:-1], trajs["quad"].gains["Kp"][:, 1])
+        dashed = sorted(float(l.get_ydata()[0]) for l in kp_ax.get_lines() if l.get_linestyle() == "--"
+                        and len(l.get_xdata()))
+        assert dashed == [1.0, 2.0, 3.0]
+        bottom, top = kp_ax.get_ylim()
+        assert bottom <= 1.0 and top >= 3.0  # the fixed PID's gains are on scale
+    finally:
+        plt.close(fig)
+
+
 def _disturbance_artists(ax):
     lines = [l for l in ax.get_lines() if l.get_gid() == "disturbance"]
     spans = [p for p in ax.patches if p.get_gid() == "disturbance"]
