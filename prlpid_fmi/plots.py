@@ -198,9 +198,13 @@ def _controllers(traj, baseline_traj, baseline_label: str, schedule_traj, label:
 
 
 def _ended_note(pairs) -> str:
-    ended = [f"{name} ended early ({t.termination.kind}, t = {t.termination.time_s:g} s)"
-             for name, t in pairs if t.termination is not None]
-    return f" ({'; '.join(ended)})" if ended else ""
+    """" (adaptive policy ended early (nan, t = 3 s))" for the title; controllers that ended alike together."""
+    ended: dict[tuple, list[str]] = {}
+    for name, t in pairs:
+        if t.termination is not None:
+            ended.setdefault((t.termination.kind, t.termination.time_s), []).append(name)
+    parts = [f"{' and '.join(names)} ended early ({kind}, t = {time_s:g} s)" for (kind, time_s), names in ended.items()]
+    return f" ({'; '.join(parts)})" if parts else ""
 
 
 def _legend(ax, **kw) -> None:

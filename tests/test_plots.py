@@ -216,7 +216,12 @@ def test_an_early_end_is_marked_where_it_happened(trajs):
     try:
         ax = fig.axes[0]
         assert "adaptive policy ended: diverged" in [t.get_text() for t in ax.get_legend().get_texts()]
-        assert "ended early (diverged, t = 5 s)" in ax.get_title()
+        assert ax.get_title() == "t (adaptive policy ended early (diverged, t = 5 s))"
+    finally:
+        plt.close(fig)
+    fig = response_figure(ended, SISO, "t", baseline_traj=ended)
+    try:
+        assert fig.axes[0].get_title() == "t (fixed PID and adaptive policy ended early (diverged, t = 5 s))"
     finally:
         plt.close(fig)
 
