@@ -248,6 +248,8 @@ class TwinEnv(gym.Env):
         self.plant = PLANTS[c.fmu](values, inputs, outputs, c.sample_time_s, fixed_step_s)
         self.prior = PLANTS[c.fmu](values, inputs, outputs, c.sample_time_s, fixed_step_s)
         self.pid = TwinPID(n, c.sample_time_s, [l.u_min for l in loops], [l.u_max for l in loops], c.coupled)
+        # bumpless start: the integral term starts at the plant's input at t = 0 (e.g. two_tank's trim q_in)
+        self.u_start = [min(max(values.get(l.input, 0.0), l.u_min), l.u_max) for l in loops]
         self.u_min = np.array([l.u_min for l in loops])
         self.u_max = np.array([l.u_max for l in loops])
         self.sp_low = np.array([l.setpoint_range[0] for l in loops])
@@ -337,6 +339,11 @@ class TwinEnv(gym.Env):
         gains = self._gains(self.smoothed)
         setpoint, measurement = self.setpoint, self.measurement
         error = (setpoint - measurement) / self.scale
+        if self.k == 0:
+            for i, u0 in enumerate(self.u_start):
+                ki = gains[3 * i] / gains[3 * i + 1]
+                if u0 != 0.0 and ki != 0.0:
+                    self.pid.integral[i] = u0 / ki
         forecast = self._forecast(gains) if self.horizon > 0 else None
 
         u = np.array(self.pid(setpoint.tolist(), measurement.tolist(), gains))
