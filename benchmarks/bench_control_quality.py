@@ -30,7 +30,7 @@ from gymnasium.utils.seeding import np_random
 
 from prlpid_fmi.core import LoopCore
 from prlpid_fmi.deliver import overall_metric
-from prlpid_fmi.evaluate import measure
+from prlpid_fmi.evaluate import Trajectory, measure
 from prlpid_fmi.presets import scenario_path
 from prlpid_fmi.run import tune
 from prlpid_fmi.scenario import load_scenario
@@ -67,9 +67,11 @@ def deadbeat_ise(scenario) -> float:
     finally:
         core.close()
     n = len(rows["control"])
-    traj = {"time_s": np.arange(n + 1) * config.sample_time_s, "setpoint": np.array(rows["setpoint"]),
-            "measurement": np.array(rows["measurement"]),
-            "control_signal": np.array(rows["control"] + rows["control"][-1:]), "terminated": terminated}
+    traj = Trajectory(time_s=np.arange(n + 1) * config.sample_time_s, setpoint=np.array(rows["setpoint"]),
+                      measurement=np.array(rows["measurement"]),
+                      control_signal=np.array(rows["control"] + rows["control"][-1:]),
+                      pid_output=np.array(rows["control"]), reward=np.zeros(n), gains={}, terminated=terminated,
+                      termination=core.termination if terminated else None)
     return overall_metric(measure(traj, config)["overall"], "ISE")
 
 
