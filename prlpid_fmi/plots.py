@@ -198,7 +198,8 @@ def _controllers(traj, baseline_traj, baseline_label: str, schedule_traj, label:
 
 
 def _ended_note(pairs) -> str:
-    """" (adaptive policy ended early (nan, t = 3 s))" for the title; controllers that ended alike together."""
+    """The title's note on early ends, e.g. " (adaptive policy ended early (nan, t = 3 s))"; controllers
+    that ended alike are named together; "" when none did."""
     ended: dict[tuple, list[str]] = {}
     for name, t in pairs:
         if t.termination is not None:
@@ -212,7 +213,7 @@ def _legend(ax, **kw) -> None:
     handles, labels = ax.get_legend_handles_labels()
     first = ("setpoint", POLICY, FIXED, SCHEDULE)
     rank = {name: i for i, name in enumerate(first)}
-    order = sorted(range(len(labels)), key=lambda i: (rank.get(labels[i].split(":")[0], len(first)), i))
+    order = sorted(range(len(labels)), key=lambda i: (rank.get(labels[i], len(first)), i))
     ax.legend([handles[i] for i in order], [labels[i] for i in order], loc="upper left", bbox_to_anchor=(1.01, 1.0),
               borderaxespad=0.0, fontsize=8, **kw)  # beside the axes: it never hides a signal or a label
 
