@@ -12,6 +12,8 @@ import dataclasses
 import math
 import warnings
 
+import numpy as np
+
 from .actions import Gains
 from .deliver import Candidate, Decision, choose
 from .evaluate import constant_gains, evaluate_gains
@@ -75,6 +77,34 @@ def assess_schedule(scenario, schedule: GainSchedule) -> Candidate:
         if schedule.variable.startswith("setpoint") else [_operating_point(config)]
     return Candidate("gain schedule", metrics, mc, _margins_at(scenario.tuning, gains, points),
                      [p[0] for p in points])
+
+
+def robust_schedule(schedule: GainSchedule, config, limit: float) -> tuple[GainSchedule, list[str]]:
+    """The schedule with every row whose Ms exceeds `limit` detuned (baseline.detune) until it meets it.
+
+    The agent's reward does not see robustness, so the gains it settles on can leave the Ms limit that
+    the fixed PID it started from meets; this keeps the adaptation pattern of every row and restores the
+    margin. Rows that cannot be detuned to the limit stay as they are (the deliverable then refuses the
+    schedule). Returns (schedule, one note per detuned row). Setpoint-scheduled tables only.
+    """
+    from .baseline import detune, margin_ms
+
+    if not schedule.variable.startswith("setpoint"):
+        return schedule, []
+    Kp, Ti, notes = schedule.Kp.copy(), schedule.Ti.copy(), []
+    for j, b in enumerate(schedule.breakpoints):
+        point = _operating_point(config, b)
+        row = (schedule.Kp[j].tolist(), schedule.Ti[j].tolist(), schedule.Td[j].tolist(),
+               None if schedule.coupling is None else schedule.coupling[j].tolist())
+        ms = margin_ms(config, row, point)
+        if ms <= limit:
+            continue
+        fixed = detune(config, row, point, limit)
+        if fixed is not None:
+            Kp[j], Ti[j] = fixed[0], fixed[1]
+            notes.append(f"row {b:g}: Ms {ms:.2f} > {limit:g}, detuned to Kp {np.round(Kp[j], 4).tolist()}, "
+                         f"Ti {np.round(Ti[j], 4).tolist()}")
+    return dataclasses.replace(schedule, Kp=Kp, Ti=Ti), notes
 
 
 def assess(scenario, schedule: GainSchedule | None, fixed_gains: Gains) -> tuple[Decision, Candidate | None, Candidate]:

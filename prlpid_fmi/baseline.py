@@ -74,45 +74,53 @@ DETUNE_SCAN = (1, 2, 4, 8, 16, 30)  # ... scanned at these k (lambda 1.15 to 66)
 DETUNE_BISECTIONS = 4
 
 
-def _robust(config: TuningConfig, gain_map: ActionMap, population, energies, limit: float):
-    """(vector, gains tuple) of the cheapest of the ROBUST_CANDIDATES cheapest population members with
-    Ms <= limit; else the best member detuned by the smallest lambda that meets the limit (scan of k in
-    DETUNE_SCAN, then bisection on k between the last failing and the first passing value; gains clipped
-    into their ranges; an unstable plant fails at both ends, so the scan starts small); else the best
-    member as it is (the deliverable then reports its Ms)."""
+def margin_ms(config: TuningConfig, gains: tuple, point: list[float]) -> float:
+    """Peak sensitivity Ms of constant gains (Kp, Ti, Td, coupling) at an operating point (setpoints)."""
     from .margins import loop_margins
 
-    point = [0.5 * (l.setpoint_range[0] + l.setpoint_range[1]) for l in config.loops]
+    return loop_margins(config, gains[0], gains[1], gains[2], point, coupling=gains[3]).Ms
 
-    def ms(g):
-        return loop_margins(config, g[0], g[1], g[2], point, coupling=g[3]).Ms
 
-    order = np.argsort(energies)
-    for i in order[:ROBUST_CANDIDATES]:
-        g = gain_map.values(population[i].tolist())
-        if ms(g) <= limit:
-            return population[i], g
-    best = population[order[0]]
-    Kp, Ti, Td, coupling = gain_map.values(best.tolist())
+def detune(config: TuningConfig, gains: tuple, point: list[float], limit: float) -> tuple | None:
+    """`gains` detuned (Kp / lambda, Ti * lambda, lambda = DETUNE_STEP**k, clipped into the gain ranges)
+    by the smallest k that gives Ms <= limit at `point`: a scan of k in DETUNE_SCAN, then bisection on k
+    between the last failing and the first passing value. None when no k in the scan passes (an unstable
+    plant fails at both ends, so the scan starts small)."""
+    Kp, Ti, Td, coupling = gains
 
     def detuned(k):
         lam = DETUNE_STEP ** k
         return ([max(x / lam, l.Kp.low) for x, l in zip(Kp, config.loops)],
-                [min(x * lam, l.Ti.high) for x, l in zip(Ti, config.loops)], Td, coupling)
+                [min(x * lam, l.Ti.high) for x, l in zip(Ti, config.loops)], list(Td), coupling)
 
-    low = 0.0  # k known to fail (the best member itself)
+    low = 0.0  # k known to fail (the gains themselves)
     for k in DETUNE_SCAN:
-        if ms(detuned(k)) <= limit:
+        if margin_ms(config, detuned(k), point) <= limit:
             high = float(k)
             for _ in range(DETUNE_BISECTIONS):
                 mid = 0.5 * (low + high)
-                if ms(detuned(mid)) <= limit:
+                if margin_ms(config, detuned(mid), point) <= limit:
                     high = mid
                 else:
                     low = mid
-            return best, detuned(high)
+            return detuned(high)
         low = float(k)
-    return best, gain_map.values(best.tolist())
+    return None
+
+
+def _robust(config: TuningConfig, gain_map: ActionMap, population, energies, limit: float):
+    """(vector, gains tuple) of the cheapest of the ROBUST_CANDIDATES cheapest population members with
+    Ms <= limit; else the best member detuned (`detune`); else the best member as it is (the
+    deliverable then reports its Ms)."""
+    point = [0.5 * (l.setpoint_range[0] + l.setpoint_range[1]) for l in config.loops]
+    order = np.argsort(energies)
+    for i in order[:ROBUST_CANDIDATES]:
+        g = gain_map.values(population[i].tolist())
+        if margin_ms(config, g, point) <= limit:
+            return population[i], g
+    best = population[order[0]]
+    g = gain_map.values(best.tolist())
+    return best, detune(config, g, point, limit) or g
 
 
 def tune_fixed_pid(config: TuningConfig, seed: int = 0, episodes: int = 3, maxiter: int = 20,

@@ -170,7 +170,7 @@ def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None
     from . import plots
     from .baseline import tune_fixed_pid
     from .progress import Progress
-    from .assess import assess, candidate_summary, max_sensitivity
+    from .assess import assess, candidate_summary, max_sensitivity, robust_schedule
     from .deliver import verdict
     from .deploy import deployable_files
     from .schedule import extract_schedule, fixed_schedule, write_schedule_csv
@@ -236,6 +236,11 @@ def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None
         if schedule.excluded:
             note = ("The closed loop diverged at setpoint(s) " + ", ".join(f"{v:g}" for v in schedule.excluded)
                     + ": left out of the schedule.\n")
+        schedule, detuned = robust_schedule(schedule, scenario.tuning, max_sensitivity(scenario))
+        if detuned:
+            note += ("Rows of the gain schedule detuned (Kp / lambda, Ti * lambda) to meet Ms <= "
+                     f"{max_sensitivity(scenario):g}: " + "; ".join(detuned) + ".\n")
+            info["schedule_detuned_rows"] = detuned
     except PrlPidError as exc:
         note = f"No gain schedule: {exc}\n"
         info["schedule_error"] = str(exc)
