@@ -87,7 +87,8 @@ def robust_schedule(schedule: GainSchedule, config, limit: float) -> tuple[GainS
     margin. Rows that cannot be detuned to the limit stay as they are (the deliverable then refuses the
     schedule). Returns (schedule, one note per detuned row). Setpoint-scheduled tables only.
     """
-    from .baseline import detune, margin_ms
+    from .baseline import detune, margins_of
+    from .deliver import meets
 
     if not schedule.variable.startswith("setpoint"):
         return schedule, []
@@ -96,9 +97,10 @@ def robust_schedule(schedule: GainSchedule, config, limit: float) -> tuple[GainS
         point = _operating_point(config, b)
         row = (schedule.Kp[j].tolist(), schedule.Ti[j].tolist(), schedule.Td[j].tolist(),
                None if schedule.coupling is None else schedule.coupling[j].tolist())
-        ms = margin_ms(config, row, point)
-        if ms <= limit:
+        m = margins_of(config, row, point)
+        if meets(m, limit):
             continue
+        ms = m.Ms
         fixed = detune(config, row, point, limit)
         if fixed is not None:
             Kp[j], Ti[j] = fixed[0], fixed[1]

@@ -74,11 +74,18 @@ DETUNE_SCAN = (1, 2, 4, 8, 16, 30)  # ... scanned at these k (lambda 1.15 to 66)
 DETUNE_BISECTIONS = 4
 
 
-def margin_ms(config: TuningConfig, gains: tuple, point: list[float]) -> float:
-    """Peak sensitivity Ms of constant gains (Kp, Ti, Td, coupling) at an operating point (setpoints)."""
+def margins_of(config: TuningConfig, gains: tuple, point: list[float]):
+    """prlpid_fmi.margins.Margins of constant gains (Kp, Ti, Td, coupling) at an operating point (setpoints)."""
     from .margins import loop_margins
 
-    return loop_margins(config, gains[0], gains[1], gains[2], point, coupling=gains[3]).Ms
+    return loop_margins(config, gains[0], gains[1], gains[2], point, coupling=gains[3])
+
+
+def _meets(config: TuningConfig, gains: tuple, point: list[float], limit: float) -> bool:
+    """Ms <= limit at the point, or not judgeable (a finite but unreliable estimate: deliver.meets)."""
+    from .deliver import meets
+
+    return meets(margins_of(config, gains, point), limit)
 
 
 def detune(config: TuningConfig, gains: tuple, point: list[float], limit: float) -> tuple | None:
@@ -95,11 +102,11 @@ def detune(config: TuningConfig, gains: tuple, point: list[float], limit: float)
 
     low = 0.0  # k known to fail (the gains themselves)
     for k in DETUNE_SCAN:
-        if margin_ms(config, detuned(k), point) <= limit:
+        if _meets(config, detuned(k), point, limit):
             high = float(k)
             for _ in range(DETUNE_BISECTIONS):
                 mid = 0.5 * (low + high)
-                if margin_ms(config, detuned(mid), point) <= limit:
+                if _meets(config, detuned(mid), point, limit):
                     high = mid
                 else:
                     low = mid
@@ -116,7 +123,7 @@ def _robust(config: TuningConfig, gain_map: ActionMap, population, energies, lim
     order = np.argsort(energies)
     for i in order[:ROBUST_CANDIDATES]:
         g = gain_map.values(population[i].tolist())
-        if margin_ms(config, g, point) <= limit:
+        if _meets(config, g, point, limit):
             return population[i], g
     best = population[order[0]]
     g = gain_map.values(best.tolist())

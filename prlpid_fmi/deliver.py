@@ -37,7 +37,15 @@ class Candidate:
 
     @property
     def worst_Ms(self) -> float:
-        return max((m.Ms for m in self.margins), default=math.nan)
+        """Largest Ms over the operating points whose estimate counts: reliable ones, and inf (the loop
+        diverged or sat at a limit there); NaN when every estimate is unreliable (see `unverified`)."""
+        return max((m.Ms for m in self.margins if counts(m)), default=math.nan)
+
+    @property
+    def unverified(self) -> bool:
+        """The margins were measured but no estimate is reliable (a time-varying or strongly nonlinear
+        plant): robustness could not be checked, so it neither qualifies nor disqualifies."""
+        return bool(self.margins) and not any(counts(m) for m in self.margins)
 
     @property
     def score(self) -> float:
@@ -62,9 +70,21 @@ class Candidate:
                 out.append("it diverged in the evaluation" + (" or a Monte-Carlo sample" if self.monte_carlo else ""))
         if not self.margins:
             out.append("its robustness margins could not be measured")
+        elif self.unverified:
+            pass  # said in the verdict, not a reason to refuse
         elif not self.worst_Ms <= max_sensitivity:
             out.append(f"its peak sensitivity Ms = {self.worst_Ms:.2f} exceeds the limit {max_sensitivity:g}")
         return out
+
+
+def counts(m) -> bool:
+    """Whether a Margins estimate decides: reliable, or infinite (diverged / saturated: always a failure)."""
+    return bool(m.reliable) or not math.isfinite(m.Ms)
+
+
+def meets(m, limit: float) -> bool:
+    """A Margins estimate meets the Ms limit, or cannot judge it (finite but unreliable)."""
+    return not counts(m) or m.Ms <= limit
 
 
 @dataclass(frozen=True)
@@ -113,6 +133,10 @@ def _total_variation(c: Candidate) -> float:
     return c.overall("TotalVariation")
 
 
+def _ms(c: Candidate) -> str:
+    return "not verified" if math.isnan(c.worst_Ms) else f"{c.worst_Ms:.2f}"
+
+
 def _ratio(a: float, b: float) -> str:
     return f"{a / b:.2f}x" if b and math.isfinite(a) and math.isfinite(b) else "n/a"
 
@@ -128,11 +152,11 @@ def verdict(decision: Decision, schedule: Candidate | None, fixed: Candidate, ma
             shape = f"its peak deviation {_ratio(s.overall('PeakDeviation'), f.overall('PeakDeviation'))}"
         lines.append(f"**Deploy the adaptive gain schedule** (schedule.csv, a plain gain-scheduled PID; no neural "
                      f"network). On the evaluation its ISE is {_ratio(s.overall('ISE'), f.overall('ISE'))} the fixed "
-                     f"PID's, {shape}, and its worst Ms {s.worst_Ms:.2f} (fixed PID {f.worst_Ms:.2f}; limit "
+                     f"PID's, {shape}, and its worst Ms {_ms(s)} (fixed PID {_ms(f)}; limit "
                      f"{max_sensitivity:g}). Ratios are gain schedule ÷ fixed PID; lower is better.")
     elif decision.deploy == "fixed PID":
         lines.append(f"**Deploy the fixed PID** (schedule.csv holds it as a one-row table; also fixed_pid.csv). "
-                     f"Its worst Ms is {fixed.worst_Ms:.2f} (limit {max_sensitivity:g}).")
+                     f"Its worst Ms is {_ms(fixed)} (limit {max_sensitivity:g}).")
         if schedule is not None:
             lines.append("The adaptive schedule lost. To try: a longer training budget (--timesteps), wider "
                          "controller.anchor_bands, or training.randomize over the parameters that vary in your plant.")
@@ -140,5 +164,10 @@ def verdict(decision: Decision, schedule: Candidate | None, fixed: Candidate, ma
         lines.append(f"**Nothing here is safe to deploy**: no controller meets the robustness limit Ms <= "
                      f"{max_sensitivity:g} without diverging. Narrow the gain ranges, lower the sample time, or "
                      "check the plant's limits and operating range.")
+    unverified = [c.name for c in (schedule, fixed) if c is not None and c.unverified]
+    if unverified:
+        lines.append(f"Robustness could not be verified for: {', '.join(unverified)} (the frequency-response "
+                     "estimate on the FMU was unreliable, e.g. a time-varying or strongly nonlinear plant); "
+                     "the choice rests on the evaluation alone.")
     lines += [""] + [f"- {r}" for r in decision.reasons]
     return "\n".join(lines) + "\n"

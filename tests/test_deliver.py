@@ -1,0 +1,50 @@
+"""The deployment rule (prlpid_fmi.deliver.choose) on hand-made evidence."""
+import math
+from types import SimpleNamespace
+
+from prlpid_fmi.deliver import Candidate, choose, verdict
+
+
+def metrics(ise, tv=10.0, overshoot=5.0, terminated=False):
+    return {"overall": {"ISE": ise, "TotalVariation": tv, "Overshoot": overshoot, "PeakDeviation": math.nan},
+            "terminated": terminated}
+
+
+def margins(ms, reliable=True):
+    return SimpleNamespace(Ms=ms, reliable=reliable)
+
+
+def cand(name, ise, ms=1.5, reliable=True, tv=10.0, terminated=False, mc=()):
+    return Candidate(name, metrics(ise, tv, terminated=terminated), list(mc), [margins(ms, reliable)], [0.0])
+
+
+def test_the_better_robust_schedule_is_deployed():
+    assert choose(cand("gain schedule", 0.9), cand("fixed PID", 1.0), 2.0).deploy == "gain schedule"
+
+
+def test_a_schedule_above_the_ms_limit_or_chattering_or_diverging_or_not_better_is_refused():
+    fixed = cand("fixed PID", 1.0)
+    for schedule in (cand("gain schedule", 0.5, ms=2.5), cand("gain schedule", 0.5, tv=15.1),
+                     cand("gain schedule", 0.5, terminated=True), cand("gain schedule", 1.0),
+                     cand("gain schedule", 0.5, mc=[metrics(0.1, terminated=True)])):
+        assert choose(schedule, fixed, 2.0).deploy == "fixed PID"
+    # the Monte-Carlo set counts in the score: better on the evaluation, much worse on the samples
+    worse = cand("gain schedule", 0.9, mc=[metrics(5.0)])
+    assert choose(worse, cand("fixed PID", 1.0, mc=[metrics(1.0)]), 2.0).deploy == "fixed PID"
+
+
+def test_nothing_is_deployed_when_neither_meets_the_limit_and_the_verdict_says_so():
+    d = choose(cand("gain schedule", 0.5, ms=3.0), cand("fixed PID", 1.0, ms=2.2), 2.0)
+    assert d.deploy == "none"
+    text = verdict(d, cand("gain schedule", 0.5, ms=3.0), cand("fixed PID", 1.0, ms=2.2), 2.0)
+    assert "Nothing here is safe to deploy" in text
+
+
+def test_unreliable_finite_margins_neither_qualify_nor_disqualify_but_divergence_does():
+    unreliable = cand("gain schedule", 0.9, ms=40.0, reliable=False)
+    fixed = cand("fixed PID", 1.0, ms=20.0, reliable=False)
+    d = choose(unreliable, fixed, 2.0)
+    assert d.deploy == "gain schedule" and unreliable.unverified and math.isnan(unreliable.worst_Ms)
+    assert "could not be verified" in verdict(d, unreliable, fixed, 2.0)
+    diverged = cand("gain schedule", 0.9, ms=math.inf, reliable=False)
+    assert choose(diverged, fixed, 2.0).deploy == "fixed PID"
