@@ -27,14 +27,17 @@ PLOTS = ((rd.RESPONSE_PLOT, "measurement and setpoint of each controller, distur
 
 
 def number(value, digits: int = 4) -> str:
-    """A metric as text: `digits` significant digits, "–" for a missing or non-finite value."""
+    """A metric as text: `digits` significant digits; "–" for a missing or undefined (NaN) value, "never"
+    for +inf (a loop that never settles or recovers within its segment, or an infinite Ms)."""
     if value is None:
         return "–"
     try:
         v = float(value)
     except (TypeError, ValueError):
         return "–"
-    return f"{v:.{digits}g}" if math.isfinite(v) else "–"
+    if math.isnan(v):
+        return "–"
+    return f"{v:.{digits}g}" if math.isfinite(v) else ("never" if v > 0 else "–")
 
 
 def unit_label(key: str, y_unit: str, u_unit: str) -> str:
@@ -90,7 +93,7 @@ def render_report(scenario, policy_m: dict, fixed_m: dict | None, fixed_gains: d
                   + _gains_text(fixed_gains, y_unit, u_unit) + ".", ""]
     lines += ["Ratio = adaptive policy ÷ fixed PID; lower is better for every metric here "
               "(below 1: the adaptive policy is better). – = not defined (no setpoint step, no baseline, "
-              "or a zero divisor).", "",
+              "or a zero divisor); never = did not settle or recover within its segment.", "",
               "| metric | unit | adaptive policy | fixed PID | ratio (adaptive ÷ fixed) |", "|---|---|---|---|---|"]
     for k in keys:
         p = policy_m["overall"][k]
