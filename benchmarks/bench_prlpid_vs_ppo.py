@@ -14,9 +14,9 @@ import json
 import time
 from pathlib import Path
 
-from prlpid_fmi.baseline import constant_policy, tune_fixed_pid
+from prlpid_fmi.baseline import tune_fixed_pid
 from prlpid_fmi.config import AgentConfig
-from prlpid_fmi.evaluate import evaluate, model_policy
+from prlpid_fmi.evaluate import constant_gains, evaluate, evaluate_gains, model_policy
 from prlpid_fmi.presets import preset
 from prlpid_fmi.train import train
 
@@ -47,7 +47,7 @@ def main() -> None:
             rows.append(row)
             print(json.dumps(row), flush=True)
     fixed = tune_fixed_pid(base, seed=args.seeds[0])
-    metrics, _ = evaluate(constant_policy(fixed.action), schedule, seed=args.seeds[0])
+    metrics, _ = evaluate_gains(constant_gains(*fixed.gains_values()), schedule, seed=args.seeds[0])
     rows.append({"variant": "fixedPID", "seed": args.seeds[0], "steps_per_s": float("nan"),
                  **{k: metrics["overall"][k] for k in COLUMNS}})
     print(json.dumps({**rows[-1], "gains": {k: v.tolist() for k, v in fixed.gains.as_dict().items()}}), flush=True)

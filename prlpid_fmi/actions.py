@@ -63,15 +63,6 @@ def map_range(a: np.ndarray, r: GainRange) -> np.ndarray:
     return r.low + frac * (r.high - r.low)
 
 
-def unmap_range(value: np.ndarray, r: GainRange) -> np.ndarray:
-    """Inverse of map_range: the action in [-1, 1] that gives `value`."""
-    if r.scale == "log":
-        frac = (np.log(value) - np.log(r.low)) / (np.log(r.high) - np.log(r.low))
-    else:
-        frac = (np.asarray(value) - r.low) / (r.high - r.low)
-    return np.clip(2.0 * frac - 1.0, -1.0, 1.0)
-
-
 class ActionMap:
     """Turns a (smoothed) action vector into Gains for the configured loops."""
 
