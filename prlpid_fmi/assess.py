@@ -15,28 +15,20 @@ import warnings
 import numpy as np
 
 from .actions import Gains
+from .baseline import margins_of, operating_point
 from .deliver import Candidate, Decision, choose
 from .evaluate import constant_gains, evaluate_gains
 from .schedule import GainSchedule, replay_schedule
 
 
-def _margins_at(config, gains: tuple, points: list[list[float]]) -> list:
-    from .margins import loop_margins
-
+def _margins_at(config, gains, points: list[list[float]]) -> list:
+    """Margins of gains(point) -> (Kp, Ti, Td, coupling) at each operating point."""
     out = []
     for point in points:
-        Kp, Ti, Td, coupling = gains(point)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
-            out.append(loop_margins(config, Kp, Ti, Td, point, coupling=coupling))
+            out.append(margins_of(config, gains(point), point))
     return out
-
-
-def _operating_point(config, value: float | None = None) -> list[float]:
-    point = [0.5 * (l.setpoint_range[0] + l.setpoint_range[1]) for l in config.loops]
-    if value is not None:
-        point[0] = float(value)
-    return point
 
 
 def _monte_carlo(scenario) -> list:
@@ -56,7 +48,7 @@ def assess_fixed(scenario, gains: Gains) -> Candidate:
     plain = dataclasses.replace(config, randomize={}) if config.randomize else config
     metrics, _ = evaluate_gains(fn, plain, seed=scenario.evaluation.seed, intervals=intervals)
     mc = [evaluate_gains(fn, c, seed=s)[0] for c, s in _monte_carlo(scenario)]
-    point = _operating_point(config)
+    point = operating_point(config)
     margins = _margins_at(scenario.tuning, lambda p: fn(None), [point])
     return Candidate("fixed PID", metrics, mc, margins, [point[0]])
 
@@ -73,8 +65,8 @@ def assess_schedule(scenario, schedule: GainSchedule) -> Candidate:
         g = schedule.gains_at(point[0])
         return tuple(x.tolist() for x in g) + ((None,) if schedule.coupling is None else ())
 
-    points = [_operating_point(config, b) for b in schedule.breakpoints] \
-        if schedule.variable.startswith("setpoint") else [_operating_point(config)]
+    points = [operating_point(config, b) for b in schedule.breakpoints] \
+        if schedule.variable.startswith("setpoint") else [operating_point(config)]
     return Candidate("gain schedule", metrics, mc, _margins_at(scenario.tuning, gains, points),
                      [p[0] for p in points])
 
@@ -87,14 +79,14 @@ def robust_schedule(schedule: GainSchedule, config, limit: float) -> tuple[GainS
     margin. Rows that cannot be detuned to the limit stay as they are (the deliverable then refuses the
     schedule). Returns (schedule, one note per detuned row). Setpoint-scheduled tables only.
     """
-    from .baseline import detune, margins_of
+    from .baseline import detune
     from .deliver import meets
 
     if not schedule.variable.startswith("setpoint"):
         return schedule, []
     Kp, Ti, notes = schedule.Kp.copy(), schedule.Ti.copy(), []
     for j, b in enumerate(schedule.breakpoints):
-        point = _operating_point(config, b)
+        point = operating_point(config, b)
         row = (schedule.Kp[j].tolist(), schedule.Ti[j].tolist(), schedule.Td[j].tolist(),
                None if schedule.coupling is None else schedule.coupling[j].tolist())
         m = margins_of(config, row, point)

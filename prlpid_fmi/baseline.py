@@ -74,6 +74,14 @@ DETUNE_SCAN = (1, 2, 4, 8, 16, 30)  # ... scanned at these k (lambda 1.15 to 66)
 DETUNE_BISECTIONS = 4
 
 
+def operating_point(config: TuningConfig, value: float | None = None) -> list[float]:
+    """Setpoints per loop at the middle of their ranges, loop 0's replaced by `value` when given."""
+    point = [0.5 * (l.setpoint_range[0] + l.setpoint_range[1]) for l in config.loops]
+    if value is not None:
+        point[0] = float(value)
+    return point
+
+
 def margins_of(config: TuningConfig, gains: tuple, point: list[float]):
     """prlpid_fmi.margins.Margins of constant gains (Kp, Ti, Td, coupling) at an operating point (setpoints)."""
     from .margins import loop_margins
@@ -119,7 +127,7 @@ def _robust(config: TuningConfig, gain_map: ActionMap, population, energies, lim
     """(vector, gains tuple) of the cheapest of the ROBUST_CANDIDATES cheapest population members with
     Ms <= limit; else the best member detuned (`detune`); else the best member as it is (the
     deliverable then reports its Ms)."""
-    point = [0.5 * (l.setpoint_range[0] + l.setpoint_range[1]) for l in config.loops]
+    point = operating_point(config)
     order = np.argsort(energies)
     for i in order[:ROBUST_CANDIDATES]:
         g = gain_map.values(population[i].tolist())
