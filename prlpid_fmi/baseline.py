@@ -125,16 +125,23 @@ def detune(config: TuningConfig, gains: tuple, point: list[float], limit: float)
 
 def _robust(config: TuningConfig, gain_map: ActionMap, population, energies, limit: float):
     """(vector, gains tuple) of the cheapest of the ROBUST_CANDIDATES cheapest population members with
-    Ms <= limit; else the best member detuned (`detune`); else the best member as it is (the
-    deliverable then reports its Ms)."""
+    Ms <= limit; else the best member detuned (`detune`) when its Ms is finite (too aggressive, not
+    unstable); else the best member as it is (the deliverable then reports its Ms)."""
+    from .deliver import meets
+
     point = operating_point(config)
     order = np.argsort(energies)
+    best_margins = None
     for i in order[:ROBUST_CANDIDATES]:
         g = gain_map.values(population[i].tolist())
-        if _meets(config, g, point, limit):
+        m = margins_of(config, g, point)
+        best_margins = best_margins or m
+        if meets(m, limit):
             return population[i], g
     best = population[order[0]]
     g = gain_map.values(best.tolist())
+    if not math.isfinite(best_margins.Ms):  # diverges or saturates there: a slower loop will not cure it
+        return best, g
     return best, detune(config, g, point, limit) or g
 
 
