@@ -90,10 +90,9 @@ def margins_of(config: TuningConfig, gains: tuple, point: list[float]):
 
 
 def _meets(config: TuningConfig, gains: tuple, point: list[float], limit: float) -> bool:
-    """Ms <= limit at the point, or not judgeable (a finite but unreliable estimate: deliver.meets)."""
-    from .deliver import meets
-
-    return meets(margins_of(config, gains, point), limit)
+    """Ms <= limit at the point. The search is conservative: an unreliable estimate counts too (a loop
+    in a limit cycle at the Nyquist frequency gives one), unlike the deliverable (deliver.meets)."""
+    return margins_of(config, gains, point).Ms <= limit
 
 
 def detune(config: TuningConfig, gains: tuple, point: list[float], limit: float) -> tuple | None:
@@ -125,23 +124,16 @@ def detune(config: TuningConfig, gains: tuple, point: list[float], limit: float)
 
 def _robust(config: TuningConfig, gain_map: ActionMap, population, energies, limit: float):
     """(vector, gains tuple) of the cheapest of the ROBUST_CANDIDATES cheapest population members with
-    Ms <= limit; else the best member detuned (`detune`) when its Ms is finite (too aggressive, not
-    unstable); else the best member as it is (the deliverable then reports its Ms)."""
-    from .deliver import meets
-
+    Ms <= limit; else the best member detuned (`detune`: a loop in a limit cycle has Ms inf and a
+    slower loop cures it); else the best member as it is (the deliverable then reports its Ms)."""
     point = operating_point(config)
     order = np.argsort(energies)
-    best_margins = None
     for i in order[:ROBUST_CANDIDATES]:
         g = gain_map.values(population[i].tolist())
-        m = margins_of(config, g, point)
-        best_margins = best_margins or m
-        if meets(m, limit):
+        if _meets(config, g, point, limit):
             return population[i], g
     best = population[order[0]]
     g = gain_map.values(best.tolist())
-    if not math.isfinite(best_margins.Ms):  # diverges or saturates there: a slower loop will not cure it
-        return best, g
     return best, detune(config, g, point, limit) or g
 
 

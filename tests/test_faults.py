@@ -185,7 +185,7 @@ def test_leak_guard_reinstantiates_an_fmu_whose_resets_grow(faulty, tmp_path):
     assert core.plant.reinstantiations >= 1
     assert any("instantiated afresh" in str(w.message) for w in caught)
     core.close()
-    assert unguarded >= 50 * LEAK_BYTES
+    assert unguarded >= 30 * LEAK_BYTES  # 60 MB kept; RSS shows at least half of it (allocator reuse varies)
     assert guarded <= 20 * LEAK_BYTES
     run = tmp_path / "run"
     assert main(["-q", "tune", str(scenario_file(tmp_path, faulty["leak"])), "--out", str(run)]) == 0
