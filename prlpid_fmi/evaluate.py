@@ -195,7 +195,8 @@ def measure(traj: Trajectory, config: TuningConfig, intervals=None) -> dict:
     metrics = compute_metrics(traj.time_s[:n], traj.setpoint[:n], traj.measurement[:n],
                               traj.control_signal[:n], config.sample_time_s, intervals=windows or None,
                               loop_names=[l.output for l in config.loops],
-                              events=sorted({d.start_step for d in config.disturbances}))
+                              events=sorted({d.start_step for d in config.disturbances}),
+                              u_range=[l.u_max - l.u_min for l in config.loops])
     for iv in metrics["intervals"]:
         if (iv["start_step"], iv["end_step"]) in cut:
             iv["requested_end_step"] = cut[(iv["start_step"], iv["end_step"])]

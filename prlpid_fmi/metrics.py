@@ -15,6 +15,14 @@ Each difference u_k - u_{k-1} belongs to the window of its later sample, so ISE,
 and TotalVariation of intervals that tile [0, n) add up to the overall values (ITAE does not: its
 clock restarts at every window start).
 
+Chatter [dimensionless, 0..1] (``chatter_fraction``): the fraction of the samples k = max(a, 2) .. b-1
+of the window at which the control signal reverses direction, i.e. du_k = u_k - u_{k-1} and du_{k-1}
+have opposite signs and both |du| exceed ``CHATTER_THRESHOLD`` (1 %) of the loop's actuator range
+u_max - u_min (``u_range``; when it is not finite or not given: of max |u| over the whole run). A
+two-sample limit cycle (u swinging every sample) gives 1 (at the window's k), a smooth or monotone
+response 0, and moves smaller than 1 % of the range (noise passed through the PID) do not count. NaN
+when the window has no such k (fewer than 3 samples) or u is not finite in it.
+
 Step metrics (names as in python-control's ``step_info``), per loop and per setpoint *segment*: a
 segment starts at sample 0 and at every sample where the loop's setpoint changes, and ends before
 the next change (or at the end of the run). The step of a segment starting at s > 0 is
@@ -79,15 +87,17 @@ from typing import Sequence
 import numpy as np
 
 INTEGRAL_METRICS = ("ISE", "IAE", "ITAE", "ControlEffort", "TotalVariation")
+CONTROL_METRICS = ("Chatter",)  # per window like the integral metrics, but a fraction: windows do not add up
 STEP_METRICS = ("Overshoot", "RiseTime", "SettlingTime", "SteadyStateError", "PeakDeviation", "RecoveryTime")
 RECOVERY_FRACTION = 0.1  # recovery band: this fraction of the peak deviation (or 3 x noise, if larger)
 NOISE_BAND = 5.0  # bands are at least this many noise standard deviations wide (|noise| > 5 sigma: p = 6e-7)
-METRIC_NAMES = INTEGRAL_METRICS + STEP_METRICS
+METRIC_NAMES = INTEGRAL_METRICS + CONTROL_METRICS + STEP_METRICS
 MIN_SEGMENT_STEPS = 2
 _REL_TOL = 1e-9
+CHATTER_THRESHOLD = 0.01  # a move counts towards Chatter when it exceeds this fraction of the actuator range
 
-__all__ = ["compute_metrics", "metric_key", "METRIC_NAMES", "INTEGRAL_METRICS", "STEP_METRICS",
-           "MIN_SEGMENT_STEPS"]
+__all__ = ["compute_metrics", "chatter_fraction", "metric_key", "METRIC_NAMES", "INTEGRAL_METRICS",
+           "CONTROL_METRICS", "STEP_METRICS", "MIN_SEGMENT_STEPS"]
 
 
 def metric_key(name: str, loop: str, n_loops: int) -> str:
@@ -179,6 +189,36 @@ def _segment_metrics(t: np.ndarray, r_new: float, base: float, y: np.ndarray, se
                 SteadyStateError=sse, PeakDeviation=nan, RecoveryTime=nan)
 
 
+def _chatter_threshold(u: np.ndarray, u_range: float | None) -> float:
+    """CHATTER_THRESHOLD of u_range, or of max |u| (finite samples) when the range is not finite or None."""
+    if u_range is not None and math.isfinite(u_range) and u_range > 0:
+        return CHATTER_THRESHOLD * float(u_range)
+    finite = np.abs(u[np.isfinite(u)])
+    return CHATTER_THRESHOLD * float(np.max(finite)) if finite.size else 0.0
+
+
+def _reversal_fraction(u: np.ndarray, threshold: float, first: int = 2) -> float:
+    """Fraction of k = first .. len(u)-1 (first >= 2) where u reverses by moves both > threshold."""
+    k_count = u.size - first
+    if k_count <= 0 or not np.all(np.isfinite(u[first - 2:])):
+        return math.nan
+    du = np.diff(u[first - 2:])  # du[j] = u[first-1+j] - u[first-2+j]
+    big = np.abs(du) > threshold
+    reversals = (du[1:] * du[:-1] < 0) & big[1:] & big[:-1]
+    return float(np.count_nonzero(reversals)) / k_count
+
+
+def chatter_fraction(u, u_range: float | None = None) -> float:
+    """Chatter of one loop's control signal u (n,) [input units] over the whole run: the fraction of
+    samples k = 2 .. n-1 where u reverses direction with both moves > 1 % of u_range = u_max - u_min
+    [input units] (None or infinite: of max |u|). Dimensionless, 0..1; NaN for fewer than 3 samples or a
+    non-finite u (see the module docstring)."""
+    a = np.asarray(u, dtype=float)
+    if a.ndim != 1:
+        raise ValueError(f"u must be a 1-D array of one loop's control signal, got shape {np.shape(u)}")
+    return _reversal_fraction(a, _chatter_threshold(a, None if u_range is None else float(u_range)))
+
+
 def _integral_metrics(t: np.ndarray, e: np.ndarray, u: np.ndarray, u_prev: float | None, ts: float) -> dict:
     """ISE, IAE, ITAE of e (m,) and effort and TV of u (m,) on one window; u_prev = u before the window."""
     with np.errstate(over="ignore", invalid="ignore"):
@@ -215,7 +255,7 @@ def _aggregate(segments: list[dict]) -> dict:
 def compute_metrics(time_s, setpoint, measurement, control_signal, sample_time_s: float,
                     intervals: Sequence[tuple[int, int]] | None = None,
                     loop_names: Sequence[str] | None = None, events: Sequence[int] | None = None, *,
-                    settling_threshold: float = 0.02, rise_time_limits: tuple[float, float] = (0.1, 0.9),
+                    u_range: Sequence[float] | float | None = None, settling_threshold: float = 0.02, rise_time_limits: tuple[float, float] = (0.1, 0.9),
                     steady_state_fraction: float = 0.1) -> dict:
     """Closed-loop metrics of one run (see the module docstring for definitions and the result layout).
 
@@ -224,6 +264,8 @@ def compute_metrics(time_s, setpoint, measurement, control_signal, sample_time_s
     intervals: optional (start_step, end_step) half-open index ranges, 0 <= start < end <= n.
     loop_names: optional names (n_loops,) used in the keys; default "0", "1", ...
     events: sample indices where disturbances begin (they start regulation segments).
+    u_range: actuator range u_max - u_min per loop [input units] (scalar or (n_loops,)) for Chatter;
+    None or infinite: 1 % of max |u| over the run is the threshold instead.
     settling_threshold, rise_time_limits, steady_state_fraction: 2 % band, 10 %/90 % levels, last
     10 % of a segment (fractions of the step size / segment length).
     Returns a dict of plain Python floats/ints/strings/lists, serialisable with json.dumps.
@@ -266,6 +308,14 @@ def compute_metrics(time_s, setpoint, measurement, control_signal, sample_time_s
             raise ValueError(f"interval {iv!r} must satisfy 0 <= start_step < end_step <= {n}")
         windows.append((a, b))
 
+    if u_range is None:
+        ranges = [None] * n_loops
+    else:
+        ranges = [float(v) for v in np.broadcast_to(np.asarray(u_range, dtype=float), (n_loops,))]
+        if any(math.isnan(v) or v <= 0 for v in ranges):
+            raise ValueError(f"u_range must be > 0 (or inf) per loop, got {ranges}")
+    chatter_thresholds = [_chatter_threshold(u[:, i], ranges[i]) for i in range(n_loops)]
+
     e = r - y
     segments = []
     per_loop_segments = []
@@ -293,6 +343,8 @@ def compute_metrics(time_s, setpoint, measurement, control_signal, sample_time_s
         for i, name in enumerate(names):
             u_prev = float(u[a - 1, i]) if a > 0 else None
             values = _integral_metrics(t[a:b], e[a:b, i], u[a:b, i], u_prev, ts)
+            first = max(a, 2)  # reversals at k in [first, b) need u[k-2 .. k]
+            values["Chatter"] = _reversal_fraction(u[first - 2:b, i], chatter_thresholds[i]) if b > first else math.nan
             values.update(_aggregate([s for s in per_loop_segments[i] if a <= s["start_step"] < b]))
             for metric in METRIC_NAMES:
                 out[metric_key(metric, name, n_loops)] = float(values[metric])

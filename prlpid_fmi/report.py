@@ -14,11 +14,12 @@ import numpy as np
 from . import rundir as rd
 
 METRIC_COLUMNS = ("ISE", "IAE", "ITAE", "Overshoot", "SettlingTime", "RiseTime", "SteadyStateError",
-                  "PeakDeviation", "RecoveryTime", "ControlEffort", "TotalVariation")
+                  "PeakDeviation", "RecoveryTime", "ControlEffort", "TotalVariation", "Chatter")
 # unit of each metric from the output unit y and the input unit u (prlpid_fmi.metrics docstring)
 METRIC_UNITS = {"ISE": "{y}²·s", "IAE": "{y}·s", "ITAE": "{y}·s²", "Overshoot": "%", "SettlingTime": "s",
                 "RiseTime": "s", "SteadyStateError": "{y}", "PeakDeviation": "{y}", "RecoveryTime": "s",
-                "ControlEffort": "{u}²·s", "TotalVariation": "{u}"}
+                "ControlEffort": "{u}²·s", "TotalVariation": "{u}",
+                "Chatter": "fraction"}
 GAIN_UNITS = {"Kp": "{u}/{y}", "Ti": "s", "Td": "s"}
 PLOTS = ((rd.RESPONSE_PLOT, "measurement and setpoint of each controller, disturbances marked"),
          (rd.CONTROL_SIGNAL_PLOT, "control signal of each controller, actuator limits and disturbances marked"),
@@ -121,7 +122,7 @@ def candidates_table(sched, fixed, units: tuple[str, str] = ("", "")) -> str:
     y_unit, u_unit = units
     rows = [("ISE", "ISE"), ("IAE", "IAE"), ("Overshoot", "overshoot"), ("SettlingTime", "settling time"),
             ("PeakDeviation", "peak deviation (regulation)"), ("RecoveryTime", "recovery time (regulation)"),
-            ("TotalVariation", "total variation of u")]
+            ("TotalVariation", "total variation of u"), ("Chatter", "chatter (u reversing, fraction of samples)")]
     cands = [c for c in (sched, fixed) if c is not None]
     lines = ["| metric (evaluation) | unit | " + " | ".join(c.name for c in cands) + " |",
              "|---|---|" + "---|" * len(cands)]

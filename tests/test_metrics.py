@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.optimize import brentq
 
-from prlpid_fmi.metrics import METRIC_NAMES, compute_metrics
+from prlpid_fmi.metrics import METRIC_NAMES, chatter_fraction, compute_metrics
 
 TS = 0.01
 
@@ -247,3 +247,43 @@ def test_a_noisy_start_at_the_setpoint_is_regulation_not_a_huge_overshoot():
     res = compute_metrics(t, r, y, np.zeros(n), ts)
     assert math.isnan(res["overall"]["Overshoot"])  # not peak / (r - y[0]) = thousands of per cent
     assert res["overall"]["PeakDeviation"] > 0.9
+
+
+@pytest.mark.parametrize("u, u_range, expected", [
+    ([0, 10, 0, 10, 0, 10], 10.0, 1.0),                  # two-sample limit cycle: k = 2..5 all reverse
+    ([0, 1, 2, 3, 3, 3], 10.0, 0.0),                      # smooth, monotone
+    ([5 + 0.04 * (-1) ** k for k in range(50)], 10.0, 0.0),  # wiggle of 0.08 < 1 % of 10
+    ([0, 2, 0.5, 0.5, 2.5, 0, 0.1], 100.0, 0.4),          # threshold 1: reversals at k = 2 and 5 of k = 2..6
+    ([0, 2, 1, 2], 100.0, 0.0),                           # moves of exactly 1 % do not count (must exceed)
+    ([0, 100, 50, 100], math.inf, 1.0),                   # infinite range: 1 % of max|u| = 1
+    ([0, 100, 99.5, 100], math.inf, 0.0),                 # moves of 0.5 < 1
+    ([0, 100, 99.5, 100], None, 0.0),
+])
+def test_chatter_fraction_hand_computed(u, u_range, expected):
+    assert chatter_fraction(u, u_range) == pytest.approx(expected, abs=1e-12)
+
+
+def test_chatter_fraction_undefined():
+    assert math.isnan(chatter_fraction([0.0, 1.0], 1.0))             # no k with two differences
+    assert math.isnan(chatter_fraction([0.0, 1.0, math.nan, 1.0], 1.0))
+    with pytest.raises(ValueError, match="1-D"):
+        chatter_fraction(np.zeros((4, 2)), 1.0)
+
+
+def test_chatter_per_window_and_per_loop():
+    # du_k for k = 1..9: 10, -10, 10, -10, 10, 0, 0, 0, 0 (range 10, threshold 0.1)
+    u0 = [0, 10, 0, 10, 0, 10, 10, 10, 10, 10]
+    u1 = [0, 1, 0, 1, 0, 1, 0, 1, 0, 1]  # reverses every sample, but by 1 = 1 % of its range 100
+    t = np.arange(10) * 0.1
+    res = compute_metrics(t, np.zeros((10, 2)), np.zeros((10, 2)), np.column_stack([u0, u1]), 0.1,
+                          intervals=[(0, 5), (5, 10), (0, 2)], loop_names=["a", "b"], u_range=[10.0, 100.0])
+    assert res["overall"]["Chatter[a]"] == pytest.approx(4 / 8)          # reversals at k = 2, 3, 4, 5 of k = 2..9
+    assert res["intervals"][0]["Chatter[a]"] == pytest.approx(1.0)       # k = 2, 3, 4
+    assert res["intervals"][1]["Chatter[a]"] == pytest.approx(1 / 5)     # k = 5 (uses u[3], u[4]) of k = 5..9
+    assert math.isnan(res["intervals"][2]["Chatter[a]"])                 # window [0, 2) has no k >= 2
+    assert res["overall"]["Chatter[b]"] == 0.0
+    # without a range: 1 % of max|u| = 0.01 for loop b, so it chatters at every k = 2..9
+    res = compute_metrics(t, np.zeros((10, 2)), np.zeros((10, 2)), np.column_stack([u0, u1]), 0.1)
+    assert res["overall"]["Chatter[1]"] == pytest.approx(1.0)
+    with pytest.raises(ValueError, match="u_range"):
+        compute_metrics(t, np.zeros(10), np.zeros(10), u0, 0.1, u_range=0.0)
