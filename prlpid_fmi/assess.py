@@ -4,7 +4,9 @@ The gain schedule is replayed as a plain PID (no neural network) and the fixed P
 the gains the search returned, both on the evaluation schedule and on the Monte-Carlo set
 (evaluation.randomize_samples episodes with parameters drawn from evaluation.randomize, seeds
 evaluation.seed + 1, + 2, ...). Robustness margins (prlpid_fmi.margins) are measured at every
-breakpoint of the schedule and at the middle of the setpoint range for the fixed PID.
+breakpoint of a setpoint schedule; for every row of an error schedule (and its gains at error 0) at
+the low end, middle and high end of the setpoint range (range_points); and at the middle of the
+setpoint range for the fixed PID and any other table.
 """
 from __future__ import annotations
 
@@ -18,7 +20,7 @@ from .actions import Gains
 from .baseline import margins_of, operating_point
 from .deliver import Candidate, Decision, choose
 from .evaluate import constant_gains, evaluate_gains
-from .schedule import GainSchedule, replay_schedule
+from .schedule import _LOOP_VARIABLE, GainSchedule, replay_schedule
 
 
 def _margins_at(config, gains, points: list[list[float]]) -> list:
@@ -65,10 +67,44 @@ def assess_schedule(scenario, schedule: GainSchedule) -> Candidate:
         g = schedule.gains_at(point[0])
         return tuple(x.tolist() for x in g) + ((None,) if schedule.coupling is None else ())
 
+    loop = error_loop(schedule)
+    if loop is not None:  # every row, and the steady-state gains (error 0), at every operating point
+        rows = [_row(schedule, j) for j in range(len(schedule.breakpoints))] + [gains([0.0])]
+        pairs = [(row, point) for row in rows for point in range_points(scenario.tuning, loop)]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            margins = [margins_of(scenario.tuning, row, point) for row, point in pairs]
+        return Candidate("gain schedule", metrics, mc, margins, [point[loop] for _, point in pairs])
     points = [operating_point(config, b) for b in schedule.breakpoints] \
         if schedule.variable.startswith("setpoint") else [operating_point(config)]
     return Candidate("gain schedule", metrics, mc, _margins_at(scenario.tuning, gains, points),
                      [p[0] for p in points])
+
+
+def error_loop(schedule: GainSchedule) -> int | None:
+    """The loop index of an error[<loop>] table, None for any other scheduling variable."""
+    m = _LOOP_VARIABLE.match(schedule.variable)
+    return schedule.loop_names.index(m.group(2)) if m and m.group(1) == "error" else None
+
+
+def range_points(config, loop: int) -> list[list[float]]:
+    """Operating points for an error table: loop `loop`'s setpoint at the low end, middle and high end of
+    its setpoint_range (the other loops at the middle of theirs). An error table is used at every setpoint,
+    so each of its rows must be robust over the whole range, not at one point."""
+    lo, hi = config.loops[loop].setpoint_range
+    points = []
+    for value in (lo, 0.5 * (lo + hi), hi):
+        point = operating_point(config)
+        point[loop] = float(value)
+        if point not in points:
+            points.append(point)
+    return points
+
+
+def _row(schedule: GainSchedule, j: int) -> tuple:
+    """Row j as (Kp, Ti, Td, coupling) lists."""
+    return (schedule.Kp[j].tolist(), schedule.Ti[j].tolist(), schedule.Td[j].tolist(),
+            None if schedule.coupling is None else schedule.coupling[j].tolist())
 
 
 def robust_schedule(schedule: GainSchedule, config, limit: float) -> tuple[GainSchedule, list[str]]:
@@ -77,25 +113,32 @@ def robust_schedule(schedule: GainSchedule, config, limit: float) -> tuple[GainS
     The agent's reward does not see robustness, so the gains it settles on can leave the Ms limit that
     the fixed PID it started from meets; this keeps the adaptation pattern of every row and restores the
     margin. Rows that cannot be detuned to the limit stay as they are (the deliverable then refuses the
-    schedule). Returns (schedule, one note per detuned row). Setpoint-scheduled tables only.
+    schedule). Returns (schedule, one note per detuned row). Setpoint tables: each row at its own
+    setpoint. Error tables: each row at every point of range_points, detuned at its worst point until it
+    meets the limit at all of them. Other variables: unchanged.
     """
     from .baseline import detune
 
-    if not schedule.variable.startswith("setpoint"):
+    loop = error_loop(schedule)
+    if not schedule.variable.startswith("setpoint") and loop is None:
         return schedule, []
     Kp, Ti, notes = schedule.Kp.copy(), schedule.Ti.copy(), []
     for j, b in enumerate(schedule.breakpoints):
-        point = operating_point(config, b)
-        row = (schedule.Kp[j].tolist(), schedule.Ti[j].tolist(), schedule.Td[j].tolist(),
-               None if schedule.coupling is None else schedule.coupling[j].tolist())
-        m = margins_of(config, row, point)  # conservative like the search: unreliable estimates count
-        if m.Ms <= limit:
-            continue
-        ms = m.Ms
-        fixed = detune(config, row, point, limit)
-        if fixed is not None:
-            Kp[j], Ti[j] = fixed[0], fixed[1]
-            notes.append(f"row {b:g}: Ms {ms:.2f} > {limit:g}, detuned to Kp {np.round(Kp[j], 4).tolist()}, "
+        points = [operating_point(config, b)] if loop is None else range_points(config, loop)
+        row, first = _row(schedule, j), None
+        for _ in points:  # each pass detunes at the worst point; that usually settles the others too
+            # conservative like the search: unreliable estimates count
+            ms, point = max(((margins_of(config, row, p).Ms, p) for p in points), key=lambda x: x[0])
+            first = ms if first is None else first
+            if ms <= limit:
+                break
+            fixed = detune(config, row, point, limit)
+            if fixed is None:
+                break
+            row = (list(fixed[0]), list(fixed[1]), row[2], row[3])
+        if row[0] != schedule.Kp[j].tolist() or row[1] != schedule.Ti[j].tolist():
+            Kp[j], Ti[j] = row[0], row[1]
+            notes.append(f"row {b:g}: Ms {first:.2f} > {limit:g}, detuned to Kp {np.round(Kp[j], 4).tolist()}, "
                          f"Ti {np.round(Ti[j], 4).tolist()}")
     return dataclasses.replace(schedule, Kp=Kp, Ti=Ti), notes
 

@@ -308,7 +308,8 @@ def make_parser() -> argparse.ArgumentParser:
                    help="st/plcopen/c: identifier in the code (default: from the output file name)")
     p.add_argument("--force", action="store_true", help="replace an existing output file (never a run's own file)")
     p.add_argument("--schedule-by", default=None,
-                   help="csv: setpoint, measurement, or an FMU variable name (default: setpoint)")
+                   help="csv: setpoint, measurement (settled holds), error (setpoint - measurement, binned from "
+                        "training-distribution trajectories), or an FMU variable name (default: setpoint)")
     p.add_argument("--points", type=int, default=None, help="csv: number of operating points (default: 9)")
     p.add_argument("--replay", action="store_true",
                    help="run the table as a plain gain-scheduled PID on the FMU and compare with the policy")

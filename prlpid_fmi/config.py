@@ -197,3 +197,4 @@ class DeployConfig:
 
     max_sensitivity: float = _d(_m.DeployModel, "max_sensitivity")
     schedule_points: int = _d(_m.DeployModel, "schedule_points")
+    schedule_by: str = _d(_m.DeployModel, "schedule_by")  # auto | setpoint | measurement | error

@@ -10,7 +10,8 @@ is rendered by jinja2 templates shipped in ``prlpid_fmi/templates/deploy/``:
 Every format computes exactly what ``prlpid_fmi.schedule.replay_schedule`` runs (and docs/deploy.md
 describes), sample by sample:
 
-1. scheduling value x: the setpoint or measurement of one loop, or an external input;
+1. scheduling value x: the setpoint, measurement or error (setpoint - measurement, uncoupled) of one
+   loop, or an external input;
 2. gains: numpy.interp's rule per table column — x <= first breakpoint: first row; x >= last: last
    row; x equal to a breakpoint: that row; else slope*(x - bp[j]) + T[j] with
    slope = (T[j+1] - T[j])/(bp[j+1] - bp[j]) (held outside the table, never extrapolated);
@@ -61,7 +62,7 @@ class DeployedController:
 
     name: identifier (C prefix; the ST block is FB_<name>). breakpoints: (K,) strictly increasing;
     Kp, Ti [s], Td [s]: K rows of n_loops values; coupling: K rows of 6 (COUPLING_NAMES order) or None.
-    schedule_kind: "setpoint" | "measurement" (of loop schedule_loop) | "external" (an input).
+    schedule_kind: "setpoint" | "measurement" | "error" (of loop schedule_loop) | "external" (an input).
     u_min/u_max: n_loops limits (may be infinite). source: where the table came from (for comments).
     """
 
@@ -118,7 +119,8 @@ class DeployedController:
                  ("PID", PID_EQUATION + "; u clipped to [u_min, u_max]"),
                  ("sample time", f"{self.sample_time_s!r} s (call the block once every sample time)"),
                  ("scheduling variable", f"{self.schedule_variable}" + (f" [{self.schedule_unit}]" if self.schedule_unit
-                                                                        else "")),
+                                                                        else "")
+                  + (" = setpoint - measurement of that loop" if self.schedule_kind == "error" else "")),
                  ("interpolation", INTERPOLATION),
                  ("anti-windup", self.anti_windup + (" (Tt = sqrt(Ti*Td), or Ti when Td = 0)"
                                                      if self.anti_windup == "back_calculation" else "")),

@@ -170,10 +170,11 @@ def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None
     from . import plots
     from .baseline import tune_fixed_pid
     from .progress import Progress
-    from .assess import assess, candidate_summary, max_sensitivity, robust_schedule
+    from .assess import assess, candidate_summary, max_sensitivity
     from .deliver import verdict
     from .deploy import deployable_files
-    from .schedule import extract_schedule, fixed_schedule, write_schedule_csv
+    from .schedule import fixed_schedule, write_schedule_csv
+    from .transients import deliverable_schedule
     from .train import train
 
     info = {"command": sys.argv, "started": rd.now(), "versions": rd.package_versions()}
@@ -230,17 +231,9 @@ def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None
     # 3. read the policy's gain schedule, evaluate both (and the fixed PID), choose what to deploy
     policy = _policy(run_dir, agent.algorithm)
     schedule, note = None, ""
-    try:
-        schedule = extract_schedule(policy, scenario.tuning, points=scenario.deploy.schedule_points,
-                                    seed=agent.seed, anchor=anchor)
-        if schedule.excluded:
-            note = ("The closed loop diverged at setpoint(s) " + ", ".join(f"{v:g}" for v in schedule.excluded)
-                    + ": left out of the schedule.\n")
-        schedule, detuned = robust_schedule(schedule, scenario.tuning, max_sensitivity(scenario))
-        if detuned:
-            note += ("Rows of the gain schedule detuned (Kp / lambda, Ti * lambda) to meet Ms <= "
-                     f"{max_sensitivity(scenario):g}: " + "; ".join(detuned) + ".\n")
-            info["schedule_detuned_rows"] = detuned
+    try:  # deploy.schedule_by: settled setpoint holds, error trajectories, or the better of both (auto)
+        schedule, note, chosen = deliverable_schedule(policy, scenario, agent.seed, anchor)
+        info.update(chosen)
     except PrlPidError as exc:
         note = f"No gain schedule: {exc}\n"
         info["schedule_error"] = str(exc)
@@ -351,7 +344,8 @@ def export_schedule(run_dir: str | Path, output: str | Path, schedule_by: str = 
     Returns (csv path, comparison or None): comparison = {"policy": metrics, "schedule": metrics}.
     """
     from .evaluate import evaluate
-    from .schedule import extract_schedule, replay_schedule, write_schedule_csv
+    from .schedule import replay_schedule, write_schedule_csv
+    from .transients import extract
 
     run_dir, output = Path(run_dir), Path(output)
     trained = _load_run(run_dir)
@@ -362,8 +356,7 @@ def export_schedule(run_dir: str | Path, output: str | Path, schedule_by: str = 
     policy = _policy(run_dir, trained.agent.algorithm)
     fixed = json.loads((run_dir / rd.FIXED_PID).read_text()) if (run_dir / rd.FIXED_PID).is_file() else None
     anchor = _anchor(trained, fixed)
-    schedule = extract_schedule(policy, trained.tuning, schedule_by=schedule_by, points=points,
-                                seed=trained.agent.seed, anchor=anchor)
+    schedule = extract(policy, trained.tuning, schedule_by, points, trained.agent.seed, anchor)
     path = write_schedule_csv(schedule, output)
     if not replay:
         return path, None

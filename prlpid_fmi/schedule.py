@@ -14,10 +14,13 @@ them. No neural network is needed to run the result.
 - ``write_schedule_csv`` / ``read_schedule_csv``: a self-describing CSV (metadata in ``# `` lines).
 - ``replay_schedule``: run the plain gain-scheduled PID on the FMU, no neural network involved.
 
-Scheduling variables are named ``setpoint[<loop>]``, ``measurement[<loop>]`` (the loop's output
-name) or an FMU variable name. At every step the value seen by the table lookup is the current
-setpoint, the current (noisy, if noise is configured) measurement, or the FMU variable read from the
-plant before the step — what a PLC reading the same signal would see.
+Scheduling variables are named ``setpoint[<loop>]``, ``measurement[<loop>]``, ``error[<loop>]``
+(the loop's output name) or an FMU variable name. At every step the value seen by the table lookup
+is the current setpoint, the current (noisy, if noise is configured) measurement, the error
+setpoint - measurement of that loop (the uncoupled error, also for a cross-coupled PID), or the FMU
+variable read from the plant before the step — what a PLC reading the same signal would see.
+Settled holds have no error to schedule on: error tables come from policy trajectories
+(prlpid_fmi.transients).
 """
 from __future__ import annotations
 
@@ -52,7 +55,7 @@ _ANTI_WINDUP_TEXT = {
     "back_calculation": "back_calculation (tracking time constant Tt = sqrt(Ti*Td), or Ti when Td = 0)",
     "none": "none",
 }
-_LOOP_VARIABLE = re.compile(r"^(setpoint|measurement)\[(.+)\]$")
+_LOOP_VARIABLE = re.compile(r"^(setpoint|measurement|error)\[(.+)\]$")
 
 __all__ = ["GainSchedule", "extract_schedule", "write_schedule_csv", "read_schedule_csv", "replay_schedule",
            "PID_EQUATION", "INTERPOLATION"]
@@ -62,7 +65,7 @@ __all__ = ["GainSchedule", "extract_schedule", "write_schedule_csv", "read_sched
 class GainSchedule:
     """A gain table: row j holds the PID parameters to use when the scheduling variable equals breakpoints[j].
 
-    variable: "setpoint[<loop>]", "measurement[<loop>]" or an FMU variable name; unit: its unit ("" if unknown).
+    variable: "setpoint[<loop>]", "measurement[<loop>]", "error[<loop>]" or an FMU variable name; unit: its unit ("" if unknown).
     breakpoints: (K,) strictly increasing. Kp, Ti [s], Td [s]: (K, n_loops). coupling: (K, 6) in
     COUPLING_NAMES order, or None for independent loops. sample_time_s: Ts of the PID law [s].
     loop_names: the measured outputs, loop_inputs: the driven inputs, output_units/input_units: their
@@ -154,7 +157,7 @@ def _group(unit: str) -> str:
 # -- extraction -------------------------------------------------------------------------------------
 
 def _variable_name(schedule_by: str, loop_names: list[str]) -> str:
-    if schedule_by in ("setpoint", "measurement"):
+    if schedule_by in ("setpoint", "measurement", "error"):
         return f"{schedule_by}[{loop_names[0]}]"
     m = _LOOP_VARIABLE.match(schedule_by)
     if m and m.group(2) not in loop_names:
@@ -179,6 +182,8 @@ class _Probe:
             return float(self.env.setpoint[self.index])
         if self.kind == "measurement":
             return float(self.env.measurement[self.index])
+        if self.kind == "error":
+            return float(self.env.setpoint[self.index]) - float(self.env.measurement[self.index])
         return float(self.env.plant.get([self.name])[0])
 
     def unit(self) -> str:
@@ -191,6 +196,13 @@ class _Probe:
 def _unit(env, name: str) -> str:
     v = env.plant.description.variable(name)
     return (v.unit or "") if v is not None else ""
+
+
+def table_meta(core, config: TuningConfig) -> dict:
+    """The loops' input names and units as GainSchedule fields (loop_inputs, output_units, input_units)."""
+    return dict(loop_inputs=tuple(l.input for l in config.loops),
+                output_units=tuple(_unit(core, l.output) for l in config.loops),
+                input_units=tuple(_unit(core, l.input) for l in config.loops))
 
 
 def _exact_mean(x: np.ndarray) -> np.ndarray:
@@ -229,6 +241,10 @@ def extract_schedule(policy: Policy, config: TuningConfig, schedule_by: str = "s
     names = [l.output for l in config.loops]
     variable = _variable_name(schedule_by, names)
     m = _LOOP_VARIABLE.match(variable)
+    if m and m.group(1) == "error":
+        raise PrlPidError(f"{variable}: settled holds have no error to schedule on (expected setpoint, measurement "
+                          "or an FMU variable; error tables come from policy trajectories, "
+                          "prlpid_fmi.transients.trajectory_schedule)")
     loop = names.index(m.group(2)) if m else 0
     lo, hi = config.loops[loop].setpoint_range
     if isinstance(points, (int, np.integer)):
@@ -255,9 +271,7 @@ def extract_schedule(policy: Policy, config: TuningConfig, schedule_by: str = "s
     try:
         probe = _Probe(variable, env.core)
         unit = probe.unit()
-        meta = dict(loop_inputs=tuple(l.input for l in config.loops),
-                    output_units=tuple(_unit(env.core, l.output) for l in config.loops),
-                    input_units=tuple(_unit(env.core, l.input) for l in config.loops))
+        meta = table_meta(env.core, config)
         for sp in setpoints:
             hold = list(others)
             hold[loop] = float(sp)
@@ -286,7 +300,18 @@ def extract_schedule(policy: Policy, config: TuningConfig, schedule_by: str = "s
         raise PrlPidError(f"the closed loop diverged at every operating point of {variable} "
                           f"({', '.join(f'{v:g}' for v in excluded)}): no gains can be scheduled; "
                           "train longer or narrow the operating range")
-    rows.sort(key=lambda r: r[0])
+    return schedule_from_rows(config, variable, unit, rows, meta, excluded=tuple(excluded))
+
+
+def schedule_from_rows(config: TuningConfig, variable: str, unit: str, rows: list, meta: dict,
+                       excluded: tuple = ()) -> GainSchedule:
+    """A GainSchedule from rows [(breakpoint, {"Kp": (n_loops,), "Ti": ..., "Td": ...[, "coupling": (6,)]})].
+
+    Rows are sorted by breakpoint; rows whose breakpoints coincide (to 1e-9 of the span) are averaged
+    into one, with a warning. meta: loop_inputs, output_units, input_units (tuples).
+    """
+    names = [l.output for l in config.loops]
+    rows = sorted(rows, key=lambda r: r[0])
     merged: list[list] = []
     span = max(abs(rows[-1][0] - rows[0][0]), abs(rows[0][0]), 1.0)
     for value, g in rows:
@@ -297,7 +322,7 @@ def extract_schedule(policy: Policy, config: TuningConfig, schedule_by: str = "s
             merged.append([[value], [g]])
     if len(merged) < len(rows):
         warnings.warn(f"{variable}: {len(rows)} operating points gave only {len(merged)} distinct breakpoint(s); "
-                      "gains at equal breakpoints were averaged", stacklevel=2)
+                      "gains at equal breakpoints were averaged", stacklevel=3)
 
     def stack(key):
         return np.array([_exact_mean(np.array([g[key] for g in gs])) for _, gs in merged])

@@ -93,6 +93,14 @@ def _siso_measurement():
                           Ti=[1.5, 1.0, 0.9], Td=[0.03, 0.08, 0.1]), (0.0,)
 
 
+def _siso_error():
+    """first_order scheduled by its error r - y (rows on both signs), clamping, no filter."""
+    config = _scenario_config("first_order", anti_windup="clamping", derivative_filter_N=None, episode_steps=200,
+                              measurement_noise_std=0.01, setpoint_schedule=((0, (0.9,)), (100, (-0.7,))))
+    return config, _table(config, "error[y]", "", [-0.4, -0.02, 0.0, 0.03, 0.5], Kp=[22.0, 12.0, 9.0, 13.0, 25.0],
+                          Ti=[0.8, 1.5, 2.0, 1.4, 0.7], Td=[0.1, 0.04, 0.02, 0.05, 0.12]), (0.0,)
+
+
 def _siso_external():
     """time_varying scheduled by the FMU variable a_t (an input of the block), back-calculation, filter N = 10."""
     config = _scenario_config("time_varying", anti_windup="back_calculation", derivative_filter_N=10.0,
@@ -124,9 +132,10 @@ def _fixed_two_tank():
 
 
 CASES = {"siso_setpoint_clamping": _siso_setpoint, "siso_measurement_none_filter": _siso_measurement,
+         "siso_error_clamping": _siso_error,
          "siso_external_backcalc_filter": _siso_external, "mimo_coupled_backcalc": _mimo_coupled,
          "fixed_pid_bumpless_clamping_filter": _fixed_two_tank}
-ST_CASES = ("siso_external_backcalc_filter", "mimo_coupled_backcalc", "fixed_pid_bumpless_clamping_filter")
+ST_CASES = ("siso_error_clamping", "siso_external_backcalc_filter", "mimo_coupled_backcalc", "fixed_pid_bumpless_clamping_filter")
 
 
 @pytest.fixture(scope="module")

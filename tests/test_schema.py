@@ -110,6 +110,7 @@ BROKEN = [
     ("baseline.popsize", 0),
     ("deploy.max_sensitivity", 1.0),
     ("deploy.margin", 2),
+    ("deploy.schedule_by", "errors"),
 ]
 
 

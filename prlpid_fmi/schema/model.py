@@ -633,6 +633,9 @@ class BaselineModel(Section):
     popsize: Count = Field(8, description="population = popsize x number of gains searched")
 
 
+ScheduleBy = Literal["auto", "setpoint", "measurement", "error"]  # deploy.schedule_by (prlpid_fmi.transients)
+
+
 class DeployModel(Section):
     """When a tuned controller may be deployed."""
 
@@ -641,6 +644,13 @@ class DeployModel(Section):
     schedule_points: Count = Field(9, description="operating points (rows) of the gain schedule `tune` reads from "
                                                   "the policy: setpoints evenly spaced over the first loop's "
                                                   "setpoint_range; Ms is measured at each")
+    schedule_by: ScheduleBy = Field("auto", description="scheduling variable of the gain schedule `tune` reads from "
+                                                        "the policy: setpoint or measurement (of the first loop; "
+                                                        "gains settled at held setpoints), error (setpoint - "
+                                                        "measurement; gains the policy applied on training episodes, "
+                                                        "binned by the error, so that its adaptation during "
+                                                        "transients is kept), or auto: the setpoint and error tables, "
+                                                        "the one with the lower ISE on seeded training episodes")
 
 
 class ScenarioModel(Section):
