@@ -1,0 +1,72 @@
+"""Settled-setpoint vs error-trajectory gain schedules of trained runs (docs/results.md "Error-scheduled gains").
+
+For each run directory made by `prlpid-fmi tune` (its model.zip, scenario.yaml, fixed_pid.json), both
+candidate tables are re-extracted from the saved policy exactly as `tune` builds them
+(prlpid_fmi.transients.extract + assess.robust_schedule), scored on the seeded training-distribution
+episodes `deploy.schedule_by: auto` uses, and assessed like the deliverable (assess.assess_schedule:
+evaluation + Monte-Carlo set + margins). Prints one markdown table: ISE and total variation of u as
+ratios to the fixed PID on the run's evaluation, worst Ms, training-episode ISE, and auto's pick.
+
+    python benchmarks/bench_error_schedule.py RUN_DIR [RUN_DIR ...] [--points 9]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+import warnings
+from pathlib import Path
+
+from prlpid_fmi import rundir as rd
+from prlpid_fmi.assess import assess_fixed, assess_schedule, max_sensitivity, robust_schedule
+from prlpid_fmi.run import _anchor, _load_run, _policy, gains_from_dict
+from prlpid_fmi.transients import extract, training_ise
+
+
+def _row(run: Path, kind: str, cand, fixed, train_ise: float | None, wall: float) -> str:
+    ise, tv = cand.overall("ISE"), cand.overall("TotalVariation")
+    f_ise, f_tv = fixed.overall("ISE"), fixed.overall("TotalVariation")
+    ms = "n/a" if math.isnan(cand.worst_Ms) else f"{cand.worst_Ms:.2f}"
+    train = "" if train_ise is None else f"{train_ise:.4g}"
+    return (f"| {run.name} | {kind} | {ise:.4g} | {ise / f_ise:.3f} | {tv / f_tv:.3f} | {ms} | {cand.score:.4g} | "
+            f"{train} | {wall:.0f} |")
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("runs", nargs="+", type=Path)
+    p.add_argument("--points", type=int, default=None, help="rows per table (default: the scenario's schedule_points)")
+    args = p.parse_args(argv)
+    print("| run | controller | ISE | ISE ÷ fixed | TV ÷ fixed | worst Ms | score (eval + MC mean ISE) | "
+          "training-episode ISE | wall s |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for run in args.runs:
+        scenario = _load_run(run)
+        fixed_json = json.loads((run / rd.FIXED_PID).read_text())
+        policy = _policy(run, scenario.agent.algorithm)
+        anchor, seed = _anchor(scenario, fixed_json), scenario.agent.seed
+        points = args.points or scenario.deploy.schedule_points
+        limit = max_sensitivity(scenario)
+        t0 = time.time()
+        fixed = assess_fixed(scenario, gains_from_dict(fixed_json["gains"]))
+        print(_row(run, "fixed PID", fixed, fixed, None, time.time() - t0))
+        scores = {}
+        for kind in ("setpoint", "error"):
+            t0 = time.time()
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                schedule = extract(policy, scenario.tuning, kind, points, seed, anchor)
+                schedule, _ = robust_schedule(schedule, scenario.tuning, limit)
+                scores[kind] = training_ise(schedule, scenario.tuning, seed)
+                cand = assess_schedule(scenario, schedule)
+            print(_row(run, f"{kind} ({len(schedule.breakpoints)} rows)", cand, fixed, scores[kind],
+                       time.time() - t0))
+            sys.stdout.flush()
+        print(f"| {run.name} | auto picks: {min(scores, key=scores.get)} | | | | | | | |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,210 @@
+"""Gain schedules that carry transients: error[<loop>] tables, trajectory binning, the Ms rule, tune's choice.
+
+Truths used: the exact ZOH discretisation of 1/(s - 1) (y+ = e^Ts*y + (e^Ts - 1)*u) closed by the
+positional PID of eq. 2 written out by hand with gains interpolated from the table by hand; equal-count
+bins and medians computed by hand; the action -> gain map written out by hand (log: low*(high/low)**frac);
+the Ms limit checked on the projected rows with the margin estimate that was validated against exact
+transfer functions in test_margins.py.
+"""
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+
+from prlpid_fmi.assess import assess_schedule, range_points, robust_schedule
+from prlpid_fmi.baseline import margins_of
+from prlpid_fmi.errors import PrlPidError
+from prlpid_fmi.presets import preset, scenario_path
+from prlpid_fmi.scenario import load_scenario, scenario_to_yaml
+from prlpid_fmi.schedule import (GainSchedule, extract_schedule, read_schedule_csv, read_schedule_metadata,
+                                 replay_schedule, write_schedule_csv)
+from prlpid_fmi.transients import bin_rows, deliverable_schedule, extract, trajectory_schedule, training_ise
+
+TS = 0.1
+# first_order, 1/(s - 1): Kp in [0.5, 30] log, Ti in [0.2, 20] log, Td in [0, 0.2] linear; u in [-10, 10]
+PLAIN = dataclasses.replace(preset("first_order"), smoothing="none", forecast_horizon=0, episode_steps=120,
+                            setpoint_schedule=((0, (0.5,)), (60, (-0.4,))))
+
+
+def error_table(breakpoints, Kp, Ti, Td, config=PLAIN) -> GainSchedule:
+    rows = lambda a: np.array(a, float).reshape(-1, 1)  # noqa: E731
+    return GainSchedule(
+        variable="error[y]", unit="", breakpoints=np.array(breakpoints, float), Kp=rows(Kp), Ti=rows(Ti), Td=rows(Td),
+        coupling=None, sample_time_s=TS, loop_names=("y",), loop_inputs=("u",), output_units=("",),
+        input_units=("",), anti_windup="clamping", u_min=np.array([-10.0]), u_max=np.array([10.0]))
+
+
+def hand_replay(table: GainSchedule, setpoints: list[float]):
+    """Closed loop by hand: 1/(s-1) discretised exactly, the table looked up at e = r - y, PID of eq. 2
+    with clamping anti-windup; returns (u, y, e) per sample."""
+    a = math.exp(TS)
+    y, integral, e_prev = 0.0, 0.0, None
+    us, ys, es = [], [], []
+    bp = table.breakpoints
+    for r in setpoints:
+        e = r - y
+        kp, ti, td = (float(np.interp(e, bp, col[:, 0])) for col in (table.Kp, table.Ti, table.Td))
+        e_prev = e if e_prev is None else e_prev
+        trial = integral + e * TS
+        u_unsat = kp * (e + td * (e - e_prev) / TS) + kp / ti * trial
+        u = min(max(u_unsat, -10.0), 10.0)
+        if u != u_unsat and (u_unsat - u) * (kp * e) > 0:
+            trial = integral
+        integral, e_prev = trial, e
+        us.append(u), ys.append(y), es.append(e)
+        y = a * y + (a - 1.0) * u
+    return np.array(us), np.array(ys), np.array(es)
+
+
+TABLE = error_table([-0.3, 0.0, 0.3], Kp=[24.0, 3.0, 26.0], Ti=[1.0, 2.0, 0.8], Td=[0.02, 0.0, 0.05])
+
+
+def test_error_table_replays_as_the_hand_computed_closed_loop(tmp_path):
+    table = read_schedule_csv(write_schedule_csv(TABLE, tmp_path / "error.csv"))  # through the file
+    _, traj = replay_schedule(table, PLAIN)
+    setpoints = [0.5] * 60 + [-0.4] * 60
+    u, y, e = hand_replay(TABLE, setpoints)
+    assert not traj["terminated"] and len(traj["pid_output"]) == 120
+    r_k, y_k = traj["setpoint"][:120, 0], traj["measurement"][:120, 0]  # the samples before each step
+    # the lookup reads e = r - y exactly as the PID does, and the gains are np.interp of that
+    assert np.array_equal(traj["scheduling_value"], r_k - y_k)
+    assert np.allclose(y_k, y, rtol=0, atol=1e-7)
+    assert np.allclose(traj["pid_output"][:, 0], u, rtol=0, atol=1e-6)
+    assert np.allclose(traj["scheduling_value"], e, rtol=0, atol=1e-7)
+    # the run exercises what it claims: saturation, both outer rows, and the middle row near e = 0
+    assert np.any(np.abs(u) == 10.0)
+    assert e.max() > 0.3 and e.min() < -0.3 and np.any(np.abs(e) < 0.05)
+    assert len(np.unique(np.round(traj["gains"]["Kp"][:, 0], 9))) > 10
+
+
+def test_error_table_csv_round_trip_is_exact_and_self_describing(tmp_path):
+    path = write_schedule_csv(TABLE, tmp_path / "error.csv")
+    back = read_schedule_csv(path)
+    assert back.variable == "error[y]"
+    for key in ("breakpoints", "Kp", "Ti", "Td", "u_min", "u_max"):
+        assert np.array_equal(getattr(back, key), getattr(TABLE, key)), key
+    meta = read_schedule_metadata(path)
+    assert meta["scheduling_variable"] == "error[y]"
+    assert path.read_text().splitlines()[len(meta)].split(",")[0] == "error[y]"
+
+
+def test_settled_holds_refuse_the_error_variable():
+    with pytest.raises(PrlPidError, match="trajectories"):
+        extract_schedule(lambda obs: np.zeros(3, np.float32), PLAIN, schedule_by="error", points=3, settle_steps=5)
+
+
+def test_equal_count_bins_give_hand_computed_medians():
+    values = np.array([5.0, 1.0, 3.0, 2.0, 4.0, 6.0, 0.0])
+    kp = np.array([[50.0], [10.0], [30.0], [20.0], [40.0], [60.0], [0.0]])  # 10 x value
+    rows = bin_rows(values, {"Kp": kp}, 3)
+    # sorted: 0 1 2 | 3 4 | 5 6 (np.array_split of 7 into 3: sizes 3, 2, 2)
+    assert [r[0] for r in rows] == [1.0, 3.5, 5.5]
+    assert [float(r[1]["Kp"][0]) for r in rows] == [10.0, 35.0, 55.0]
+    with pytest.raises(PrlPidError):
+        bin_rows(np.array([]), {"Kp": np.zeros((0, 1))}, 3)
+
+
+def kp_of(a):
+    return 0.5 * (30.0 / 0.5) ** ((a + 1.0) / 2.0)
+
+
+def kp_action(e):
+    """Kp action of error_policy: increasing in e, Kp between 3.15 and 16.2 (1/(s - 1) needs Kp > 1)."""
+    return 0.3 + 0.4 * np.tanh(e)
+
+
+def error_policy(obs):
+    """Kp action kp_action(e) (obs[2] = e / measurement_scale = e), Ti action 0, Td action -1 (Td = 0)."""
+    return np.array([kp_action(obs[2]), 0.0, -1.0], np.float32)
+
+
+# training distribution of first_order: random setpoints in [-1, 1] held 100 samples, 200-sample episodes
+TRAINING = dataclasses.replace(preset("first_order"), smoothing="none")
+
+
+def test_trajectory_table_follows_a_policy_that_adapts_to_the_error():
+    s = trajectory_schedule(error_policy, TRAINING, points=7, episodes=3, seed=1)
+    assert s.variable == "error[y]" and s.breakpoints.shape == (7,)
+    assert np.all(np.diff(s.breakpoints) > 0)
+    assert s.breakpoints[0] < 0.0 < s.breakpoints[-1]  # transients of both signs have rows
+    # the median of a monotone function of e is that function of the median e (up to the two middle
+    # samples of an even bin): each row's Kp is the policy's Kp at (about) the row's error
+    expected = kp_of(kp_action(s.breakpoints))
+    assert s.Kp[:, 0] == pytest.approx(expected, rel=0.05)
+    assert np.all(np.diff(s.Kp[:, 0]) >= 0)
+    assert s.Ti[:, 0] == pytest.approx([0.2 * 100 ** 0.5] * 7, rel=1e-6) and np.all(s.Td == 0.0)
+
+
+def test_a_constant_policy_gives_its_gains_in_every_row_and_other_variables_work():
+    action = np.array([0.1, -0.2, -0.6], np.float32)
+    s = trajectory_schedule(lambda obs: action, TRAINING, schedule_by="measurement", points=4, episodes=2)
+    assert s.variable == "measurement[y]" and s.breakpoints.shape == (4,)
+    assert s.Kp[:, 0] == pytest.approx([kp_of(float(action[0]))] * 4, rel=1e-12)
+    # the extraction's episodes come from the training distribution, not from a fixed schedule
+    assert s.breakpoints[-1] - s.breakpoints[0] > 0.2
+
+
+def test_extract_dispatches_error_to_trajectories_and_setpoint_to_settled_holds():
+    by_error = extract(error_policy, TRAINING, "error[y]", 5, 0)
+    by_setpoint = extract(error_policy, TRAINING, "setpoint", 3, 0)
+    assert by_error.variable == "error[y]" and by_error.breakpoints.shape == (5,)
+    assert by_setpoint.breakpoints.tolist() == [-1.0, 0.0, 1.0]  # held setpoints
+
+
+def test_every_row_of_an_error_table_is_projected_onto_the_limit_over_the_setpoint_range():
+    limit = 2.0
+    table = error_table([-0.5, 0.0, 0.5], Kp=[28.0, 4.0, 28.0], Ti=[0.3, 2.0, 0.3], Td=[0.0, 0.0, 0.0],
+                        config=TRAINING)
+    points = range_points(TRAINING, 0)
+    assert points == [[-1.0], [0.0], [1.0]]
+    before = [max(margins_of(TRAINING, _row(table, j), p).Ms for p in points) for j in range(3)]
+    assert before[0] > limit and before[1] <= limit  # the outer rows fail, the middle one passes
+    projected, notes = robust_schedule(table, TRAINING, limit)
+    assert len(notes) == 2 and notes[0].startswith("row -0.5")
+    assert projected.Kp[1, 0] == 4.0 and projected.Ti[1, 0] == 2.0  # a row that meets the limit is untouched
+    for j in (0, 2):  # detuned (Kp down, Ti up) until the row meets the limit at every operating point
+        assert projected.Kp[j, 0] < 28.0 and projected.Ti[j, 0] > 0.3
+        assert all(margins_of(TRAINING, _row(projected, j), p).Ms <= limit for p in points)
+
+
+def _row(s: GainSchedule, j: int) -> tuple:
+    return ([float(s.Kp[j, 0])], [float(s.Ti[j, 0])], [float(s.Td[j, 0])], None)
+
+
+def test_assessment_measures_every_row_and_the_error_zero_gains_at_every_point():
+    scenario = load_scenario(scenario_path("first_order"))
+    table = error_table([-0.2, 0.3], Kp=[5.0, 7.0], Ti=[2.0, 1.5], Td=[0.0, 0.0])
+    cand = assess_schedule(scenario, table)
+    assert len(cand.margins) == 3 * 3  # (2 rows + gains at e = 0) x 3 setpoints
+    assert cand.breakpoints == [-1.0, 0.0, 1.0] * 3
+    at_zero = ([float(np.interp(0.0, [-0.2, 0.3], [5.0, 7.0]))], [float(np.interp(0.0, [-0.2, 0.3], [2.0, 1.5]))],
+               [0.0], None)
+    assert cand.margins[-2].Ms == pytest.approx(margins_of(scenario.tuning, at_zero, [0.0]).Ms, rel=1e-9)
+
+
+def test_scenario_option_schedule_by_loads_resolves_and_drives_the_candidates(tmp_path):
+    text = scenario_path("first_order").read_text()
+    assert load_scenario(scenario_path("first_order")).deploy.schedule_by == "auto"
+    file = tmp_path / "s.yaml"
+    file.write_text(text + "deploy: {schedule_by: error, schedule_points: 5}\n")
+    scenario = load_scenario(file)
+    assert scenario.deploy.schedule_by == "error"
+    assert "schedule_by: error" in scenario_to_yaml(scenario)
+    scenario = dataclasses.replace(scenario, tuning=TRAINING)
+    schedule, note, info = deliverable_schedule(error_policy, scenario, seed=0)
+    assert schedule.variable == "error[y]" and info["schedule_by"] == "error[y]"
+
+
+def test_auto_keeps_the_candidate_with_the_lower_training_ise():
+    scenario = load_scenario(scenario_path("first_order"))
+    scenario = dataclasses.replace(scenario, tuning=TRAINING, deploy=dataclasses.replace(
+        scenario.deploy, schedule_points=3, max_sensitivity=1e3))  # no projection: compare the raw tables
+    schedule, note, info = deliverable_schedule(error_policy, scenario, seed=0)
+    scores = info["schedule_candidates_training_ise"]
+    assert set(scores) == {"setpoint", "error"}
+    assert schedule.variable == ("error[y]" if scores["error"] < scores["setpoint"] else "setpoint[y]")
+    assert "deploy.schedule_by: auto" in note
+    # the score is the replay's ISE on the selection episodes, independent of the evaluation
+    again = extract(error_policy, TRAINING, "error" if schedule.variable.startswith("error") else "setpoint", 3, 0)
+    assert training_ise(again, TRAINING, 0) == pytest.approx(min(scores.values()), rel=1e-12)
