@@ -142,6 +142,19 @@ def save_checkpoint(model, run_dir: Path, normalize: bool) -> Path:
     return path
 
 
+def normalize_stats(run_dir: Path, model_file: Path) -> Path | None:
+    """The VecNormalize statistics saved with `model_file`: a checkpoint's own
+    checkpoints/model_vecnormalize_<steps>_steps.pkl, or run_dir/vecnormalize.pkl beside model.zip; None if
+    absent. A checkpoint is paired with its own statistics: run_dir/vecnormalize.pkl may be older or newer."""
+    model_file = Path(model_file)
+    parts = model_file.stem.split("_")
+    if model_file.parent.name == "checkpoints" and len(parts) == 3 and parts[0] == "model" and parts[2] == "steps":
+        paired = model_file.parent / f"model_vecnormalize_{parts[1]}_steps.pkl"
+    else:
+        paired = Path(run_dir) / "vecnormalize.pkl"
+    return paired if paired.is_file() else None
+
+
 def train(config: TuningConfig, agent: AgentConfig, run_dir: Path, progress_bar: bool = False,
           resume_from: Path | None = None, total_timesteps: int | None = None, anchor=None):
     """Train an agent; checkpoints, TensorBoard logs and Monitor CSVs go under run_dir.
@@ -156,8 +169,8 @@ def train(config: TuningConfig, agent: AgentConfig, run_dir: Path, progress_bar:
     torch.set_num_threads(agent.torch_threads)
     env = make_vec_env(config, agent, run_dir / "monitor", anchor, append=resume_from is not None)
     if agent.normalize:
-        stats = run_dir / "vecnormalize.pkl"
-        env = VecNormalize.load(str(stats), env) if resume_from and stats.exists() else VecNormalize(env, gamma=agent.gamma)
+        stats = normalize_stats(run_dir, resume_from) if resume_from is not None else None
+        env = VecNormalize.load(str(stats), env) if stats is not None else VecNormalize(env, gamma=agent.gamma)
     if resume_from is not None:
         try:
             model = load_model(resume_from, agent.algorithm, env)

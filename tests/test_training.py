@@ -61,3 +61,20 @@ def test_subprocess_vector_env_and_vecnormalize(tmp_path):
     model = train(CONFIG, agent, tmp_path / "run")
     assert model.num_timesteps == 1024
     assert (tmp_path / "run" / "vecnormalize.pkl").is_file()
+
+
+def test_resume_with_vecnormalize_takes_the_checkpoints_own_statistics(tmp_path):
+    """Resuming from checkpoint k loads the running mean saved at step k, not the final vecnormalize.pkl."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    agent = AgentConfig(total_timesteps=1024, n_envs=1, n_steps=256, normalize=True, seed=2, checkpoint_every=512)
+    run = tmp_path / "run"
+    train(CONFIG, agent, run)
+    at_512 = run / "checkpoints" / "model_vecnormalize_512_steps.pkl"
+    saved = VecNormalize.load(str(at_512), make_vec_env(CONFIG, agent)).obs_rms.mean
+    final = VecNormalize.load(str(run / "vecnormalize.pkl"), make_vec_env(CONFIG, agent)).obs_rms.mean
+    assert not np.allclose(saved, final)  # the two statistics differ, so the check below can fail
+    model = train(CONFIG, agent, run, resume_from=run / "checkpoints" / "model_512_steps.zip", total_timesteps=256)
+    # 256 more steps counted on top of the checkpoint's 512 (+ a few reset observations), not on the final 1024
+    resumed = model.get_vec_normalize_env().obs_rms
+    assert resumed.count == pytest.approx(512 + 256, abs=8)
