@@ -7,7 +7,12 @@ episodes `deploy.schedule_by: auto` uses, and assessed like the deliverable (ass
 evaluation + Monte-Carlo set + margins). Prints one markdown table: ISE and total variation of u as
 ratios to the fixed PID on the run's evaluation, worst Ms, training-episode ISE, and auto's pick.
 
-    python benchmarks/bench_error_schedule.py RUN_DIR [RUN_DIR ...] [--points 9]
+--abs-error adds a table binned by |error| (the same samples, K bins of |e|), written as the
+mirrored signed-error table g(|e|) (breakpoints -m..., +m...): linear interpolation in e on each side
+equals interpolation in |e|, so it replays exactly as an |error| table would. It measures whether the
+sign of the error carries information (docs/results.md "Error-scheduled gains").
+
+    python benchmarks/bench_error_schedule.py RUN_DIR [RUN_DIR ...] [--points 9] [--abs-error]
 """
 from __future__ import annotations
 
@@ -22,7 +27,17 @@ from pathlib import Path
 from prlpid_fmi import rundir as rd
 from prlpid_fmi.assess import assess_fixed, assess_schedule, max_sensitivity, robust_schedule
 from prlpid_fmi.run import _anchor, _load_run, _policy, gains_from_dict
-from prlpid_fmi.transients import extract, training_ise
+from prlpid_fmi.schedule import schedule_from_rows
+from prlpid_fmi.transients import TRAJECTORY_EPISODES, bin_rows, extract, trajectory_samples, training_ise
+
+
+def abs_error_table(policy, config, points: int, seed: int, anchor):
+    """The |error|-binned table as a mirrored error[<loop 0>] table (see the module docstring)."""
+    variable = f"error[{config.loops[0].output}]"
+    values, gains, unit, meta = trajectory_samples(policy, config, variable, TRAJECTORY_EPISODES, seed, anchor)
+    rows = bin_rows(abs(values), gains, points)
+    mirrored = [(-v, g) for v, g in rows if v > 0] + rows
+    return schedule_from_rows(config, variable, unit, mirrored, meta)
 
 
 def _row(run: Path, kind: str, cand, fixed, train_ise: float | None, wall: float) -> str:
@@ -38,6 +53,7 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("runs", nargs="+", type=Path)
     p.add_argument("--points", type=int, default=None, help="rows per table (default: the scenario's schedule_points)")
+    p.add_argument("--abs-error", action="store_true", help="also a table binned by |error| (mirrored)")
     args = p.parse_args(argv)
     print("| run | controller | ISE | ISE ÷ fixed | TV ÷ fixed | worst Ms | score (eval + MC mean ISE) | "
           "training-episode ISE | wall s |")
@@ -53,18 +69,20 @@ def main(argv=None) -> int:
         fixed = assess_fixed(scenario, gains_from_dict(fixed_json["gains"]))
         print(_row(run, "fixed PID", fixed, fixed, None, time.time() - t0))
         scores = {}
-        for kind in ("setpoint", "error"):
+        for kind in ("setpoint", "error") + (("|error|",) if args.abs_error else ()):
             t0 = time.time()
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                schedule = extract(policy, scenario.tuning, kind, points, seed, anchor)
+                schedule = abs_error_table(policy, scenario.tuning, points, seed, anchor) if kind == "|error|" \
+                    else extract(policy, scenario.tuning, kind, points, seed, anchor)
                 schedule, _ = robust_schedule(schedule, scenario.tuning, limit)
                 scores[kind] = training_ise(schedule, scenario.tuning, seed)
                 cand = assess_schedule(scenario, schedule)
             print(_row(run, f"{kind} ({len(schedule.breakpoints)} rows)", cand, fixed, scores[kind],
                        time.time() - t0))
             sys.stdout.flush()
-        print(f"| {run.name} | auto picks: {min(scores, key=scores.get)} | | | | | | | |")
+        auto = {k: v for k, v in scores.items() if k != "|error|"}
+        print(f"| {run.name} | auto picks: {min(auto, key=auto.get)} | | | | | | | |")
     return 0
 
 

@@ -78,11 +78,21 @@ def trajectory_schedule(policy: Policy, config: TuningConfig, schedule_by: str =
     seed + EXTRACTION_SEED_OFFSET + i; an episode that diverges contributes its samples up to the
     failure and is named in a warning. anchor: the fixed-PID gains of an anchored gain map.
     """
-    from .env import PidTuningEnv
-
     if points < 1 or episodes < 1:
         raise PrlPidError(f"points and episodes must be >= 1 (got {points}, {episodes})")
     variable = _variable_name(schedule_by, [l.output for l in config.loops])
+    values, gains, unit, meta = trajectory_samples(policy, config, variable, episodes, seed, anchor)
+    rows = bin_rows(values, gains, points)
+    with warnings.catch_warnings():  # equal medians (e.g. a variable that rarely moves) merge silently
+        warnings.simplefilter("ignore")
+        return schedule_from_rows(config, variable, unit, rows, meta)
+
+
+def trajectory_samples(policy: Policy, config: TuningConfig, variable: str, episodes: int, seed: int,
+                       anchor: Gains | None = None) -> tuple[np.ndarray, dict, str, dict]:
+    """The rollouts of trajectory_schedule: (values (n,), {"Kp": (n, n_loops), ...}, unit, table_meta)."""
+    from .env import PidTuningEnv
+
     values, applied, failed = [], [], []
     env = PidTuningEnv(config, info=False, anchor=anchor)
     try:
@@ -103,13 +113,10 @@ def trajectory_schedule(policy: Policy, config: TuningConfig, schedule_by: str =
         env.close()
     if failed:
         warnings.warn(f"{variable}: the closed loop with the policy diverged in training episode(s) with seed "
-                      f"{', '.join(map(str, failed))}; their samples up to the failure are binned", stacklevel=2)
+                      f"{', '.join(map(str, failed))}; their samples up to the failure are binned", stacklevel=3)
     gains = {name: np.array([g[i] for g in applied], float) for i, name in enumerate(GAIN_NAMES)
              if applied and applied[0][i] is not None}
-    rows = bin_rows(np.array(values, float), gains, points)
-    with warnings.catch_warnings():  # equal medians (e.g. a variable that rarely moves) merge silently
-        warnings.simplefilter("ignore")
-        return schedule_from_rows(config, variable, unit, rows, meta)
+    return np.array(values, float), gains, unit, meta
 
 
 def extract(policy: Policy, config: TuningConfig, schedule_by: str, points: int, seed: int,
