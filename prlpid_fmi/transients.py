@@ -159,7 +159,7 @@ def deliverable_schedule(policy: Policy, scenario, seed: int, anchor: Gains | No
     config, limit = scenario.tuning, max_sensitivity(scenario)
     by = scenario.deploy.schedule_by
     kinds = AUTO_CANDIDATES if by == "auto" else (by,)
-    built, notes, errors, info = [], [], [], {}
+    built, errors = [], []
     for kind in kinds:
         try:
             schedule = extract(policy, config, kind, scenario.deploy.schedule_points, seed, anchor)
@@ -174,17 +174,15 @@ def deliverable_schedule(policy: Policy, scenario, seed: int, anchor: Gains | No
         if detuned:
             note += (f"Rows of the gain schedule ({schedule.variable}) detuned (Kp / lambda, Ti * lambda) to meet "
                      f"Ms <= {limit:g}: " + "; ".join(detuned) + ".\n")
-            info.setdefault("schedule_detuned_rows", []).extend(detuned)
-        built.append((kind, schedule, note))
+        built.append((kind, schedule, note, {"schedule_detuned_rows": detuned} if detuned else {}))
     if not built:
         raise PrlPidError("; ".join(errors))
     if len(built) == 1:
-        kind, schedule, note = built[0]
+        kind, schedule, note, info = built[0]
         return schedule, note, {**info, "schedule_by": schedule.variable}
-    scores = {kind: training_ise(s, config, seed) for kind, s, _ in built}
-    kind, schedule, note = min(built, key=lambda b: scores[b[0]])
-    info["schedule_candidates_training_ise"] = scores
-    info["schedule_by"] = schedule.variable
+    scores = {kind: training_ise(s, config, seed) for kind, s, _, _ in built}
+    kind, schedule, note, info = min(built, key=lambda b: scores[b[0]])
+    info = {**info, "schedule_candidates_training_ise": scores, "schedule_by": schedule.variable}
     words = ", ".join(f"{k} {v:.4g}" for k, v in scores.items())
     note += (f"Gain schedule over {schedule.variable} chosen (deploy.schedule_by: auto): lowest ISE over "
              f"{SELECTION_EPISODES} seeded training episodes replayed as plain PIDs ({words}).\n")
