@@ -8,7 +8,7 @@ the bundled plants' C format), built into benchmarks/third_party/fmus/ with the 
 their scenarios are benchmarks/third_party/*.yaml. Each scenario is tuned as `prlpid-fmi tune` does it
 (run.tune: fixed-PID search, training around it, schedule, deliverable), one after the other, each
 into its own run directory under --out (default: a temporary folder; a run directory that already
-holds metrics.json is read, not run again).
+holds metrics.json is read, not run again; wall times are the tune's, from its run.json).
 
 Per plant it prints one table, for the fixed PID, the replayed gain schedule and the deployed
 controller, measured on the scenario's evaluation, with PASS/FAIL per target of issue 8:
@@ -23,6 +23,7 @@ Nothing here is asserted: it is a measurement.
 from __future__ import annotations
 
 import argparse
+import datetime as dt
 import json
 import math
 import sys
@@ -108,6 +109,13 @@ def plant_table(name: str, m: dict, wall_s: float) -> tuple[list[list[str]], boo
     return rows, passed
 
 
+def tune_wall_s(run_dir: Path) -> float:
+    """Wall time of the run's tune [s] from run.json (started, finished; to the second)."""
+    info = json.loads((run_dir / "run.json").read_text())
+    start, end = (dt.datetime.fromisoformat(info[k]) for k in ("started", "finished"))
+    return (end - start).total_seconds()
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--scenarios", nargs="+", default=None,
@@ -130,10 +138,9 @@ def main(argv=None) -> int:
     t_all = time.time()
     for name in names:
         run_dir = out / f"{name}_seed{a.seed}"
-        t0 = time.time()
         if not (run_dir / "metrics.json").is_file():
             tune(SCENARIOS / f"{name}.yaml", timesteps=a.timesteps, seed=a.seed, out=run_dir, progress_bar=False)
-        wall = time.time() - t0
+        wall = tune_wall_s(run_dir)
         m = json.loads((run_dir / "metrics.json").read_text())
         rows, passed = plant_table(name, m, wall)
         print(f"\n#### {name} (seed {a.seed})\n")
