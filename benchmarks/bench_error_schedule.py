@@ -69,11 +69,11 @@ def main(argv=None) -> int:
         fixed = assess_fixed(scenario, gains_from_dict(fixed_json["gains"]))
         print(_row(run, "fixed PID", fixed, fixed, None, time.time() - t0))
         scores = {}
-        for kind in ("setpoint", "error") + (("|error|",) if args.abs_error else ()):
+        for kind in ("setpoint", "error") + (("abs(error)",) if args.abs_error else ()):
             t0 = time.time()
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                schedule = abs_error_table(policy, scenario.tuning, points, seed, anchor) if kind == "|error|" \
+                schedule = abs_error_table(policy, scenario.tuning, points, seed, anchor) if kind == "abs(error)" \
                     else extract(policy, scenario.tuning, kind, points, seed, anchor)
                 schedule, _ = robust_schedule(schedule, scenario.tuning, limit)
                 scores[kind] = training_ise(schedule, scenario.tuning, seed)
@@ -81,7 +81,7 @@ def main(argv=None) -> int:
             print(_row(run, f"{kind} ({len(schedule.breakpoints)} rows)", cand, fixed, scores[kind],
                        time.time() - t0))
             sys.stdout.flush()
-        auto = {k: v for k, v in scores.items() if k != "|error|"}
+        auto = {k: v for k, v in scores.items() if k != "abs(error)"}
         print(f"| {run.name} | auto picks: {min(auto, key=auto.get)} | | | | | | | |")
     return 0
 
