@@ -192,11 +192,13 @@ def measure(traj: Trajectory, config: TuningConfig, intervals=None) -> dict:
             windows.append((a, min(b, n)))
             if b > n:
                 cut[(a, min(b, n))] = b
+    # the controller's command per row (the last row repeats, like control_signal's), for Chatter
+    command = np.concatenate([traj.pid_output, traj.pid_output[-1:]])[:n] if len(traj.pid_output) else None
     metrics = compute_metrics(traj.time_s[:n], traj.setpoint[:n], traj.measurement[:n],
                               traj.control_signal[:n], config.sample_time_s, intervals=windows or None,
                               loop_names=[l.output for l in config.loops],
                               events=sorted({d.start_step for d in config.disturbances}),
-                              u_range=[l.u_max - l.u_min for l in config.loops])
+                              u_range=[l.u_max - l.u_min for l in config.loops], command=command)
     for iv in metrics["intervals"]:
         if (iv["start_step"], iv["end_step"]) in cut:
             iv["requested_end_step"] = cut[(iv["start_step"], iv["end_step"])]

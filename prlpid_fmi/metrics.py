@@ -16,7 +16,9 @@ and TotalVariation of intervals that tile [0, n) add up to the overall values (I
 clock restarts at every window start).
 
 Chatter [dimensionless, 0..1] (``chatter_fraction``): the fraction of the samples k = max(a, 2) .. b-1
-of the window at which the control signal reverses direction, i.e. du_k = u_k - u_{k-1} and du_{k-1}
+of the window at which the controller's command u (``command``, default the control signal; the
+evaluation passes the PID output before actuator noise, which would otherwise count as chatter the
+controller did not make) reverses direction, i.e. du_k = u_k - u_{k-1} and du_{k-1}
 have opposite signs and both |du| exceed ``CHATTER_THRESHOLD`` (1 %) of the loop's actuator range
 u_max - u_min (``u_range``; when it is not finite or not given: of max |u| over the whole run). A
 two-sample limit cycle (u swinging every sample) gives 1 (at the window's k), a smooth or monotone
@@ -255,7 +257,7 @@ def _aggregate(segments: list[dict]) -> dict:
 def compute_metrics(time_s, setpoint, measurement, control_signal, sample_time_s: float,
                     intervals: Sequence[tuple[int, int]] | None = None,
                     loop_names: Sequence[str] | None = None, events: Sequence[int] | None = None, *,
-                    u_range: Sequence[float] | float | None = None, settling_threshold: float = 0.02, rise_time_limits: tuple[float, float] = (0.1, 0.9),
+                    u_range: Sequence[float] | float | None = None, command=None, settling_threshold: float = 0.02, rise_time_limits: tuple[float, float] = (0.1, 0.9),
                     steady_state_fraction: float = 0.1) -> dict:
     """Closed-loop metrics of one run (see the module docstring for definitions and the result layout).
 
@@ -266,6 +268,8 @@ def compute_metrics(time_s, setpoint, measurement, control_signal, sample_time_s
     events: sample indices where disturbances begin (they start regulation segments).
     u_range: actuator range u_max - u_min per loop [input units] (scalar or (n_loops,)) for Chatter;
     None or infinite: 1 % of max |u| over the run is the threshold instead.
+    command: the controller's command (n,) or (n, n_loops) [input units] that Chatter is measured on
+    (default: control_signal).
     settling_threshold, rise_time_limits, steady_state_fraction: 2 % band, 10 %/90 % levels, last
     10 % of a segment (fractions of the step size / segment length).
     Returns a dict of plain Python floats/ints/strings/lists, serialisable with json.dumps.
@@ -314,7 +318,10 @@ def compute_metrics(time_s, setpoint, measurement, control_signal, sample_time_s
         ranges = [float(v) for v in np.broadcast_to(np.asarray(u_range, dtype=float), (n_loops,))]
         if any(math.isnan(v) or v <= 0 for v in ranges):
             raise ValueError(f"u_range must be > 0 (or inf) per loop, got {ranges}")
-    chatter_thresholds = [_chatter_threshold(u[:, i], ranges[i]) for i in range(n_loops)]
+    cmd = u if command is None else _as_2d(command, n, "command")
+    if cmd.shape[1] != n_loops:
+        raise ValueError(f"command must have {n_loops} loop(s), got {cmd.shape[1]}")
+    chatter_thresholds = [_chatter_threshold(cmd[:, i], ranges[i]) for i in range(n_loops)]
 
     e = r - y
     segments = []
@@ -344,7 +351,7 @@ def compute_metrics(time_s, setpoint, measurement, control_signal, sample_time_s
             u_prev = float(u[a - 1, i]) if a > 0 else None
             values = _integral_metrics(t[a:b], e[a:b, i], u[a:b, i], u_prev, ts)
             first = max(a, 2)  # reversals at k in [first, b) need u[k-2 .. k]
-            values["Chatter"] = _reversal_fraction(u[first - 2:b, i], chatter_thresholds[i]) if b > first else math.nan
+            values["Chatter"] = _reversal_fraction(cmd[first - 2:b, i], chatter_thresholds[i]) if b > first else math.nan
             values.update(_aggregate([s for s in per_loop_segments[i] if a <= s["start_step"] < b]))
             for metric in METRIC_NAMES:
                 out[metric_key(metric, name, n_loops)] = float(values[metric])

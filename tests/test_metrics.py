@@ -287,3 +287,15 @@ def test_chatter_per_window_and_per_loop():
     assert res["overall"]["Chatter[1]"] == pytest.approx(1.0)
     with pytest.raises(ValueError, match="u_range"):
         compute_metrics(t, np.zeros(10), np.zeros(10), u0, 0.1, u_range=0.0)
+
+
+def test_chatter_is_measured_on_the_command():
+    # the plant received the command plus an alternating actuator noise of +-1 (1 % of the range 10 is 0.1):
+    # the applied signal reverses at every k = 2..7, the controller's ramp never does
+    command = np.linspace(0.0, 1.4, 8)
+    applied = command + np.array([1.0, -1.0] * 4)
+    t = np.arange(8) * 0.1
+    res = compute_metrics(t, np.zeros(8), np.zeros(8), applied, 0.1, u_range=10.0, command=command)
+    assert res["overall"]["Chatter"] == 0.0
+    assert res["overall"]["TotalVariation"] == pytest.approx(np.sum(np.abs(np.diff(applied))))
+    assert compute_metrics(t, np.zeros(8), np.zeros(8), applied, 0.1, u_range=10.0)["overall"]["Chatter"] == 1.0
