@@ -11,12 +11,15 @@ seed) is an ordinary `tune` run directory under --out (default: a temporary fold
 scenario with only `reward.control_variation_weight` changed; a run whose metrics.json exists is not run
 again, so an interrupted benchmark resumes. Prints one markdown table: per plant and weight, the fixed
 PID's and the deployed controller's ISE, TotalVariation, Chatter (prlpid_fmi.metrics) and worst Ms on the
-scenario's evaluation, and ISE and TotalVariation as ratios to the same plant and seed at weight 0.
+scenario's evaluation, and ISE and TotalVariation as ratios to the same plant and seed at weight 0. The
+metrics are measured here, with the current metrics code, by replaying the run's fixed_pid.csv and
+schedule.csv (what `tune` deployed) on its evaluation; Ms and the choice come from its metrics.json.
 Nothing here is asserted: it is a measurement.
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import sys
@@ -30,6 +33,8 @@ from prlpid_fmi.deliver import overall_metric
 from prlpid_fmi.fmu import build_fmu
 from prlpid_fmi.presets import scenario_path
 from prlpid_fmi.run import tune
+from prlpid_fmi.scenario import load_scenario
+from prlpid_fmi.schedule import read_schedule_csv, replay_schedule
 
 HERE = Path(__file__).parent
 TEST_PLANTS = HERE.parent / "tests" / "plants"
@@ -55,9 +60,9 @@ def scenario_with_weight(plant: str, weight: float, folder: Path) -> Path:
     return path
 
 
-def run(plant: str, weight: float, seed: int, out: Path, timesteps: int | None) -> tuple[dict, float]:
-    """metrics.json of the tune run of (plant, weight, seed), running it if needed; and its wall time [s]
-    (NaN when it was run before)."""
+def run(plant: str, weight: float, seed: int, out: Path, timesteps: int | None) -> tuple[Path, dict, float]:
+    """Run directory and metrics.json of the tune run of (plant, weight, seed), running it if needed; and
+    its wall time [s] (NaN when it was run before)."""
     run_dir = out / f"{plant}_w{weight:g}_seed{seed}"
     wall = math.nan
     if not (run_dir / "metrics.json").is_file():
@@ -65,17 +70,26 @@ def run(plant: str, weight: float, seed: int, out: Path, timesteps: int | None) 
         t0 = time.time()
         tune(path, timesteps=timesteps, seed=seed, out=run_dir, progress_bar=False)
         wall = time.time() - t0
-    return json.loads((run_dir / "metrics.json").read_text()), wall
+    return run_dir, json.loads((run_dir / "metrics.json").read_text()), wall
 
 
-def controllers(m: dict) -> tuple[tuple[dict, float | None], tuple[dict, float | None], str]:
+def replayed(run_dir: Path, csv_name: str) -> dict:
+    """Overall evaluation metrics of a schedule CSV of the run (fixed_pid.csv, schedule.csv) replayed as a
+    plain PID on the run's evaluation, as `tune` assesses it (without parameter randomisation)."""
+    scenario = load_scenario(run_dir / "scenario.yaml")
+    config = scenario.evaluation_config()
+    config = dataclasses.replace(config, randomize={}) if config.randomize else config
+    metrics, _ = replay_schedule(read_schedule_csv(run_dir / csv_name), config, seed=scenario.evaluation.seed)
+    return metrics["overall"]
+
+
+def controllers(run_dir: Path, m: dict) -> tuple[tuple[dict, float | None], tuple[dict, float | None], str]:
     """((overall metrics, worst Ms) of the fixed PID, of the deployed controller, which one was deployed).
-    When nothing was deployable ("none"), the second is the replayed gain schedule's (or the fixed PID's)."""
-    fixed = m["fixed_pid_assessment"]
-    sched = m.get("schedule_replay")
-    deployed = sched if m["deployed"] == "gain schedule" or (m["deployed"] == "none" and sched) else fixed
-    return ((fixed["metrics"]["overall"], fixed["worst_Ms"]), (deployed["metrics"]["overall"], deployed["worst_Ms"]),
-            m["deployed"])
+    When nothing was deployable ("none"), the second is the fixed PID's."""
+    fixed = (replayed(run_dir, "fixed_pid.csv"), m["fixed_pid_assessment"]["worst_Ms"])
+    if m["deployed"] != "gain schedule":
+        return fixed, fixed, m["deployed"]
+    return fixed, (replayed(run_dir, "schedule.csv"), m["schedule_replay"]["worst_Ms"]), m["deployed"]
 
 
 def _cells(overall: dict, ms, base: dict) -> list[str]:
@@ -107,12 +121,14 @@ def main(argv=None) -> int:
             results = {}
             for w in weights:
                 results[w] = run(plant, w, seed, out, a.timesteps)
-                print(f"done: {plant} w={w:g} seed={seed} wall {results[w][1]:.0f} s", file=sys.stderr, flush=True)
-            base_fixed, base_deployed, _ = controllers(results[0.0][0])
+                print(f"done: {plant} w={w:g} seed={seed} wall {results[w][2]:.0f} s", file=sys.stderr, flush=True)
+            measured = {w: controllers(run_dir, m) for w, (run_dir, m, _) in results.items()}
+            base_fixed, base_deployed, _ = measured[0.0]
             for w in weights:
-                (f, f_ms), (d, d_ms), which = controllers(results[w][0])
+                (f, f_ms), (d, d_ms), which = measured[w]
                 rows.append([plant, str(seed), f"{w:g}", *_cells(f, f_ms, base_fixed[0]),
-                             *_cells(d, d_ms, base_deployed[0]), which, f"{results[w][1]:.0f}"])
+                             *_cells(d, d_ms, base_deployed[0]), which,
+                             "–" if math.isnan(results[w][2]) else f"{results[w][2]:.0f}"])
     print("| " + " | ".join(header) + " |")
     print("|" + "---|" * len(header))
     for row in rows:
