@@ -14,7 +14,9 @@ does not buy ISE with a chattering actuator. A diverging episode costs DIVERGED_
 Robustness: with `max_sensitivity` given, the result must have a peak sensitivity Ms (measured on the
 FMU at the middle of the setpoint range, prlpid_fmi.margins) at most that limit. The cheapest few
 members of the final DE population are tried in order of cost; if none qualifies, the best one is
-detuned (Kp / lambda, Ti * lambda: a slower loop) by the smallest lambda that meets the limit.
+detuned by the smallest lambda that meets the limit, in two ways: Kp / lambda with Ti * lambda (a uniformly
+slower loop: the integral gain Kp/Ti falls by lambda^2, so the last part of a step can creep in) and Kp /
+lambda with Ti kept (the integral time stays); the one with the lower J is kept.
 """
 from __future__ import annotations
 
@@ -95,17 +97,19 @@ def _meets(config: TuningConfig, gains: tuple, point: list[float], limit: float)
     return margins_of(config, gains, point).Ms <= limit
 
 
-def detune(config: TuningConfig, gains: tuple, point: list[float], limit: float) -> tuple | None:
-    """`gains` detuned (Kp / lambda, Ti * lambda, lambda = DETUNE_STEP**k, clipped into the gain ranges)
-    by the smallest k that gives Ms <= limit at `point`: a scan of k in DETUNE_SCAN, then bisection on k
-    between the last failing and the first passing value. None when no k in the scan passes (an unstable
-    plant fails at both ends, so the scan starts small)."""
+def detune(config: TuningConfig, gains: tuple, point: list[float], limit: float,
+           keep_ti: bool = False) -> tuple | None:
+    """`gains` detuned (Kp / lambda, Ti * lambda or Ti kept with keep_ti, lambda = DETUNE_STEP**k, clipped
+    into the gain ranges) by the smallest k that gives Ms <= limit at `point`: a scan of k in DETUNE_SCAN,
+    then bisection on k between the last failing and the first passing value. None when no k in the scan
+    passes (an unstable plant fails at both ends, so the scan starts small)."""
     Kp, Ti, Td, coupling = gains
+    ti_factor = 0.0 if keep_ti else 1.0
 
     def detuned(k):
         lam = DETUNE_STEP ** k
         return ([max(x / lam, l.Kp.low) for x, l in zip(Kp, config.loops)],
-                [min(x * lam, l.Ti.high) for x, l in zip(Ti, config.loops)], list(Td), coupling)
+                [min(x * lam ** ti_factor, l.Ti.high) for x, l in zip(Ti, config.loops)], list(Td), coupling)
 
     low = 0.0  # k known to fail (the gains themselves)
     for k in DETUNE_SCAN:
@@ -122,10 +126,12 @@ def detune(config: TuningConfig, gains: tuple, point: list[float], limit: float)
     return None
 
 
-def _robust(config: TuningConfig, gain_map: ActionMap, population, energies, limit: float):
+def _robust(config: TuningConfig, gain_map: ActionMap, population, energies, limit: float,
+            core: LoopCore, seeds: list[int]):
     """(vector, gains tuple) of the cheapest of the ROBUST_CANDIDATES cheapest population members with
-    Ms <= limit; else the best member detuned (`detune`: a loop in a limit cycle has Ms inf and a
-    slower loop cures it); else the best member as it is (the deliverable then reports its Ms)."""
+    Ms <= limit; else the best member detuned both ways (`detune`, with and without keep_ti; a loop in a
+    limit cycle has Ms inf and a slower loop cures it), the one with the lower J on `seeds`; else the best
+    member as it is (the deliverable then reports its Ms)."""
     point = operating_point(config)
     order = np.argsort(energies)
     for i in order[:ROBUST_CANDIDATES]:
@@ -134,7 +140,8 @@ def _robust(config: TuningConfig, gain_map: ActionMap, population, energies, lim
             return population[i], g
     best = population[order[0]]
     g = gain_map.values(best.tolist())
-    return best, detune(config, g, point, limit) or g
+    repairs = [r for r in (detune(config, g, point, limit), detune(config, g, point, limit, keep_ti=True)) if r]
+    return best, min(repairs, key=lambda r: _cost_of(r, core, seeds)) if repairs else g
 
 
 def tune_fixed_pid(config: TuningConfig, seed: int = 0, episodes: int = 3, maxiter: int = 20,
@@ -164,7 +171,8 @@ def tune_fixed_pid(config: TuningConfig, seed: int = 0, episodes: int = 3, maxit
         vector, gains = result.x, gain_map.values(result.x.tolist())
         cost = float(result.fun)
         if max_sensitivity is not None:
-            vector, gains = _robust(search, gain_map, result.population, result.population_energies, max_sensitivity)
+            vector, gains = _robust(search, gain_map, result.population, result.population_energies, max_sensitivity,
+                                    core, seeds)
             cost = _cost_of(gains, core, seeds)
     finally:
         core.close()

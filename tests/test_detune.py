@@ -1,0 +1,34 @@
+"""Detuning a fixed PID onto the Ms limit (baseline.detune), checked against python-control's exact loop."""
+import control
+import numpy as np
+import pytest
+
+from prlpid_fmi.baseline import DETUNE_STEP, detune, operating_point
+from prlpid_fmi.presets import preset
+from tests.test_margins import first_order_zoh, pid_by_hand, reference_margins
+
+CONFIG = preset("first_order")  # 1/(s - 1), Ts = 0.1 s
+AGGRESSIVE = ([8.0], [0.3], [0.05], None)  # a stable loop with Ms about 7.5 on 1/(s - 1)
+
+
+def exact_ms(gains):
+    """Ms of the exact discrete loop; the closed loop must be stable for Ms to mean anything."""
+    Kp, Ti, Td, _ = gains
+    loop = pid_by_hand(Kp[0], Ti[0], Td[0]) * first_order_zoh(1.0)
+    assert np.all(np.abs(control.feedback(loop, 1).poles()) < 1.0)
+    return reference_margins(loop)[0]
+
+
+@pytest.mark.parametrize("keep_ti", [False, True])
+def test_detuned_gains_meet_the_limit_by_a_small_margin(keep_ti):
+    assert exact_ms(AGGRESSIVE) > 2.5  # the starting point violates the limit, so the check can fail
+    Kp, Ti, Td, _ = detuned = detune(CONFIG, AGGRESSIVE, operating_point(CONFIG), 2.0, keep_ti=keep_ti)
+    lam = AGGRESSIVE[0][0] / Kp[0]
+    assert lam > 1.0 and Td == AGGRESSIVE[2]
+    assert Ti[0] == pytest.approx(AGGRESSIVE[1][0] * (1.0 if keep_ti else lam))
+    assert exact_ms(detuned) <= 2.0 * 1.01
+    # the smallest detuning found (bisection on k of lambda = DETUNE_STEP**k, resolution <= 1/16 of a scan
+    # interval): a clearly smaller lambda still violates the limit
+    less = lam / DETUNE_STEP ** 0.5
+    fewer = ([AGGRESSIVE[0][0] / less], [AGGRESSIVE[1][0] * (1.0 if keep_ti else less)], AGGRESSIVE[2], None)
+    assert exact_ms(fewer) > 2.0
