@@ -28,20 +28,24 @@ from prlpid_fmi.presets import PRESET_NAMES
 ENV_ID = "prlpid_fmi/PidTuning-v0"
 ALL_PRESETS = ("first_order", "second_order", "first_order_1p5", "time_varying", "two_tank", "quadrotor")
 
-# Default RewardWeights of the project, written out as literals (eq. 10-11 and its documented defaults).
+# Default RewardWeights of the project, written out as literals (eq. 10-11 and its documented defaults,
+# and the control-variation weight, docs/architecture.md "Control-variation penalty").
 ALPHA, BETA, V_CLIP, E_CLIP = 1.0, 1.0, 0.5, 1.0
 BONUS_THRESHOLD, BONUS_NUMERATOR, BONUS_OFFSET = 0.05, 0.1, 0.05
+CONTROL_VARIATION_WEIGHT = 0.3
 
 
 # -- independent re-implementations ------------------------------------------------------------
-def hand_reward(error, previous_error) -> float:
-    """Eq. 10-11 per loop on normalised errors, averaged over loops."""
+def hand_reward(error, previous_error, u, u_prev, u_span) -> float:
+    """Eq. 10-11 per loop on normalised errors, minus the control-variation term
+    w * min(|u - u_prev| / u_span, 1) (u_span = u_max - u_min), averaged over loops."""
     total = 0.0
-    for e, e_prev in zip(np.atleast_1d(error), np.atleast_1d(previous_error)):
+    for e, e_prev, uk, uk_prev, span in zip(*(np.atleast_1d(x) for x in (error, previous_error, u, u_prev, u_span))):
         V, V_prev = e * e / 2.0, e_prev * e_prev / 2.0
         r = -max(V - V_prev, 0.0) - ALPHA * min(V, V_CLIP) - BETA * min(abs(e), E_CLIP)
         if abs(e) < BONUS_THRESHOLD:
             r += BONUS_NUMERATOR / (abs(e) + BONUS_OFFSET)
+        r -= CONTROL_VARIATION_WEIGHT * min(abs(uk - uk_prev) / span, 1.0)
         total += r
     return total / len(np.atleast_1d(error))
 
@@ -238,7 +242,10 @@ def test_forecast_reward_equals_hand_replay(name, horizon):
     actions = random_actions(env, 60, seed=7)
     _, info = env.reset(seed=5)
     y = float(info["measurement"][0])
-    n_replayed, n_bonus, n_saturated = 0, 0, 0
+    u_span = loop.u_max - loop.u_min  # control_scale is not set in these scenarios
+    # the PID output of the sample before: at the start, the plant's input start value, clipped
+    u_before = min(max(float(c.plant_parameters.get(loop.input, 0.0)), loop.u_min), loop.u_max)
+    n_replayed, n_bonus, n_saturated, n_moved = 0, 0, 0, 0
     for k, action in enumerate(actions):
         blob, pid_state = env.plant.get_state(), env.pid.get_state()
         r = schedule[0][1][0] if k < schedule[1][0] else schedule[1][1][0]
@@ -259,24 +266,29 @@ def test_forecast_reward_equals_hand_replay(name, horizon):
         pid = HandPID(dt, loop.u_min, loop.u_max, integral,
                       float(pid_state.last_error[0]) if pid_state.initialized else e0)
         y_hat, prev_norm_error, rewards = y, e0 / scale, []
+        u_prev, u_first = u_before, None
         for _ in range(horizon):
             u = pid.step(r - y_hat, Kp, Ti, Td)
+            u_first = u if u_first is None else u_first  # what the real plant gets this sample
             n_saturated += u in (loop.u_min, loop.u_max)
             y_hat = float(third.step([u])[0])
             norm_error = (r - y_hat) / scale
             if not abs(norm_error) <= bound:
                 rewards.append(c.divergence_penalty)
                 break
-            rewards.append(hand_reward(norm_error, prev_norm_error))
+            rewards.append(hand_reward(norm_error, prev_norm_error, u, u_prev, u_span))
             n_bonus += abs(norm_error) < BONUS_THRESHOLD
-            prev_norm_error = norm_error
+            n_moved += 0.0 < abs(u - u_prev) < u_span
+            prev_norm_error, u_prev = norm_error, u
         expected = sum(rewards) / len(rewards)
         assert info["forecast_reward"] == pytest.approx(expected, abs=1e-12, rel=0), k
         if not terminated:
             assert reward == info["forecast_reward"]
             # the one-step reward, also by hand, on the real plant's new measurement
             y_new = float(info["measurement"][0])
-            assert info["step_reward"] == pytest.approx(hand_reward((r - y_new) / scale, e0 / scale), abs=1e-12)
+            assert info["step_reward"] == pytest.approx(
+                hand_reward((r - y_new) / scale, e0 / scale, u_first, u_before, u_span), abs=1e-12)
+        u_before = u_first
         n_replayed += 1
         if terminated:
             break
@@ -284,6 +296,7 @@ def test_forecast_reward_equals_hand_replay(name, horizon):
     assert n_replayed >= 40
     assert n_bonus > 0  # the bonus branch of eq. 11 was exercised
     assert n_saturated > 0  # ... and so were the saturation and the clamping rule
+    assert n_moved > 0  # ... and the unclipped control-variation term
     third.close()
     env.close()
 

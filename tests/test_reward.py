@@ -12,7 +12,7 @@ W = RewardWeights()
 
 
 def test_defaults():
-    assert dataclasses.astuple(W) == (1.0, 1.0, 0.5, 1.0, 0.05, 0.1, 0.05, 0.0)  # last: control variation off
+    assert dataclasses.astuple(W) == (1.0, 1.0, 0.5, 1.0, 0.05, 0.1, 0.05, 0.3)  # last: control variation
     with pytest.raises(dataclasses.FrozenInstanceError):
         W.alpha = 2.0
 
@@ -128,7 +128,13 @@ def test_control_variation_per_loop_scale_and_mean():
 
 def test_control_variation_is_zero_without_u_or_weight():
     assert hierarchical_reward(0.5, 0.3, CV) == hierarchical_reward(0.5, 0.3, W)
-    assert hierarchical_reward(0.5, 0.3, W, 5.0, -5.0, 1.0) == hierarchical_reward(0.5, 0.3, W)
+    off = RewardWeights(control_variation_weight=0.0)  # the paper's eq. 10
+    assert hierarchical_reward(0.5, 0.3, off, 5.0, -5.0, 1.0) == hierarchical_reward(0.5, 0.3, W)
+
+
+def test_control_variation_on_by_default():
+    # steady |e| = 0.2: -0.02 - 0.2; |du| / scale = 2 / 10 -> -0.3 * 0.2 with the default weight
+    assert hierarchical_reward(0.2, 0.2, W, 3.0, 1.0, 10.0) == pytest.approx(-0.22 - 0.06, abs=1e-12)
     assert math.isnan(hierarchical_reward(0.5, 0.3, CV, float("nan"), 0.0, 1.0))  # min(NaN, 1) is NaN
 
 

@@ -48,7 +48,11 @@ class RewardWeights:
     bonus_threshold, bonus_numerator, bonus_offset: eq. 11's 0.05, 0.1 and 0.05; the bonus is
     between 1.0 (|e| just under 0.05) and 2.0 (|e| = 0) per step.
     control_variation_weight: weight w of the control-variation term -w * min(|u_k - u_{k-1}| / u_scale, 1)
-    per loop (at most -w per step); 0 switches it off. It also weights effort in the fixed-PID search.
+    per loop (at most -w per step, u_scale = the loop's control span); it also weights the moves of u in
+    the fixed-PID search. 0.3, measured by benchmarks/bench_control_variation.py: the smallest weight of
+    the grid at which the tuned fixed PID stops chattering on the noisy plants (a 0.5-0.6 fraction of
+    reversing samples down to 0.10 or less) at most 5 % ISE cost (docs/architecture.md, "Control-variation
+    penalty"). 0 gives the paper's eq. 10.
     """
 
     alpha: float = 1.0
@@ -58,7 +62,7 @@ class RewardWeights:
     bonus_threshold: float = 0.05
     bonus_numerator: float = 0.1
     bonus_offset: float = 0.05
-    control_variation_weight: float = 0.0
+    control_variation_weight: float = 0.3
 
     def __post_init__(self):
         for name in ("alpha", "beta", "bonus_threshold", "bonus_numerator", "control_variation_weight"):
