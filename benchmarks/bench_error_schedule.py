@@ -6,6 +6,8 @@ candidate tables are re-extracted from the saved policy exactly as `tune` builds
 episodes `deploy.schedule_by: auto` uses, and assessed like the deliverable (assess.assess_schedule:
 evaluation + Monte-Carlo set + margins). Prints one markdown table: ISE and total variation of u as
 ratios to the fixed PID on the run's evaluation, worst Ms, training-episode ISE, and auto's pick.
+For error tables also their gains at e = 0 held as a constant PID (what the table does at rest): the
+difference to the table is what its variation with the error buys.
 
 --abs-error adds a table binned by |error| (the same samples, K bins of |e|), written as the
 mirrored signed-error table g(|e|) (breakpoints -m..., +m...): linear interpolation in e on each side
@@ -25,6 +27,7 @@ import warnings
 from pathlib import Path
 
 from prlpid_fmi import rundir as rd
+from prlpid_fmi.actions import gains_from_values
 from prlpid_fmi.assess import assess_fixed, assess_schedule, max_sensitivity, robust_schedule
 from prlpid_fmi.run import _anchor, _load_run, _policy, gains_from_dict
 from prlpid_fmi.schedule import schedule_from_rows
@@ -80,6 +83,10 @@ def main(argv=None) -> int:
                 cand = assess_schedule(scenario, schedule)
             print(_row(run, f"{kind} ({len(schedule.breakpoints)} rows)", cand, fixed, scores[kind],
                        time.time() - t0))
+            if kind != "setpoint":  # does the table's variation matter, or only its steady-state gains?
+                t0 = time.time()
+                held = assess_fixed(scenario, gains_from_values(*[g.tolist() for g in schedule.gains_at(0.0)], None))
+                print(_row(run, f"{kind}: its e = 0 gains held constant", held, fixed, None, time.time() - t0))
             sys.stdout.flush()
         auto = {k: v for k, v in scores.items() if k != "abs(error)"}
         print(f"| {run.name} | auto picks: {min(auto, key=auto.get)} | | | | | | | |")
