@@ -10,8 +10,8 @@ benchmarks/scenarios/inertia.yaml: the motor inertia with a noisy speed measurem
 seed) is an ordinary `tune` run directory under --out (default: a temporary folder) of a copy of the
 scenario with only `reward.control_variation_weight` changed; a run whose metrics.json exists is not run
 again, so an interrupted benchmark resumes. Prints one markdown table: per plant and weight, the fixed
-PID's and the deployed controller's ISE, TotalVariation, Chatter (prlpid_fmi.metrics) and worst Ms on the
-scenario's evaluation, and ISE and TotalVariation as ratios to the same plant and seed at weight 0. The
+PID's and the deployed controller's ISE, TotalVariation, Chatter (prlpid_fmi.metrics; also counting only
+reversals by more than 5 % of the actuator range) and worst Ms on the scenario's evaluation, and ISE and TotalVariation as ratios to the same plant and seed at weight 0. The
 metrics are measured here, with the current metrics code, by replaying the run's fixed_pid.csv and
 schedule.csv (what `tune` deployed) on its evaluation; Ms and the choice come from its metrics.json.
 Nothing here is asserted: it is a measurement.
@@ -31,6 +31,7 @@ import yaml
 
 from prlpid_fmi.deliver import overall_metric
 from prlpid_fmi.fmu import build_fmu
+from prlpid_fmi.metrics import chatter_fraction
 from prlpid_fmi.presets import scenario_path
 from prlpid_fmi.run import tune
 from prlpid_fmi.scenario import load_scenario
@@ -43,7 +44,7 @@ PLANTS = {"first_order": (scenario_path("first_order"), None), "two_tank": (scen
           "room_heating": (HERE / "scenarios" / "room_heating.yaml", "RoomHeating"),
           "inertia": (HERE / "scenarios" / "inertia.yaml", "Inertia")}
 WEIGHTS = (0.0, 0.05, 0.2, 0.5, 1.0)
-METRICS = (("ISE", "ISE"), ("TotalVariation", "TV(u)"), ("Chatter", "chatter"))
+METRICS = (("ISE", "ISE"), ("TotalVariation", "TV(u)"), ("Chatter", "chatter"), ("Chatter5", "chatter > 5 %"))
 
 
 def scenario_with_weight(plant: str, weight: float, folder: Path) -> Path:
@@ -75,12 +76,19 @@ def run(plant: str, weight: float, seed: int, out: Path, timesteps: int | None) 
 
 def replayed(run_dir: Path, csv_name: str) -> dict:
     """Overall evaluation metrics of a schedule CSV of the run (fixed_pid.csv, schedule.csv) replayed as a
-    plain PID on the run's evaluation, as `tune` assesses it (without parameter randomisation)."""
+    plain PID on the run's evaluation, as `tune` assesses it (without parameter randomisation), plus
+    "Chatter5": Chatter counting only moves > 5 % of the actuator range (worst loop): large reversals."""
     scenario = load_scenario(run_dir / "scenario.yaml")
     config = scenario.evaluation_config()
     config = dataclasses.replace(config, randomize={}) if config.randomize else config
-    metrics, _ = replay_schedule(read_schedule_csv(run_dir / csv_name), config, seed=scenario.evaluation.seed)
-    return metrics["overall"]
+    metrics, traj = replay_schedule(read_schedule_csv(run_dir / csv_name), config, seed=scenario.evaluation.seed)
+    large = []
+    for i, loop in enumerate(config.loops):
+        u = traj.pid_output[:, i]
+        span = loop.u_max - loop.u_min
+        span = span if math.isfinite(span) else float(max(abs(u)))  # Chatter's fallback for unbounded u
+        large.append(chatter_fraction(u, 5 * span))  # its threshold is 1 % of the range given: 5 % of span
+    return {**metrics["overall"], "Chatter5": max(large)}
 
 
 def controllers(run_dir: Path, m: dict) -> tuple[tuple[dict, float | None], tuple[dict, float | None], str]:
@@ -93,7 +101,7 @@ def controllers(run_dir: Path, m: dict) -> tuple[tuple[dict, float | None], tupl
 
 
 def _cells(overall: dict, ms, base: dict) -> list[str]:
-    cells = [f"{overall_metric(overall, key):.4g}" for key, _ in METRICS]
+    cells = [f"{overall_metric(overall, key):.3g}" for key, _ in METRICS]
     cells.append("not verified" if ms is None or math.isnan(ms) else f"{ms:.3g}")
     for key in ("ISE", "TotalVariation"):
         value, ref = overall_metric(overall, key), overall_metric(base, key)
