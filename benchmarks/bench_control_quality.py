@@ -37,7 +37,7 @@ from prlpid_fmi.scenario import load_scenario
 
 LINEAR = ("first_order", "first_order_1p5", "time_varying")
 COLUMNS = (("ISE", "ISE"), ("IAE", "IAE"), ("Overshoot", "overshoot %"), ("SettlingTime", "settling s"),
-           ("TotalVariation", "TV(u)"))
+           ("TotalVariation", "TV(u)"), ("Chatter", "chatter"))
 
 
 def deadbeat_ise(scenario) -> float:
