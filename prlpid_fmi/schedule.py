@@ -304,18 +304,20 @@ def extract_schedule(policy: Policy, config: TuningConfig, schedule_by: str = "s
 
 
 def schedule_from_rows(config: TuningConfig, variable: str, unit: str, rows: list, meta: dict,
-                       excluded: tuple = ()) -> GainSchedule:
+                       excluded: tuple = (), resolution: float | None = None) -> GainSchedule:
     """A GainSchedule from rows [(breakpoint, {"Kp": (n_loops,), "Ti": ..., "Td": ...[, "coupling": (6,)]})].
 
-    Rows are sorted by breakpoint; rows whose breakpoints coincide (to 1e-9 of the span) are averaged
-    into one, with a warning. meta: loop_inputs, output_units, input_units (tuples).
+    Rows are sorted by breakpoint; a row whose breakpoint lies within `resolution` (default: 1e-9 of
+    the span) of the previous one is averaged with it, with a warning. meta: loop_inputs, output_units,
+    input_units (tuples).
     """
     names = [l.output for l in config.loops]
     rows = sorted(rows, key=lambda r: r[0])
     merged: list[list] = []
     span = max(abs(rows[-1][0] - rows[0][0]), abs(rows[0][0]), 1.0)
+    tolerance = 1e-9 * span if resolution is None else max(float(resolution), 1e-9 * span)
     for value, g in rows:
-        if merged and abs(value - merged[-1][0][-1]) <= 1e-9 * span:
+        if merged and abs(value - merged[-1][0][-1]) <= tolerance:
             merged[-1][0].append(value)
             merged[-1][1].append(g)
         else:

@@ -12,7 +12,9 @@ forecast and smoothing on, exactly as in training), reads the scheduling variabl
 the pairs: K bins of equal sample count (edges at the i/K quantiles of the visited values), breakpoint
 = the median value in the bin (the (i + 1/2)/K quantile), gains = the median of each gain column in
 the bin. States the policy visits during transients get rows of their own, in proportion to the time
-spent there. Any scheduling variable works; ``error[<loop>]`` is the one for transients.
+spent there. Neighbouring bins whose medians lie within RESOLUTION of the visited span of each other
+are averaged into one row (a noise-free loop at rest puts most samples at e = 0 exactly: without this,
+rows 1e-9 apart). Any scheduling variable works; ``error[<loop>]`` is the one for transients.
 
 ``deliverable_schedule`` is what `tune` calls: it builds the candidate tables of deploy.schedule_by
 (auto: settled setpoint holds and error trajectories), projects each onto the Ms limit
@@ -44,6 +46,7 @@ TRAJECTORY_EPISODES = 8  # training-distribution episodes the trajectory table i
 SELECTION_EPISODES = 8  # further episodes the candidate tables are scored on (auto)
 EXTRACTION_SEED_OFFSET = 10_000
 SELECTION_SEED_OFFSET = 20_000
+RESOLUTION = 1e-3  # bins whose medians lie closer than this fraction of the visited span become one row
 SCHEDULE_BY = get_args(ScheduleBy)  # deploy.schedule_by: auto | setpoint | measurement | error
 AUTO_CANDIDATES = ("setpoint", "error")  # what auto compares
 
@@ -83,9 +86,10 @@ def trajectory_schedule(policy: Policy, config: TuningConfig, schedule_by: str =
     variable = _variable_name(schedule_by, [l.output for l in config.loops])
     values, gains, unit, meta = trajectory_samples(policy, config, variable, episodes, seed, anchor)
     rows = bin_rows(values, gains, points)
-    with warnings.catch_warnings():  # equal medians (e.g. a variable that rarely moves) merge silently
+    resolution = RESOLUTION * float(values.max() - values.min())
+    with warnings.catch_warnings():  # bins of (nearly) equal medians merge silently
         warnings.simplefilter("ignore")
-        return schedule_from_rows(config, variable, unit, rows, meta)
+        return schedule_from_rows(config, variable, unit, rows, meta, resolution=resolution)
 
 
 def trajectory_samples(policy: Policy, config: TuningConfig, variable: str, episodes: int, seed: int,
