@@ -257,7 +257,8 @@ def _aggregate(segments: list[dict]) -> dict:
 def compute_metrics(time_s, setpoint, measurement, control_signal, sample_time_s: float,
                     intervals: Sequence[tuple[int, int]] | None = None,
                     loop_names: Sequence[str] | None = None, events: Sequence[int] | None = None, *,
-                    u_range: Sequence[float] | float | None = None, command=None, settling_threshold: float = 0.02, rise_time_limits: tuple[float, float] = (0.1, 0.9),
+                    u_range: Sequence[float] | float | None = None, command=None,
+                    settling_threshold: float = 0.02, rise_time_limits: tuple[float, float] = (0.1, 0.9),
                     steady_state_fraction: float = 0.1) -> dict:
     """Closed-loop metrics of one run (see the module docstring for definitions and the result layout).
 
