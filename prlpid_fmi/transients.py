@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from typing import Callable, get_args
+from typing import Callable
 
 import numpy as np
 
@@ -37,7 +37,6 @@ from .actions import Gains
 from .config import TuningConfig
 from .errors import PrlPidError
 from .evaluate import GAIN_NAMES
-from .schema.model import ScheduleBy
 from .schedule import GainSchedule, _LOOP_VARIABLE, _Probe, _variable_name, schedule_from_rows, table_meta
 
 Policy = Callable[[np.ndarray], np.ndarray]
@@ -47,10 +46,9 @@ SELECTION_EPISODES = 8  # further episodes the candidate tables are scored on (a
 EXTRACTION_SEED_OFFSET = 10_000
 SELECTION_SEED_OFFSET = 20_000
 RESOLUTION = 1e-3  # bins whose medians lie closer than this fraction of the visited span become one row
-SCHEDULE_BY = get_args(ScheduleBy)  # deploy.schedule_by: auto | setpoint | measurement | error
 AUTO_CANDIDATES = ("setpoint", "error")  # what auto compares
 
-__all__ = ["trajectory_schedule", "bin_rows", "training_ise", "deliverable_schedule", "extract", "SCHEDULE_BY"]
+__all__ = ["trajectory_schedule", "bin_rows", "training_ise", "deliverable_schedule", "extract"]
 
 
 def bin_rows(values: np.ndarray, gains: dict[str, np.ndarray], points: int) -> list[tuple[float, dict]]:
