@@ -18,7 +18,7 @@ import numpy as np
 
 from .actions import Gains
 from .baseline import margins_of, operating_point
-from .deliver import Candidate, Decision, choose
+from .deliver import Candidate, Decision, choose, meets
 from .evaluate import constant_gains, evaluate_gains
 from .schedule import _LOOP_VARIABLE, GainSchedule, replay_schedule
 
@@ -112,10 +112,12 @@ def robust_schedule(schedule: GainSchedule, config, limit: float) -> tuple[GainS
 
     The agent's reward does not see robustness, so the gains it settles on can leave the Ms limit that
     the fixed PID it started from meets; this keeps the adaptation pattern of every row and restores the
-    margin. Rows that cannot be detuned to the limit stay as they are (the deliverable then refuses the
-    schedule). Returns (schedule, one note per detuned row). Setpoint tables: each row at its own
-    setpoint. Error tables: each row at every point of range_points, detuned at its worst point until it
-    meets the limit at all of them. Other variables: unchanged.
+    margin. A row is detuned only where the deliverable's rule (deliver.meets) rejects it: a finite but
+    unreliable estimate (a time-varying or nonlinear plant) cannot be judged, so it neither justifies a
+    detune nor can confirm one. Rows that cannot be detuned to the limit stay as they are (the deliverable
+    then refuses the schedule). Returns (schedule, one note per detuned row). Setpoint tables: each row
+    at its own setpoint. Error tables: each row at every point of range_points, detuned at its worst
+    failing point until it meets the limit at all of them. Other variables: unchanged.
     """
     from .baseline import detune
 
@@ -126,12 +128,12 @@ def robust_schedule(schedule: GainSchedule, config, limit: float) -> tuple[GainS
     for j, b in enumerate(schedule.breakpoints):
         points = [operating_point(config, b)] if loop is None else range_points(config, loop)
         row, first = _row(schedule, j), None
-        for _ in points:  # each pass detunes at the worst point; that usually settles the others too
-            # conservative like the search: unreliable estimates count
-            ms, point = max(((margins_of(config, row, p).Ms, p) for p in points), key=lambda x: x[0])
-            first = ms if first is None else first
-            if ms <= limit:
+        for _ in points:  # each pass detunes at the worst failing point; that usually settles the others too
+            failing = [(m.Ms, p) for m, p in ((margins_of(config, row, p), p) for p in points) if not meets(m, limit)]
+            if not failing:
                 break
+            ms, point = max(failing, key=lambda x: x[0])
+            first = ms if first is None else first
             fixed = detune(config, row, point, limit)
             if fixed is None:
                 break

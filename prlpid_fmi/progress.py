@@ -1,4 +1,4 @@
-"""Progress of long work (training, the fixed-PID search) on stderr, with an honest total and an ETA.
+"""Progress of long work (training, the fixed-PID search, the steps after training) on stderr, with an honest total and an ETA.
 
 On a terminal: one line redrawn in place (a bar). Otherwise (`nohup ... > log`): a plain line when the
 work starts, about every 30 s, and when it ends, so a log shows where a long run is. The count never
@@ -6,6 +6,7 @@ passes the total: PPO collects whole rollouts, so SB3's own bar ends at 51,200/5
 """
 from __future__ import annotations
 
+import contextlib
 import sys
 import time
 from typing import Callable, TextIO
@@ -104,6 +105,21 @@ class Progress:
             self.stream.write(f"prlpid-fmi: {self.label}: {self.done:,}/{self.total:,} {self.unit} "
                               f"({pct:.0f} %){extra}\n")
         self.stream.flush()
+
+
+@contextlib.contextmanager
+def stage(label: str, enabled: bool = True, stream: TextIO | None = None,
+          clock: Callable[[], float] = time.monotonic):
+    """Announce a step of unknown length (`label` ...) and its duration when it ends; silent if not enabled."""
+    out = stream if stream is not None else sys.stderr
+    t0 = clock()
+    if enabled:
+        out.write(f"prlpid-fmi: {label} ...\n")
+        out.flush()
+    yield
+    if enabled:
+        out.write(f"prlpid-fmi: {label}: done in {format_duration(clock() - t0)}\n")
+        out.flush()
 
 
 def training_progress(stream: TextIO | None = None):

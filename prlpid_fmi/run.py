@@ -137,7 +137,7 @@ def tune(scenario_path: str | Path, timesteps: int | None = None, seed: int | No
     (its scenario.yaml, not `scenario_path`, defines the run). timesteps >= 1 and seed >= 0 are checked,
     and the scenario loaded, before anything is created; a start refused before training produced a
     model or a checkpoint leaves no directory behind. progress_bar: training and fixed-PID search
-    progress on stderr.
+    progress, and the steps after training, on stderr.
     """
     if timesteps is not None and timesteps < 1:
         raise RunError(f"--timesteps: must be at least 1 (got {timesteps}; expected a number of training steps >= 1)")
@@ -169,7 +169,7 @@ def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None
           progress_bar: bool, baseline: bool, crashed: bool = False) -> Path:
     from . import plots
     from .baseline import tune_fixed_pid
-    from .progress import Progress
+    from .progress import Progress, stage
     from .assess import assess, candidate_summary, max_sensitivity
     from .deliver import verdict
     from .deploy import deployable_files
@@ -232,15 +232,18 @@ def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None
     policy = _policy(run_dir, agent.algorithm)
     schedule, note = None, ""
     try:  # deploy.schedule_by: settled setpoint holds, error trajectories, or the better of both (auto)
-        schedule, note, chosen = deliverable_schedule(policy, scenario, agent.seed, anchor)
+        with stage("gain schedule (tables from the policy, rows checked against the Ms limit)", progress_bar):
+            schedule, note, chosen = deliverable_schedule(policy, scenario, agent.seed, anchor)
         info.update(chosen)
     except PrlPidError as exc:
         note = f"No gain schedule: {exc}\n"
         info["schedule_error"] = str(exc)
-    evaluate_into(run_dir, scenario, run_dir, policy, fixed, source, anchor=anchor, schedule=schedule)
+    with stage("evaluation", progress_bar):
+        evaluate_into(run_dir, scenario, run_dir, policy, fixed, source, anchor=anchor, schedule=schedule)
     report = (run_dir / rd.REPORT).read_text(encoding="utf-8")
     if fixed is not None:
-        decision, sched_c, fixed_c = assess(scenario, schedule, gains_from_dict(fixed["gains"]))
+        with stage("choice of the deployed controller (replays, Monte-Carlo set, margins)", progress_bar):
+            decision, sched_c, fixed_c = assess(scenario, schedule, gains_from_dict(fixed["gains"]))
         limit = max_sensitivity(scenario)
         deployed = {"gain schedule": schedule, "fixed PID": fixed_schedule(gains_from_dict(fixed["gains"]),
                                                                            scenario.tuning)}.get(decision.deploy)

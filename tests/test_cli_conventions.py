@@ -18,7 +18,7 @@ from prlpid_fmi import rundir
 from prlpid_fmi.cli import main
 from prlpid_fmi.errors import PrlPidError
 from prlpid_fmi.presets import SCENARIO_DIR, scenario_path
-from prlpid_fmi.progress import Progress, format_duration
+from prlpid_fmi.progress import Progress, format_duration, stage
 from prlpid_fmi.run import export_schedule
 from prlpid_fmi.schedule import read_schedule_csv
 from test_cli import _small_copy
@@ -305,6 +305,9 @@ def test_tune_progress_goes_to_stderr_and_never_passes_the_target(tmp_path, caps
     budget = 2 * 2 * 3  # (maxiter + 1) * popsize * (Kp, Ti, Td) of the small baseline
     assert f"prlpid-fmi: fixed-PID search: {budget}/{budget} evaluations (100 %)" in err
     assert "prlpid-fmi: training" not in out and "fixed-PID search:" not in out
+    after = [line for line in err.splitlines() if line.startswith(("prlpid-fmi: gain schedule", "prlpid-fmi: evaluation",
+                                                                     "prlpid-fmi: choice"))]
+    assert len(after) == 6 and after[-1].startswith("prlpid-fmi: choice of the deployed controller")  # start, end x 3
     assert "run directory:" in out and "| metric |" in out
 
 
@@ -447,6 +450,16 @@ def test_progress_on_a_terminal_redraws_one_line():
     assert text.count("\n") == 1 and text.endswith("\n") and text.count("\r") == 12
     final = text.rsplit("\r", 1)[1]
     assert "2,048/2,048 steps 100 %" in final and "#" * 24 in final
+
+
+def test_a_stage_says_when_it_starts_and_how_long_it_took():
+    clock, stream = FakeClock(), io.StringIO()
+    with stage("evaluation", stream=stream, clock=clock):
+        clock.t += 75.0
+    with stage("quiet", enabled=False, stream=stream, clock=clock):
+        pass
+    assert stream.getvalue().splitlines() == ["prlpid-fmi: evaluation ...",
+                                              "prlpid-fmi: evaluation: done in 1 min 15 s"]
 
 
 def test_format_duration():

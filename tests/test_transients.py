@@ -220,3 +220,24 @@ def test_rows_closer_than_the_resolution_become_one():
     assert s.breakpoints.tolist() == [5e-7, 0.5]
     assert s.Kp[:, 0].tolist() == [3.0, 8.0] and s.Ti[:, 0].tolist() == [2.0, 1.0] and s.Td[:, 0].tolist() == [0.05, 0.0]
     assert schedule_from_rows(PLAIN, "error[y]", "", rows, meta).breakpoints.shape == (3,)  # default: exact only
+
+
+def test_a_row_whose_margins_cannot_be_judged_is_not_detuned(monkeypatch):
+    # 1/(s - a(t)), a(t) = 0.5 + 0.25 (sin(0.2 pi t) + 1): no frequency response exists, so the multisine
+    # estimate is finite but flagged unreliable; the deliverable's rule (deliver.meets) cannot judge it, so
+    # robust_schedule measures the row once per operating point and spends no detuning scan on it.
+    import prlpid_fmi.assess as assess
+    import prlpid_fmi.baseline as baseline
+    from prlpid_fmi.deliver import counts
+
+    config = preset("time_varying")
+    table = error_table([0.0], Kp=[2.0], Ti=[1.0], Td=[0.0], config=config)
+    seen, detunes = [], []
+    monkeypatch.setattr(assess, "margins_of", lambda *a: seen.append(margins_of(*a)) or seen[-1])
+    monkeypatch.setattr(baseline, "detune", lambda *a, **k: detunes.append(a))
+    projected, notes = robust_schedule(table, config, 2.0)
+    assert len(seen) == len(range_points(config, 0))
+    # the premise: finite and unreliable everywhere, above the limit somewhere (the old rule detuned it)
+    assert all(math.isfinite(m.Ms) and not counts(m) for m in seen) and max(m.Ms for m in seen) > 2.0
+    assert detunes == [] and notes == []
+    assert projected.Kp.tolist() == table.Kp.tolist() and projected.Ti.tolist() == table.Ti.tolist()
