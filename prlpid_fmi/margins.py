@@ -238,7 +238,7 @@ def _measure_loop(rig: ClosedLoopRig, loop: int, frequencies, amplitude: float, 
         period = int(2 ** math.ceil(math.log2(max(2 * np.pi * MIN_RESOLUTION_BIN / (w_min * Ts), 16))))
     bins = _log_bins(period, GRID_POINTS) if frequencies is None else _bins_for(frequencies, period, Ts)
     responses = [measure_response(rig, loop, bins, period, amplitude, controller, wait)]
-    while not responses[-1].diverged:
+    while not responses[-1].diverged and not _problems(responses):  # refining cannot make a flagged estimate good
         omega, P = _merged(responses)
         L = controller(omega) * P
         points = _points_of_interest(L)
@@ -279,17 +279,26 @@ def _loop_result(rig: ClosedLoopRig, loop: int, responses: list[PlantResponse]) 
     # no integral action and |L| flat at the lowest frequencies: a finite DC loop gain
     no_integrator = not math.isfinite(rig.Ti[loop]) and len(L) > 1 and abs(abs(L[1]) / abs(L[0]) - 1) < 0.1
     Ms, w_ms, gm, wpc, pm, wgc = margins_from_loop_response(omega, L, finite_dc_gain=no_integrator)
+    problems = _problems(responses)
+    return Margins(Ms, w_ms, gm, wpc, pm, wgc, omega, P, C, amplitude, not problems, "; ".join(problems), name)
+
+
+def _problems(responses: list[PlantResponse]) -> list[str]:
+    """Why estimates from these experiments cannot be trusted (empty: reliable). Each test is on the worst
+    experiment, so a flag raised by one experiment stays whatever further experiments measure."""
     problems = []
     if any(r.saturated for r in responses):
+        amplitude = min(r.amplitude for r in responses)
         problems.append(f"the control signal reached a limit even with a multisine peak of {amplitude:.3g}")
     change = max(r.change for r in responses)
     if change > 10 * CONVERGENCE_TOLERANCE:
-        problems.append(f"the response did not reach a periodic steady state (change {change:.2g} between periods)")
+        problems.append(f"the response did not reach a periodic steady state (change {change:.2g} between periods: "
+                        "a time-varying plant, or a loop too lightly damped to settle)")
     distortion = max(r.distortion for r in responses)
     if distortion > DISTORTION_LIMIT:
         problems.append(f"the plant does not respond linearly around this operating point "
                         f"(distortion {distortion:.1%}: nonlinear or time-varying)")
-    return Margins(Ms, w_ms, gm, wpc, pm, wgc, omega, P, C, amplitude, not problems, "; ".join(problems), name)
+    return problems
 
 
 def loop_margins(config: TuningConfig, Kp: Sequence[float], Ti: Sequence[float], Td: Sequence[float],

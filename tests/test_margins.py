@@ -206,10 +206,18 @@ def test_unstable_closed_loop_has_no_margins():
     assert format_margins(m).startswith("Ms inf (")
 
 
-def test_time_varying_plant_is_flagged():
+def test_time_varying_plant_is_flagged_after_one_experiment(monkeypatch):
+    import prlpid_fmi.margins as margins
+
+    experiments = []
+    monkeypatch.setattr(margins, "measure_response", lambda *a: experiments.append(measure_response(*a)) or experiments[-1])
     m = loop_margins(preset("time_varying"), [5.0], [2.0], [0.05], [1.0])
     assert not m.reliable
     assert "time-varying" in m.note
+    assert len(experiments) == 1  # no refinement of an estimate that is flagged already
+    experiments.clear()
+    assert loop_margins(preset("first_order"), [3.0], [2.0], [0.05], [1.0]).reliable
+    assert len(experiments) >= 2  # a good estimate is refined around its peak and crossovers
 
 
 def test_format_margins_one_line():
