@@ -344,3 +344,21 @@ def test_ray_runs_the_same_trials(local_sweep, tmp_path):
     assert inv["backend"] == "ray" and inv["trials_run"] == 2
     local = [r for r in _read_csv(local_sweep[1] / "trials.csv") if r["seed"] == "0"]
     assert _read_csv(tmp_path / "out" / "trials.csv") == local and len(local) == 2 * 4 * 2 * 6
+
+
+def test_ctrl_c_writes_the_summary_of_the_finished_trials(tmp_path, monkeypatch, capsys):
+    import prlpid_fmi.sweep.runner as runner
+
+    def first_then_ctrl_c(trials, workers):  # the pool's behaviour on Ctrl-C: the running trials stop, it re-raises
+        yield trials[0], run_trial(trials[0])
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(runner, "run_local", first_then_ctrl_c)
+    f, out = _write(tmp_path / "tiny.yaml", TINY.format(seeds=1)), tmp_path / "out"
+    assert main(["sweep", str(f), "--out", str(out), "--workers", "1"]) == 130
+    err = capsys.readouterr().err
+    assert "[1/2] forecast_horizon=0/seed0: done in" in err
+    assert "sweep tiny: interrupted after " in err and "the same command continues the sweep" in err
+    summary = (out / "summary.md").read_text()
+    assert "Finished trials: 1 of 2." in summary and "| 1 (interrupted) |" in summary
+    assert trial_status(out / VARIANTS[0] / "seed0") == "finished" and not (out / VARIANTS[1] / "seed0").exists()

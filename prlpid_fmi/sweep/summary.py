@@ -204,7 +204,8 @@ def _markdown(sweep, out: Path, stats: list[dict], finished: dict, deployed: dic
             backend = inv.get("backend", "")
             backend += f" ({inv['workers']} processes)" if inv.get("workers") and inv.get("trials_run") else (
                 f" ({inv['ray_address']})" if inv.get("ray_address") else "")
-            lines.append(f"| {inv.get('started', '')} | `{command}` | {backend} | {inv.get('trials_run', '')} | "
+            run = f"{inv.get('trials_run', '')}" + (" (interrupted)" if inv.get("interrupted") else "")
+            lines.append(f"| {inv.get('started', '')} | `{command}` | {backend} | {run} | "
                          f"{len(inv.get('failed', {}))} | {inv.get('wall_s', float('nan')):.1f} |")
         lines.append("")
     return "\n".join(lines)
