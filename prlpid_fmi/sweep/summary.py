@@ -288,7 +288,9 @@ def plot_metrics(sweep, stats: list[dict], rows: list[dict], path: Path) -> Path
             mean = np.array([st["mean"] if st else np.nan for st in s])
             half = np.array([st["ci95_half_width"] if st else np.nan for st in s])
             at = x + (j - (len(CONTROLLERS) - 1) / 2) * width
-            ax.bar(at, mean, width, yerr=np.nan_to_num(half), capsize=2, color=f"C{j}", label=cname)
+            upper = np.nan_to_num(half)  # every metric here is >= 0: the interval is cut at 0 below
+            ax.bar(at, mean, width, yerr=[np.minimum(upper, np.nan_to_num(mean)), upper], capsize=2, color=f"C{j}",
+                   label=cname)
             for k, v in enumerate(variants):
                 seeds = [r["value"] for r in rows if r["variant"] == v and r["controller"] == c
                          and r["interval"] == OVERALL and r["metric"] == metric and math.isfinite(r["value"])]
@@ -302,7 +304,7 @@ def plot_metrics(sweep, stats: list[dict], rows: list[dict], path: Path) -> Path
         ax.grid(True, axis="y", alpha=0.3)
     handles, labels = axes[0, 0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8, frameon=False)
-    axes[0, 0].set_title(f"{sweep.name}: overall metrics, mean and 95 % interval over seeds")
+    axes[0, 0].set_title(f"{sweep.name}: overall metrics, mean and 95 % interval over seeds (cut at 0)")
     fig.tight_layout(rect=(0, 0.35 / fig.get_figheight(), 1, 1))
     return _save(fig, path)
 
