@@ -362,3 +362,45 @@ def test_ctrl_c_writes_the_summary_of_the_finished_trials(tmp_path, monkeypatch,
     summary = (out / "summary.md").read_text()
     assert "Finished trials: 1 of 2." in summary and "| 1 (interrupted) |" in summary
     assert trial_status(out / VARIANTS[0] / "seed0") == "finished" and not (out / VARIANTS[1] / "seed0").exists()
+
+
+def test_sigterm_stops_the_workers_and_writes_the_summary(tmp_path):
+    # a job manager or `timeout` stops a sweep with SIGTERM: before, the workers were orphaned and ran on
+    import signal
+    import subprocess
+    import sys
+
+    f, out = _write(tmp_path / "tiny.yaml", TINY.format(seeds=1)), tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-m", "prlpid_fmi", "sweep", str(f), "--out", str(out), "--workers", "1"],
+                            stderr=subprocess.PIPE, text=True, cwd=tmp_path)
+    lines = []
+    for line in proc.stderr:
+        lines.append(line)
+        if line.startswith("[1/2]"):
+            break
+    children = [int(p) for p in Path(f"/proc/{proc.pid}/task/{proc.pid}/children").read_text().split()]
+    assert children  # the worker (and multiprocessing's resource tracker)
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=120) == 128 + signal.SIGTERM  # (killed by the signal: -15)
+    rest = proc.communicate(timeout=60)[1]
+    assert "sweep tiny: interrupted after" in rest and "interrupted by SIGTERM" in rest and "Traceback" not in rest
+    assert [pid for pid in children if _still_running(pid)] == []
+    summary = (out / "summary.md").read_text()
+    assert "Finished trials: 1 of 2." in summary and "| 1 (interrupted) |" in summary
+
+
+def _still_running(pid: int, wait_s: float = 15.0) -> bool:
+    """Whether process `pid` is still running (not gone, not a zombie) after up to wait_s seconds: the
+    resource tracker ends a moment after the sweep's process, when its pipe closes."""
+    import time
+
+    status = Path(f"/proc/{pid}/status")
+    end = time.monotonic() + wait_s
+    while time.monotonic() < end:
+        try:
+            if "\nState:\tZ" in status.read_text():
+                return False
+        except FileNotFoundError:
+            return False
+        time.sleep(0.2)
+    return True

@@ -337,7 +337,7 @@ def run_sweep(path: str | Path, out: str | Path | None = None, workers: Optional
     failed: list[tuple[str, str]] = []
     record = {"started": started, "command": sys.argv, "backend": "ray" if ray else "local",
               "ray_address": ray_address, "workers": None if ray else n_workers, "trials_run": 0}
-    interrupted = False
+    interrupted: BaseException | None = None
     if todo:
         results = run_ray(todo, ray_started) if ray else run_local(todo, n_workers)
         try:
@@ -348,17 +348,17 @@ def run_sweep(path: str | Path, out: str | Path | None = None, workers: Optional
                     failed.append((trial.label, result["error"]))
                     line += f": {result['error']}"
                 log(line)
-        except KeyboardInterrupt:  # Ctrl-C: the running trials were stopped; summarise the finished ones
-            interrupted = True
+        except (KeyboardInterrupt, Interrupted) as exc:  # Ctrl-C or SIGTERM: the running trials were stopped
+            interrupted = exc
     record.update(finished=rd.now(), wall_s=round(time.perf_counter() - t0, 3), failed=dict(failed),
-                  interrupted=interrupted)
+                  interrupted=interrupted is not None)
     _append_invocation(out, sweep, record)
     files = write_summary(sweep, out, trials, [f"{label}: {error}" for label, error in failed])
     wall = time.perf_counter() - t0
-    if interrupted:
+    if interrupted is not None:
         log(f"sweep {sweep.name}: interrupted after {wall:.1f} s; summary of the finished trials in "
             f"{out / 'summary.md'}; the same command continues the sweep")
-        raise KeyboardInterrupt
+        raise interrupted
     log(f"sweep {sweep.name}: done in {wall:.1f} s; summary in {out / 'summary.md'}")
     return SweepRun(out, files, failed, wall)
 
