@@ -346,22 +346,25 @@ def test_ray_runs_the_same_trials(local_sweep, tmp_path):
     assert _read_csv(tmp_path / "out" / "trials.csv") == local and len(local) == 2 * 4 * 2 * 6
 
 
-def test_ctrl_c_writes_the_summary_of_the_finished_trials(tmp_path, monkeypatch, capsys):
+def test_ctrl_c_writes_the_summary_of_the_finished_trials(local_sweep, tmp_path, monkeypatch, capsys):
+    import shutil
+
     import prlpid_fmi.sweep.runner as runner
 
-    def first_then_ctrl_c(trials, workers):  # the pool's behaviour on Ctrl-C: the running trials stop, it re-raises
-        yield trials[0], run_trial(trials[0])
+    def ctrl_c(trials, workers):  # the pool's behaviour on Ctrl-C: the running trials stop, it re-raises
         raise KeyboardInterrupt
+        yield
 
-    monkeypatch.setattr(runner, "run_local", first_then_ctrl_c)
-    f, out = _write(tmp_path / "tiny.yaml", TINY.format(seeds=1)), tmp_path / "out"
+    f, finished = local_sweep
+    out = tmp_path / "out"
+    shutil.copytree(finished, out)
+    shutil.rmtree(out / VARIANTS[1] / "seed1")  # one trial left to run
+    monkeypatch.setattr(runner, "run_local", ctrl_c)
     assert main(["sweep", str(f), "--out", str(out), "--workers", "1"]) == 130
     err = capsys.readouterr().err
-    assert "[1/2] forecast_horizon=0/seed0: done in" in err
     assert "sweep tiny: interrupted after " in err and "the same command continues the sweep" in err
     summary = (out / "summary.md").read_text()
-    assert "Finished trials: 1 of 2." in summary and "| 1 (interrupted) |" in summary
-    assert trial_status(out / VARIANTS[0] / "seed0") == "finished" and not (out / VARIANTS[1] / "seed0").exists()
+    assert "Finished trials: 3 of 4." in summary and "| 0 (interrupted) |" in summary
 
 
 def test_sigterm_stops_the_workers_and_writes_the_summary(tmp_path):
