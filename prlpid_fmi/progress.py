@@ -1,4 +1,5 @@
-"""Progress of long work (training, the fixed-PID search, the steps after training) on stderr, with an honest total and an ETA.
+"""Progress of long work on stderr (training, the fixed-PID search: an honest total and an ETA; the steps
+after training: when each starts and how long it took).
 
 On a terminal: one line redrawn in place (a bar). Otherwise (`nohup ... > log`): a plain line when the
 work starts, about every 30 s, and when it ends, so a log shows where a long run is. The count never
