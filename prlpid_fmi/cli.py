@@ -203,20 +203,16 @@ def _export(args: argparse.Namespace) -> int:
 def _sweep(args: argparse.Namespace) -> int:
     import signal
 
-    from .errors import Interrupted
     from .sweep import resolve_sweep, run_sweep
 
-    def on_sigterm(signum, frame):  # like Ctrl-C: stop the workers, summarise the finished trials
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)
-        raise Interrupted(signum)
-
-    previous = signal.signal(signal.SIGTERM, on_sigterm)  # a job manager's or `timeout`'s stop orphaned the workers
+    previous = _interrupt_on_signals()  # SIGTERM too (a job manager, `timeout`): stop the workers, summarise
     try:
         result = run_sweep(resolve_sweep(args.sweep), out=args.out, workers=args.workers, ray=args.ray is not None,
                            ray_address=args.ray or None, log=(lambda line: None) if args.quiet else
                            (lambda line: print(line, file=sys.stderr, flush=True)))
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for s, h in previous.items():
+            signal.signal(s, h)
     for label, error in result.failed:
         print(f"{PROG}: error: {label}: {error}", file=sys.stderr)
     print(f"sweep summary: {result.out / 'summary.md'}")

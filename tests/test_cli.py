@@ -24,9 +24,9 @@ SMALL = {"agent": {"n_envs": 1, "n_steps": 128, "batch_size": 64, "checkpoint_ev
          "baseline": {"episodes": 1, "maxiter": 1, "popsize": 2}, "deploy": {"schedule_points": 3}}
 
 
-# time_varying: its margin estimates are unreliable, and the search and the schedule projection count
-# them (conservatively), so every tiny-budget PID is detuned through a scan of margin experiments that
-# takes minutes; the detuning is tested in test_detune/test_transients/test_anchored
+# time_varying: its margin estimates are unreliable, and the fixed-PID search counts them
+# (conservatively), so a tiny-budget PID is detuned through a scan of margin experiments that takes
+# minutes; the detuning is tested in test_detune/test_transients/test_anchored
 TIME_VARYING = {"deploy": {"schedule_points": 3, "schedule_by": "setpoint", "max_sensitivity": 1e3}}
 
 

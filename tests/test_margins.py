@@ -210,7 +210,8 @@ def test_time_varying_plant_is_flagged_after_one_experiment(monkeypatch):
     import prlpid_fmi.margins as margins
 
     experiments = []
-    monkeypatch.setattr(margins, "measure_response", lambda *a: experiments.append(measure_response(*a)) or experiments[-1])
+    monkeypatch.setattr(margins, "measure_response",
+                        lambda *a: experiments.append(measure_response(*a)) or experiments[-1])
     m = loop_margins(preset("time_varying"), [5.0], [2.0], [0.05], [1.0])
     assert not m.reliable
     assert "time-varying" in m.note
