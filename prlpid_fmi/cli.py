@@ -240,7 +240,8 @@ def make_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
 
     def command(name: str, func, help: str) -> argparse.ArgumentParser:
-        p = sub.add_parser(name, help=help, description=help, parents=[common])
+        # the command list %-formats each help (a "95 %" would break `--help`); the description is not
+        p = sub.add_parser(name, help=help.replace("%", "%%"), description=help, parents=[common])
         p.set_defaults(func=func)
         return p
 
