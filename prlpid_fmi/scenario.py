@@ -308,8 +308,8 @@ def init_scenario(fmu_path: str | Path, output: Optional[str] = None,
     p = Path(fmu_path)
     try:
         d = describe_fmu(p)
-    except PlantError as exc:
-        raise ScenarioError(f"{fmu_path}: {exc}") from None
+    except PlantError as exc:  # its message already names the file
+        raise ScenarioError(str(exc)) from None
     problems = d.plant_problems()
     if problems:
         raise ScenarioError(f"{fmu_path}: cannot be a plant: {'; '.join(problems)} "

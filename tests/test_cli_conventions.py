@@ -480,3 +480,15 @@ def test_every_help_prints_and_exits_0(argv, capsys):
     assert out.startswith("usage: prlpid-fmi")
     if argv == ["--help"]:
         assert "95 % interval" in out and "check-plants" in out  # every command listed, help text intact
+
+
+@pytest.mark.parametrize("command", ["inspect", "probe", "init"])
+@pytest.mark.parametrize("content, problem", [(None, "FMU file not found"),
+                                              (b"PK\x03\x04 not a zip", "not an FMU (expected a ZIP archive")])
+def test_a_missing_or_broken_fmu_is_one_line_naming_the_file_once(command, content, problem, tmp_path, capsys):
+    fmu = tmp_path / "plant.fmu"
+    if content is not None:
+        fmu.write_bytes(content)
+    assert main([command, str(fmu)]) == 2
+    line = _one_error_line(capsys)
+    assert problem in line and line.count(str(fmu)) == 1, line
