@@ -140,6 +140,16 @@ CASES = [
      "strategies.smoothing_alpha", "0.5", "takes no alpha"),
     ("loops-share-output", "quadrotor", _set("plant.loops.1.output", "phi"), "plant.loops[1].output", "'phi'",
      "share the output"),
+    # a setpoint step the divergence bound ends at once: setpoint_range spans 2, the bound is 5 x scale 1
+    ("divergence-bound-below-setpoint-span", "first_order", _set("plant.loops.0.divergence_bound", 1.5),
+     "plant.loops[0].divergence_bound", "1.5", "2 x measurement_scale"),
+    ("setpoint-step-past-divergence-bound", "first_order",
+     _set("evaluation.setpoints", [{"at_step": 0, "value": 1.0}, {"at_step": 50, "value": -4.5}]),
+     "evaluation.setpoints[1].value", "-4.5", "plant.loops[0].divergence_bound x measurement_scale = 5"),
+    ("setpoint-step-past-divergence-bound-loop-2", "quadrotor",  # 6 x 0.5 = 3 rad per loop
+     _set("evaluation.setpoints", [{"at_step": 0, "value": [0.0, 0.0, 0.0]},
+                                   {"at_step": 10, "value": [2.9, -3.1, 0.0]}]),
+     "evaluation.setpoints[1].value", "[2.9, -3.1, 0.0]", "from 0 to -3.1 is larger than plant.loops[1]"),
 ]
 
 
@@ -304,6 +314,16 @@ def test_infinite_actuator_limits_are_allowed(tmp_path):
     doc["plant"]["loops"][0]["u_limits"] = [-INF, INF]
     s = load_scenario(_write(tmp_path / "ok.yaml", doc))
     assert (s.tuning.loops[0].u_min, s.tuning.loops[0].u_max) == (-INF, INF)
+
+
+def test_setpoint_steps_up_to_the_divergence_bound_are_allowed(tmp_path):
+    """A step of exactly divergence_bound x measurement_scale is allowed (only a larger one ends the episode)."""
+    doc = _raw("first_order")
+    doc["plant"]["loops"][0]["divergence_bound"] = 2.0  # = the span of setpoint_range [-1, 1]
+    doc["evaluation"]["setpoints"] = [{"at_step": 0, "value": 1.0}, {"at_step": 50, "value": -1.0},
+                                      {"at_step": 100, "value": 1.0}]
+    s = load_scenario(_write(tmp_path / "ok.yaml", doc))
+    assert s.tuning.loops[0].divergence_bound == 2.0
 
 
 # --------------------------------------------------------------------------------------------

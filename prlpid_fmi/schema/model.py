@@ -164,6 +164,23 @@ class LoopModel(Section):
             raise problem("low >= high", "min < max")
         return value
 
+    @field_validator("divergence_bound")
+    @classmethod
+    def _reachable(cls, bound: float, info: ValidationInfo) -> float:
+        low_high, scale = info.data.get("setpoint_range"), info.data.get("measurement_scale")
+        if low_high is not None and scale is not None and (low_high[1] - low_high[0]) / scale > bound:
+            span = (low_high[1] - low_high[0]) / scale
+            raise problem(f"a training setpoint step across setpoint_range, {span:g} x measurement_scale, would end "
+                          "the episode as diverged at once", f"a bound >= {span:g}, or a narrower setpoint_range")
+        return bound
+
+    @model_validator(mode="after")
+    def _remember_largest_step(self, info: ValidationInfo) -> "LoopModel":
+        state = state_of(info)
+        if state is not None:
+            state.largest_step.append(self.divergence_bound * self.measurement_scale)
+        return self
+
     @field_validator("input", "output")
     @classmethod
     def _fmu_variable(cls, name: str, info: ValidationInfo) -> str:
@@ -464,11 +481,31 @@ class SetpointModel(Section):
                           f"an integer in ({last}, {n}) (episode_steps = {n})" if n else f"an integer > {last}")
         return step
 
+    @field_validator("value")
+    @classmethod
+    def _reachable(cls, value: tuple, info: ValidationInfo) -> tuple:
+        """A step from the previous setpoint larger than divergence_bound x measurement_scale ends the episode
+        at its first sample, whatever the controller: refused (known only when every loop was valid)."""
+        state = state_of(info)
+        if state is None:
+            return value
+        previous, state.last_setpoint = state.last_setpoint, value
+        largest = state.largest_step
+        if previous is None or len(largest) != state.n_loops or len(value) != len(largest):
+            return value
+        for i, (a, b, limit) in enumerate(zip(previous, value, largest)):
+            if abs(b - a) > limit:
+                loop = f"plant.loops[{i}]"
+                raise problem(f"the step from {a:g} to {b:g} is larger than {loop}.divergence_bound x "
+                              f"measurement_scale = {limit:g} and would end the episode as diverged at once",
+                              f"a step <= {limit:g}, or a larger {loop}.divergence_bound")
+        return value
+
 
 def _schedule(value: Any, info: ValidationInfo) -> Any:
     state = state_of(info)
     if state is not None:
-        state.last_step = -1
+        state.last_step, state.last_setpoint = -1, None
     if isinstance(value, list) and not value:
         raise problem("empty schedule", "at least one {at_step: 0, value: ...}, or null")
     return value
