@@ -20,7 +20,7 @@ from .actions import Gains
 from .baseline import margins_of, operating_point
 from .deliver import Candidate, Decision, choose, meets
 from .evaluate import constant_gains, evaluate_gains
-from .schedule import _LOOP_VARIABLE, GainSchedule, replay_schedule
+from .schedule import LOOP_VARIABLE, GainSchedule, replay_schedule
 
 
 def _margins_at(config, gains, points: list[list[float]]) -> list:
@@ -83,7 +83,7 @@ def assess_schedule(scenario, schedule: GainSchedule) -> Candidate:
 
 def error_loop(schedule: GainSchedule) -> int | None:
     """The loop index of an error[<loop>] table, None for any other scheduling variable."""
-    m = _LOOP_VARIABLE.match(schedule.variable)
+    m = LOOP_VARIABLE.match(schedule.variable)
     return schedule.loop_names.index(m.group(2)) if m and m.group(1) == "error" else None
 
 

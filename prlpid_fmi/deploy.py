@@ -159,7 +159,7 @@ def from_schedule(schedule: "GainSchedule", name: str, source: str = "a gain sch
 
     from .control import COUPLING_NAMES
     from .control.pid import ANTI_WINDUP_MODES
-    from .schedule import _LOOP_VARIABLE
+    from .schedule import LOOP_VARIABLE
 
     s = schedule
     where = f"{source}: "
@@ -189,7 +189,7 @@ def from_schedule(schedule: "GainSchedule", name: str, source: str = "a gain sch
     if np.any(~(s.u_min <= s.u_max)):
         raise PrlPidError(f"{where}u limits: (got u_min {s.u_min.tolist()}, u_max {s.u_max.tolist()}; "
                           "expected u_min <= u_max)")
-    m = _LOOP_VARIABLE.match(s.variable)
+    m = LOOP_VARIABLE.match(s.variable)
     if m and m.group(2) in s.loop_names:
         kind, loop = m.group(1), s.loop_names.index(m.group(2))
     else:

@@ -337,6 +337,32 @@ def check_output(run_dir: Path, output: Path, force: bool = False) -> None:
         raise RunError(f"{output}: exists (expected a new file name, or --force to replace it)")
 
 
+def _check_schedule_options(trained: Scenario, schedule_by: str, points: int) -> None:
+    """--points >= 1, and --schedule-by a loop signal or a real variable of the run's plant FMU (RunError)."""
+    from .core import resolve_fmu
+    from .fmu import describe_fmu
+    from .schedule import LOOP_SIGNALS, LOOP_VARIABLE
+
+    if points < 1:
+        raise RunError(f"--points: must be at least 1 (got {points}; expected a number of operating points >= 1)")
+    if schedule_by in LOOP_SIGNALS:
+        return
+    m, loops = LOOP_VARIABLE.match(schedule_by), [loop.output for loop in trained.tuning.loops]
+    if m:
+        if m.group(2) not in loops:
+            raise RunError(f"--schedule-by: no loop measures {m.group(2)!r} (got {schedule_by!r}; expected "
+                           f"{m.group(1)}[<loop>] with one of the loops: {', '.join(loops)})")
+        return
+    fmu = resolve_fmu(trained.tuning.fmu, trained.tuning.fmi_version)
+    desc = describe_fmu(fmu)
+    v = desc.variable(schedule_by)
+    if v is None or v.type not in ("Real", "Float64"):
+        names = [x.name for x in desc.variables if x.type in ("Real", "Float64")]
+        shown = ", ".join(names[:12]) + (", ..." if len(names) > 12 else "")
+        raise RunError(f"--schedule-by: the plant {fmu.name} has no real variable {schedule_by!r} (got "
+                       f"{schedule_by!r}; expected {', '.join(LOOP_SIGNALS)}, <signal>[<loop>], or one of: {shown})")
+
+
 def export_schedule(run_dir: str | Path, output: str | Path, schedule_by: str = "setpoint", points: int = 9,
                     replay: bool = False, scenario_path: str | Path | None = None,
                     force: bool = False) -> tuple[Path, dict | None]:
@@ -353,6 +379,7 @@ def export_schedule(run_dir: str | Path, output: str | Path, schedule_by: str = 
     run_dir, output = Path(run_dir), Path(output)
     trained = _load_run(run_dir)
     check_output(run_dir, output, force)
+    _check_schedule_options(trained, schedule_by, points)
     if scenario_path is not None and not replay:
         raise RunError(f"--scenario {scenario_path}: only used with --replay (expected --replay, or no --scenario)")
     scenario = trained if scenario_path is None else _on_other_evaluation(trained, scenario_path)

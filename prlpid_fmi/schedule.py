@@ -55,7 +55,8 @@ _ANTI_WINDUP_TEXT = {
     "back_calculation": "back_calculation (tracking time constant Tt = sqrt(Ti*Td), or Ti when Td = 0)",
     "none": "none",
 }
-_LOOP_VARIABLE = re.compile(r"^(setpoint|measurement|error)\[(.+)\]$")
+LOOP_SIGNALS = ("setpoint", "measurement", "error")  # scheduling variables read from a loop, not the FMU
+LOOP_VARIABLE = re.compile(r"^(setpoint|measurement|error)\[(.+)\]$")  # <signal>[<loop output>]
 
 __all__ = ["GainSchedule", "extract_schedule", "write_schedule_csv", "read_schedule_csv", "replay_schedule",
            "PID_EQUATION", "INTERPOLATION"]
@@ -157,9 +158,9 @@ def _group(unit: str) -> str:
 # -- extraction -------------------------------------------------------------------------------------
 
 def _variable_name(schedule_by: str, loop_names: list[str]) -> str:
-    if schedule_by in ("setpoint", "measurement", "error"):
+    if schedule_by in LOOP_SIGNALS:
         return f"{schedule_by}[{loop_names[0]}]"
-    m = _LOOP_VARIABLE.match(schedule_by)
+    m = LOOP_VARIABLE.match(schedule_by)
     if m and m.group(2) not in loop_names:
         raise PrlPidError(f"{schedule_by!r}: no loop measures {m.group(2)!r} (loops: {', '.join(loop_names)})")
     return schedule_by
@@ -170,7 +171,7 @@ class _Probe:
 
     def __init__(self, variable: str, env):
         self.env = env
-        m = _LOOP_VARIABLE.match(variable)
+        m = LOOP_VARIABLE.match(variable)
         if m:
             self.kind, self.index = m.group(1), env.loop_names.index(m.group(2))
         else:
@@ -240,7 +241,7 @@ def extract_schedule(policy: Policy, config: TuningConfig, schedule_by: str = "s
 
     names = [l.output for l in config.loops]
     variable = _variable_name(schedule_by, names)
-    m = _LOOP_VARIABLE.match(variable)
+    m = LOOP_VARIABLE.match(variable)
     if m and m.group(1) == "error":
         raise PrlPidError(f"{variable}: settled holds have no error to schedule on (expected setpoint, measurement "
                           "or an FMU variable; error tables come from policy trajectories, "

@@ -37,7 +37,7 @@ from .actions import Gains
 from .config import TuningConfig
 from .errors import PrlPidError
 from .evaluate import GAIN_NAMES
-from .schedule import GainSchedule, _LOOP_VARIABLE, _Probe, _variable_name, schedule_from_rows, table_meta
+from .schedule import LOOP_VARIABLE, GainSchedule, _Probe, _variable_name, schedule_from_rows, table_meta
 
 Policy = Callable[[np.ndarray], np.ndarray]
 
@@ -126,7 +126,7 @@ def extract(policy: Policy, config: TuningConfig, schedule_by: str, points: int,
     """One candidate table: error tables from trajectories, every other variable from settled holds."""
     from .schedule import extract_schedule
 
-    m = _LOOP_VARIABLE.match(schedule_by)
+    m = LOOP_VARIABLE.match(schedule_by)
     if schedule_by == "error" or (m and m.group(1) == "error"):
         return trajectory_schedule(policy, config, schedule_by, points=points, seed=seed, anchor=anchor)
     return extract_schedule(policy, config, schedule_by=schedule_by, points=points, seed=seed, anchor=anchor)

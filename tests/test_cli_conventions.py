@@ -492,3 +492,15 @@ def test_a_missing_or_broken_fmu_is_one_line_naming_the_file_once(command, conte
     assert main([command, str(fmu)]) == 2
     line = _one_error_line(capsys)
     assert problem in line and line.count(str(fmu)) == 1, line
+
+
+@pytest.mark.parametrize("option, expected", [
+    (["--points", "0"], "--points: must be at least 1 (got 0;"),
+    (["--schedule-by", "banana"], "--schedule-by: the plant FirstOrderUnstable.fmu has no real variable 'banana'"),
+    (["--schedule-by", "setpoint[q]"], "--schedule-by: no loop measures 'q' (got 'setpoint[q]'; expected "
+                                       "setpoint[<loop>] with one of the loops: y)")])
+def test_export_names_a_bad_schedule_option_and_writes_nothing(option, expected, trained_run, tmp_path, capsys):
+    out = tmp_path / "gains.csv"
+    assert main(["export", str(trained_run), "-o", str(out)] + option) == 2
+    assert expected in _one_error_line(capsys)
+    assert not out.exists()
