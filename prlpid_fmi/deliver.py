@@ -141,8 +141,9 @@ def _ratio(a: float, b: float) -> str:
     return f"{a / b:.2f}x" if b and math.isfinite(a) and math.isfinite(b) else "n/a"
 
 
-def verdict(decision: Decision, schedule: Candidate | None, fixed: Candidate, max_sensitivity: float) -> str:
-    """The report's opening paragraph, in words (markdown)."""
+def verdict(decision: Decision, schedule: Candidate | None, fixed: Candidate, max_sensitivity: float,
+            gain_mapping: str = "anchored") -> str:
+    """The report's opening paragraph, in words (markdown); gain_mapping: the run's controller.gain_mapping."""
     lines = ["## Verdict", ""]
     if decision.deploy == "gain schedule":
         s, f = schedule, fixed
@@ -158,8 +159,11 @@ def verdict(decision: Decision, schedule: Candidate | None, fixed: Candidate, ma
         lines.append(f"**Deploy the fixed PID** (schedule.csv holds it as a one-row table; also fixed_pid.csv). "
                      f"Its worst Ms is {_ms(fixed)} (limit {max_sensitivity:g}).")
         if schedule is not None:
-            lines.append("The adaptive schedule lost. To try: a longer training budget (--timesteps), wider "
-                         "controller.anchor_bands, or training.randomize over the parameters that vary in your plant.")
+            the_map = ("wider controller.anchor_bands" if gain_mapping == "anchored" else
+                       "the anchored gain map (controller.gain_mapping: anchored, which starts training at the fixed "
+                       "PID)")
+            lines.append(f"The adaptive schedule lost. To try: a longer training budget (--timesteps), {the_map}, or "
+                         "training.randomize over the parameters that vary in your plant.")
     else:
         lines.append(f"**Nothing here is safe to deploy**: no controller meets the robustness limit Ms <= "
                      f"{max_sensitivity:g} without diverging. Narrow the gain ranges, lower the sample time, or "

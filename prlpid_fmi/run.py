@@ -256,7 +256,7 @@ def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None
         metrics["fixed_pid_assessment"] = candidate_summary(fixed_c)
         write_json(run_dir / rd.METRICS, metrics)
         title, _, body = report.partition("\n")
-        report = "\n".join([title, "", verdict(decision, sched_c, fixed_c, limit).rstrip(), "",
+        report = "\n".join([title, "", verdict(decision, sched_c, fixed_c, limit, scenario.tuning.gain_mapping).rstrip(), "",
                              candidates_table(sched_c, fixed_c, loop_units(scenario.tuning)), body.lstrip("\n")])
     elif schedule is not None:
         write_schedule_csv(schedule, run_dir / rd.SCHEDULE)

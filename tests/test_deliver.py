@@ -48,3 +48,12 @@ def test_unreliable_finite_margins_neither_qualify_nor_disqualify_but_divergence
     assert "could not be verified" in verdict(d, unreliable, fixed, 2.0)
     diverged = cand("gain schedule", 0.9, ms=math.inf, reliable=False)
     assert choose(diverged, fixed, 2.0).deploy == "fixed PID"
+
+
+def test_the_advice_after_a_lost_schedule_names_a_setting_of_the_runs_gain_map():
+    lost = choose(cand("gain schedule", 1.2), cand("fixed PID", 1.0), 2.0)
+    assert lost.deploy == "fixed PID"
+    anchored = verdict(lost, cand("gain schedule", 1.2), cand("fixed PID", 1.0), 2.0, "anchored")
+    absolute = verdict(lost, cand("gain schedule", 1.2), cand("fixed PID", 1.0), 2.0, "absolute")
+    assert "controller.anchor_bands" in anchored and "gain_mapping" not in anchored
+    assert "controller.gain_mapping: anchored" in absolute and "anchor_bands" not in absolute
