@@ -10,6 +10,7 @@ import decimal
 import io
 import json
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -183,8 +184,6 @@ def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None
         source = run_dir / rd.SCENARIO
         info = {**json.loads((run_dir / rd.RUN_INFO).read_text()), "resumed": rd.now()}
         if crashed and scenario.tuning.isolation == "auto":
-            import warnings
-
             warnings.warn(f"{run_dir}: the previous run ended abruptly (did the FMU crash it?); the plant now runs "
                           "in a worker process (plant.isolation: process)", stacklevel=2)
             info["isolation"] = "process"
@@ -196,6 +195,11 @@ def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None
         agent = dataclasses.replace(agent, total_timesteps=timesteps)
     if timesteps is not None or seed is not None:
         scenario = dataclasses.replace(scenario, agent=agent)
+    if resume and info.pop("finished", None) and info.get("trained_timesteps", 0) >= agent.total_timesteps \
+            and (run_dir / rd.REPORT).is_file():
+        warnings.warn(f"{run_dir}: finished already ({info['trained_timesteps']} training steps; {rd.REPORT} "
+                      "holds its result); nothing to do (a larger --timesteps trains on)", stacklevel=2)
+        return run_dir
     if not resume:
         write_atomic(run_dir / rd.SCENARIO, scenario_to_yaml(scenario))
     info.update(seed=agent.seed, total_timesteps=agent.total_timesteps, algorithm=agent.algorithm)

@@ -98,6 +98,12 @@ def test_run_directory_is_never_overwritten_and_resume_continues(tmp_path, capsy
     assert main(["tune", str(scenario), "--timesteps", "512", "--out", str(run), "--resume", "--no-progress",
                  "--no-baseline"]) == 0
     assert json.loads((run / "run.json").read_text())["trained_timesteps"] == 512
+    # resuming a finished run to the same budget does nothing and says so (no file is rewritten)
+    files = {p: p.stat().st_mtime_ns for p in run.rglob("*") if p.is_file()}
+    with pytest.warns(UserWarning, match=r"finished already \(512 training steps"):
+        assert main(["tune", str(scenario), "--timesteps", "512", "--out", str(run), "--resume", "--no-progress",
+                     "--no-baseline"]) == 0
+    assert {p: p.stat().st_mtime_ns for p in run.rglob("*") if p.is_file()} == files
 
 
 def test_evaluate_on_another_scenario_writes_a_new_evaluation(tmp_path, capsys):
