@@ -260,7 +260,8 @@ def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None
         metrics["fixed_pid_assessment"] = candidate_summary(fixed_c)
         write_json(run_dir / rd.METRICS, metrics)
         title, _, body = report.partition("\n")
-        report = "\n".join([title, "", verdict(decision, sched_c, fixed_c, limit, scenario.tuning.gain_mapping).rstrip(), "",
+        opening = verdict(decision, sched_c, fixed_c, limit, scenario.tuning.gain_mapping).rstrip()
+        report = "\n".join([title, "", opening, "",
                              candidates_table(sched_c, fixed_c, loop_units(scenario.tuning)), body.lstrip("\n")])
     elif schedule is not None:
         write_schedule_csv(schedule, run_dir / rd.SCHEDULE)
@@ -360,10 +361,10 @@ def _check_schedule_options(trained: Scenario, schedule_by: str, points: int) ->
     fmu = resolve_fmu(trained.tuning.fmu, trained.tuning.fmi_version)
     desc = describe_fmu(fmu)
     v = desc.variable(schedule_by)
-    if v is None or v.type not in ("Real", "Float64"):
-        names = [x.name for x in desc.variables if x.type in ("Real", "Float64")]
+    if v is None or not v.scalar_real:
+        names = [x.name for x in desc.variables if x.scalar_real]
         shown = ", ".join(names[:12]) + (", ..." if len(names) > 12 else "")
-        raise RunError(f"--schedule-by: the plant {fmu.name} has no real variable {schedule_by!r} (got "
+        raise RunError(f"--schedule-by: the plant {fmu.name} has no scalar real variable {schedule_by!r} (got "
                        f"{schedule_by!r}; expected {', '.join(LOOP_SIGNALS)}, <signal>[<loop>], or one of: {shown})")
 
 

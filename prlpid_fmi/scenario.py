@@ -313,13 +313,13 @@ def init_scenario(fmu_path: str | Path, output: Optional[str] = None,
     problems = d.plant_problems()
     if problems:
         raise ScenarioError(f"{fmu_path}: cannot be a plant: {'; '.join(problems)} "
-                            f"(got {d.model_name!r}; expected an FMU with real inputs and outputs)")
+                            f"(got {d.model_name!r}; expected an FMU with scalar real inputs and outputs)")
     start_values = dict(start_values or {})
     try:
         loop = propose_loop(probe(p, output=output, start_values=start_values))
     except PlantError as exc:
         raise ScenarioError(f"{fmu_path}: the step and trim test failed: {exc}") from None
-    tunable = [v for v in d.parameters if v.variability == "tunable" and v.type in ("Real", "Float64")]
+    tunable = [v for v in d.parameters if v.variability == "tunable" and v.scalar_real]
 
     def unit(name):
         v = d.variable(name)

@@ -208,10 +208,10 @@ def test_repeated_key_is_refused_with_both_lines(case, tmp_path):
 # --------------------------------------------------------------------------------------------
 # FMU archives, checked before anything is extracted
 
-def _rezip(tmp_path: Path, transform, name: str = "plant.fmu") -> Path:
-    """A copy of the bundled FirstOrderUnstable FMU (FMI 2.0) with its members passed through
+def _rezip(tmp_path: Path, transform, name: str = "plant.fmu", fmi_version: int = 2) -> Path:
+    """A copy of the bundled FirstOrderUnstable FMU (FMI 2.0, or 3.0) with its members passed through
     transform(name, data) -> [(name, data), ...]."""
-    src = bundled_fmu("FirstOrderUnstable", 2)
+    src = bundled_fmu("FirstOrderUnstable", fmi_version)
     out = tmp_path / name
     with zipfile.ZipFile(src) as zin, zipfile.ZipFile(out, "w", zipfile.ZIP_STORED) as zout:
         for info in zin.infolist():
@@ -459,3 +459,30 @@ def test_random_values_anywhere_give_only_well_formed_lines(tmp_path):
                 match = _LINE.match(line)
                 assert match and match["file"] == str(path), line
     assert refused >= 100  # almost every such edit is a mistake
+
+
+def test_an_fmi3_array_input_is_refused_by_name_at_inspect_and_validate(tmp_path):
+    """An FMI 3 array variable (a <Dimension>) cannot be a loop's input: inspect says why the FMU cannot be a
+    plant, and validate names the variable (before, inspect said "yes" and the first step failed in the FMU)."""
+    from prlpid_fmi.fmu import describe_fmu
+
+    scalar = b'causality="input" start="0.0" />'
+    array = b'causality="input" start="0.0 0.0"><Dimension start="2" /></Float64>'
+
+    def to_array(name, data):
+        if name == MD:
+            assert data.count(scalar) == 1
+            data = data.replace(scalar, array)
+        return [(name, data)]
+
+    fmu = _rezip(tmp_path, to_array, fmi_version=3)
+    d = describe_fmu(fmu)
+    assert d.variable("u").dimensions == 1 and d.variable("y").dimensions == 0
+    assert d.plant_problems() == ["no scalar real inputs (only arrays: u)"]
+    doc = _raw("first_order")
+    doc["plant"]["fmu"] = str(fmu)
+    doc["strategies"]["forecast_horizon"] = 0
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(_write(tmp_path / "array.yaml", doc))
+    assert "plant.loops[0].input: 'u' is an array variable (FMI 3 dimensions) (got 'u'; expected a scalar real" \
+        in str(info.value)

@@ -496,7 +496,8 @@ def test_a_missing_or_broken_fmu_is_one_line_naming_the_file_once(command, conte
 
 @pytest.mark.parametrize("option, expected", [
     (["--points", "0"], "--points: must be at least 1 (got 0;"),
-    (["--schedule-by", "banana"], "--schedule-by: the plant FirstOrderUnstable.fmu has no real variable 'banana'"),
+    (["--schedule-by", "banana"],
+     "--schedule-by: the plant FirstOrderUnstable.fmu has no scalar real variable 'banana'"),
     (["--schedule-by", "setpoint[q]"], "--schedule-by: no loop measures 'q' (got 'setpoint[q]'; expected "
                                        "setpoint[<loop>] with one of the loops: y)")])
 def test_export_names_a_bad_schedule_option_and_writes_nothing(option, expected, trained_run, tmp_path, capsys):

@@ -24,6 +24,12 @@ class FmuVariable:
     min: float | None = None      # declared range and nominal value (modelDescription), FMU units
     max: float | None = None
     nominal: float | None = None
+    dimensions: int = 0           # FMI 3 array variables: number of <Dimension> elements (0: a scalar)
+
+    @property
+    def scalar_real(self) -> bool:
+        """A scalar Real / Float64: the only kind a loop, a parameter or a scheduling variable can be."""
+        return self.type in REAL_TYPES and not self.dimensions
 
 
 @dataclass(frozen=True)
@@ -52,7 +58,11 @@ class FmuDescription:
         return None
 
     def _names(self, causality: str) -> tuple[str, ...]:
-        return tuple(v.name for v in self.variables if v.causality == causality and v.type in REAL_TYPES)
+        return tuple(v.name for v in self.variables if v.causality == causality and v.scalar_real)
+
+    def _arrays(self, causality: str) -> tuple[str, ...]:
+        return tuple(v.name for v in self.variables if v.causality == causality and v.type in REAL_TYPES
+                     and v.dimensions)
 
     @property
     def input_names(self) -> tuple[str, ...]:
@@ -75,6 +85,9 @@ class FmuDescription:
                              f"outputs: {', '.join(self.output_names) or 'none'}")
         if v.type not in REAL_TYPES:
             raise PlantError(f"{self.path}: variable {name!r} is {v.type}, expected a real (Real/Float64) to use as {role}")
+        if v.dimensions:
+            raise PlantError(f"{self.path}: variable {name!r} is an array (FMI 3 dimensions), expected a scalar real "
+                             f"to use as {role}")
         if causalities is not None and v.causality not in causalities:
             raise PlantError(f"{self.path}: variable {name!r} has causality {v.causality!r}, "
                              f"expected {' or '.join(causalities)} to use as {role}")
@@ -85,10 +98,11 @@ class FmuDescription:
         problems = []
         if not (self.co_simulation or self.model_exchange):
             problems.append("neither a co-simulation nor a model-exchange interface")
-        if not self.input_names:
-            problems.append("no real inputs")
-        if not self.output_names:
-            problems.append("no real outputs")
+        for causality in ("input", "output"):
+            if not self._names(causality):
+                arrays = self._arrays(causality)
+                problems.append(f"no scalar real {causality}s (only arrays: {', '.join(arrays)})" if arrays
+                                else f"no real {causality}s")
         return problems
 
     def prior_problems(self) -> list[str]:
@@ -144,7 +158,8 @@ def _describe(path: str, mtime: float) -> FmuDescription:
     variables = tuple(
         FmuVariable(v.name, int(v.valueReference), v.causality, v.variability, v.type,
                     v.start, getattr(v, "unit", None) or (v.declaredType.unit if v.declaredType is not None else None),
-                    v.description or "", number(v, "min"), number(v, "max"), number(v, "nominal"))
+                    v.description or "", number(v, "min"), number(v, "max"), number(v, "nominal"),
+                    len(getattr(v, "dimensions", None) or ()))
         for v in md.modelVariables)
     step = md.defaultExperiment.stepSize if md.defaultExperiment is not None else None
     return FmuDescription(

@@ -18,9 +18,8 @@ from typing import Any, Optional
 from pydantic import ValidationInfo
 
 from ..errors import PlantError
+from ..fmu.description import REAL_TYPES
 from .types import problem
-
-REAL_TYPES = ("Real", "Float64")
 
 
 @dataclass
@@ -100,7 +99,7 @@ def check_variable(desc, name: str, causalities: tuple[str, ...], role: str,
     """`name` is a real variable of the FMU with one of `causalities` (and, for parameters, `variabilities`)."""
     v = desc.variable(name)
     wanted = " or ".join(causalities)
-    pool = [x.name for x in desc.variables if x.causality in causalities and x.type in REAL_TYPES
+    pool = [x.name for x in desc.variables if x.causality in causalities and x.scalar_real
             and (variabilities is None or x.causality != "parameter" or x.variability in variabilities)]
     if v is None:
         raise problem(f"the FMU {desc.path.name} has no variable {name!r}",
@@ -110,6 +109,9 @@ def check_variable(desc, name: str, causalities: tuple[str, ...], role: str,
                       f"{role}: {', '.join(pool) or 'none'}")
     if v.type not in REAL_TYPES:
         raise problem(f"{name!r} is a {v.type} variable", f"a real (Real/Float64) variable as {role}")
+    if v.dimensions:
+        raise problem(f"{name!r} is an array variable (FMI 3 dimensions)",
+                      f"a scalar real variable as {role}: {', '.join(pool) or 'none'}")
     if variabilities is not None and v.causality == "parameter" and v.variability not in variabilities:
         raise problem(f"{name!r} is a {v.variability} parameter and cannot change during a run",
                       "an input or a tunable parameter")
