@@ -4,7 +4,8 @@ Rule (one place; explained in docs/architecture.md "Deliverable"):
 - A controller is eligible when it never diverged (evaluation and every Monte-Carlo sample) and its
   worst peak sensitivity Ms over its operating points is at most `max_sensitivity`.
 - Its score is the evaluation's ISE plus the mean ISE over the Monte-Carlo samples.
-- The schedule is deployed when it is eligible, scores below the fixed PID, and its total variation
+- The schedule is deployed when it is eligible, scores at least MIN_IMPROVEMENT below the fixed PID (a
+  table of gains must earn its place over one set of gains: a tie is not a win), and its total variation
   of u is at most TOTAL_VARIATION_LIMIT times the fixed PID's (no ISE bought by chattering);
   otherwise the fixed PID when it is eligible; otherwise nothing is deployable.
 """
@@ -14,6 +15,7 @@ import math
 from dataclasses import dataclass, field
 
 TOTAL_VARIATION_LIMIT = 1.5
+MIN_IMPROVEMENT = 0.01  # the schedule's score must be at most (1 - this) x the fixed PID's
 
 
 @dataclass
@@ -101,8 +103,9 @@ def choose(schedule: Candidate | None, fixed: Candidate, max_sensitivity: float)
     if schedule is not None:
         problems = schedule.problems(max_sensitivity)
         if not problems:
-            if not schedule.score < fixed.score:
-                problems.append(f"it does not beat the fixed PID on ISE ({schedule.score:.4g} vs {fixed.score:.4g})")
+            if not schedule.score <= (1 - MIN_IMPROVEMENT) * fixed.score:
+                problems.append(f"it does not beat the fixed PID on ISE by {MIN_IMPROVEMENT:.0%} or more "
+                                f"({schedule.score:.4g} vs {fixed.score:.4g})")
             tv_s, tv_f = _total_variation(schedule), _total_variation(fixed)
             if tv_s > TOTAL_VARIATION_LIMIT * tv_f:
                 problems.append(f"its control signal varies {tv_s / tv_f:.1f}x as much as the fixed PID's "
@@ -149,6 +152,8 @@ def verdict(decision: Decision, schedule: Candidate | None, fixed: Candidate, ma
         s, f = schedule, fixed
         if math.isfinite(s.overall("Overshoot")) and f.overall("Overshoot") > 0:
             shape = f"its overshoot {_ratio(s.overall('Overshoot'), f.overall('Overshoot'))}"
+        elif math.isfinite(s.overall("Overshoot")):  # the fixed PID does not overshoot: no ratio
+            shape = f"its overshoot {s.overall('Overshoot'):.2g} % (fixed PID {f.overall('Overshoot'):.2g} %)"
         else:  # no setpoint step: disturbance rejection
             shape = f"its peak deviation {_ratio(s.overall('PeakDeviation'), f.overall('PeakDeviation'))}"
         lines.append(f"**Deploy the adaptive gain schedule** (schedule.csv, a plain gain-scheduled PID; no neural "

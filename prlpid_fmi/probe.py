@@ -40,8 +40,9 @@ def is_disturbance_like(name: str, description: str = "") -> bool:
 class StepResponse:
     """One input's open-loop step response on one output, around the start values.
 
-    kind: "stable" | "unstable" | "integrating" | "none" (the input does not move the output).
-    gain: Δy/Δu at steady state [output units per input unit] (stable), the formal G(0) (unstable).
+    kind: "stable" | "unstable" | "integrating" | "static" (the output follows the input within one step: no
+    dynamics on the probe's grid) | "none" (the input does not move the output).
+    gain: Δy/Δu at steady state [output units per input unit] (stable, static), the formal G(0) (unstable).
     time_constant_s: the slowest time constant (stable) or 1/growth rate (unstable), s.
     growth_rate_per_s: λ of an unstable response (1/s); rate: dy/dt per input unit of an integrating one.
     """
@@ -71,7 +72,7 @@ class StepResponse:
     def output_change_per_unit(self) -> float:
         """How much one input unit moves the output: |gain| (stable, unstable), |rate| x 10 T_sample
         (integrating: the change over ten samples), 0 (none)."""
-        if self.kind in ("stable", "unstable"):
+        if self.kind in ("stable", "unstable", "static"):
             return abs(self.gain)
         if self.kind == "integrating":
             return abs(self.rate) * 10 * self.sample_time_s
@@ -86,6 +87,8 @@ class StepResponse:
                     f"(time constant {self.time_constant_s:.4g} s), formal steady-state gain {self.gain:.4g}")
         elif self.kind == "integrating":
             what = f"integrating, rate {self.rate:.4g} per s per input unit"
+        elif self.kind == "static":
+            what = f"static, gain {self.gain:.4g} (no dynamics at {self.sample_time_s:g} s steps)"
         else:
             return f"{self.input}: does not move {self.output}"
         dead = f", dead time {self.dead_time_s:.4g} s" if self.dead_time_s > 0 else ""
@@ -158,6 +161,8 @@ def _analyse(t: np.ndarray, dy: np.ndarray, dt: float, du: float, y_scale: float
         return "none", None, None, None, None, 0.0
     nz = int(np.argmax(np.abs(dy) > 1e-6 * scale))           # a transport delay: Δy stays at zero
     dead = (nz - 1) * dt if nz - 1 >= 2 else 0.0
+    if np.all(np.abs(dy[nz:] - dy[-1]) <= 1e-6 * scale):      # at its final value from the first step it moves
+        return "static", float(dy[-1] / du), None, None, None, dead
     data = dy[max(nz - 1, 0):] / scale
     best = None
     for order in range(1, min(max_order, (len(data) - 2) // 3) + 1):
@@ -214,6 +219,8 @@ def probe_input(path, name: str, output: str, inputs: Sequence[str], u0: Sequenc
         t = dt * np.arange(n)
         kind, gain, tau, growth, rate, dead = _analyse(t, stepped[:n] - trim[:n], dt, du, abs(y0))
         result = (dt, t, trim[:n], stepped[:n], kind, gain, tau, growth, rate, dead)
+        if kind == "static":  # no time scale to resolve: a finer grid would show the same
+            break
         if kind in ("stable", "unstable"):
             target = _snap(tau / SAMPLES_PER_TIME_CONSTANT)
             if n < SAMPLES // 2:  # blew up early: finer grid
@@ -338,6 +345,8 @@ def _model_response(r: StepResponse) -> Optional[np.ndarray]:
         return -r.gain * r.du * np.expm1(np.minimum(r.growth_rate_per_s * t, 700))
     if r.kind == "integrating":
         return r.rate * r.du * t
+    if r.kind == "static":
+        return np.where(r.time_s >= r.dead_time_s, r.gain * r.du, 0.0)
     return None
 
 
@@ -419,6 +428,8 @@ def propose_loop(result: ProbeResult) -> LoopProposal:
     elif r.kind == "unstable":
         b = -r.gain * r.growth_rate_per_s          # high-frequency gain of b/(s - λ)
         u_trim = r.u0 - s0 / b
+    elif r.kind == "static":
+        u_trim = r.u0                              # y0 was read at u0, and nothing drifts
     else:
         u_trim = r.u0 - s0 / r.rate
     u_trim = _round(u_trim, 4)
@@ -438,9 +449,9 @@ def propose_loop(result: ProbeResult) -> LoopProposal:
         why["u_limits"] = (f"ADJUST to the actuator: ±{_round(reach)} around the trim input {u_trim:g} that holds "
                            f"{result.output} = {y0:.4g} (probe)")
     # setpoint range the actuator can hold at steady state
-    if r.kind in ("stable", "unstable"):
+    if r.kind in ("stable", "unstable", "static"):
         held = sorted(y0 + r.gain * (u - u_trim) for u in u_limits)
-        shrink = 0.1 if r.kind == "stable" else 0.25
+        shrink = 0.25 if r.kind == "unstable" else 0.1
         width = held[1] - held[0]
         sp = [held[0] + shrink * width, held[1] - shrink * width]
         why["setpoint_range"] = (f"{100 * (1 - 2 * shrink):.0f} % of what u_limits hold in steady state "
@@ -467,6 +478,15 @@ def propose_loop(result: ProbeResult) -> LoopProposal:
         td_max = max(L, 2 * ts)
         sign = math.copysign(1.0, K)
         why["gains"] = f"around SIMC for gain {K:.4g}, T = {T:.4g} s, dead time {L:.3g} s (Kp {kc:.3g}, Ti {ti:.3g} s)"
+    elif r.kind == "static":
+        K = r.gain
+        ts = _snap(r.sample_time_s)
+        why["sample_time"] = (f"the probe's step: {result.output} follows {r.input} within one step, so there is no "
+                              "time scale to choose it from; ADJUST to the controller's period")
+        kc, ti, td_max = 0.3 / abs(K), ts, ts  # with the step's delay: closed-loop poles 0.78 and -0.38
+        sign = math.copysign(1.0, K)
+        why["gains"] = (f"a static gain {K:.4g}: integral action does the work (Kp {kc:.3g}, Ti {ti:.3g} s, one "
+                        "step)")
     elif r.kind == "unstable":
         lam = r.growth_rate_per_s
         b = -r.gain * lam

@@ -57,3 +57,12 @@ def test_the_advice_after_a_lost_schedule_names_a_setting_of_the_runs_gain_map()
     absolute = verdict(lost, cand("gain schedule", 1.2), cand("fixed PID", 1.0), 2.0, "absolute")
     assert "controller.anchor_bands" in anchored and "gain_mapping" not in anchored
     assert "controller.gain_mapping: anchored" in absolute and "anchor_bands" not in absolute
+
+
+def test_a_schedule_must_beat_the_fixed_pid_by_one_percent_to_be_deployed():
+    """1.5 % better: deployed; 0.5 % better: a tie (one set of gains is simpler than a table), the fixed PID."""
+    fixed = cand("fixed PID", 2.0)
+    assert choose(cand("gain schedule", 1.97), fixed, 2.0).deploy == "gain schedule"
+    tie = choose(cand("gain schedule", 1.99), fixed, 2.0)
+    assert tie.deploy == "fixed PID"
+    assert "by 1% or more (1.99 vs 2)" in tie.reasons[0]

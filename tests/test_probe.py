@@ -5,7 +5,8 @@ SecondOrderUnstable's poles (2.9781 ± j sqrt(4·279.03 - 2.9781²)) / (2·279.0
 linearised by hand around its steady state for q_in = 25 cm³/s; two plants with unusual scales built
 from tests/plants/: a motor inertia J = 0.002 kg·m² with a +10 N·m load (an integrator, 1/J = 500 rad/s²
 per N·m; holding any speed needs -10 N·m) and a room with an hour-long time constant (R C = 3600 s,
-gain R = 0.01 K/W, starting at 16 °C, 5 °C outside, the outside temperature being its first input).
+gain R = 0.01 K/W, starting at 16 °C, 5 °C outside, the outside temperature being its first input), and a
+valve without dynamics (q = 2.5 x opening: the output follows the input within one step).
 """
 from pathlib import Path
 
@@ -28,7 +29,8 @@ PLANTS = Path(__file__).parent / "plants"
 @pytest.fixture(scope="module")
 def unusual(tmp_path_factory):
     out = tmp_path_factory.mktemp("plants")
-    return {name: build_fmu(name, out_dir=out, source_dir=PLANTS / name) for name in ("Inertia", "RoomHeating")}
+    names = ("Inertia", "RoomHeating", "StaticValve")
+    return {name: build_fmu(name, out_dir=out, source_dir=PLANTS / name) for name in names}
 
 
 def test_first_order_unstable_growth_rate_and_gain():
@@ -94,6 +96,29 @@ def test_room_hour_long_time_constant_init_chooses_the_heater(unusual, tmp_path)
     text = init_scenario(unusual["RoomHeating"])
     assert "T_outside: looks like a disturbance" in text and "input: P_heat" in text
     _settles(text, tmp_path / "room.yaml")
+
+
+def test_a_plant_without_dynamics_is_static_and_init_gives_a_working_integral_controller(unusual, tmp_path):
+    """Before, the probe fitted ever faster lags to a feedthrough and proposed a 1 µs sample time."""
+    r = probe(unusual["StaticValve"]).response("opening")
+    assert r.kind == "static" and r.gain == pytest.approx(2.5, rel=1e-9) and r.time_constant_s is None
+    loop = propose_loop(probe(unusual["StaticValve"]))
+    assert loop.sample_time_s == pytest.approx(0.1)                     # the FMU's default step, not 1e-6 s
+    assert loop.trim_input == pytest.approx(0.4) and loop.u_limits == (0.0, 1.0)
+    # one-step delay, u = Kp e + integral: 0.3 / Kv and Ti = Ts put the closed-loop poles at 0.78 and -0.38
+    kp_low, kp_high, _ = loop.gains["Kp"]
+    ti_low, ti_high, _ = loop.gains["Ti"]
+    assert kp_low < 0.3 / 2.5 < kp_high and ti_low < loop.sample_time_s < ti_high
+    text = init_scenario(unusual["StaticValve"])
+    # those gains on the FMU: the error decays as the dominant root of z^2 - 0.4 z - 0.3, derived by hand from
+    # y_(k+1) = 2.5 u_k, u_k = Kp e_k + (Kp Ts / Ti) sum_(j<=k) e_j
+    (tmp_path / "valve.yaml").write_text(text)
+    s = load_scenario(tmp_path / "valve.yaml")
+    _, traj = evaluate_gains(lambda core: ([0.12], [0.1], [0.0], None), s.evaluation_config(),
+                             intervals=s.evaluation.intervals)
+    e = traj["setpoint"][:20, 0] - traj["measurement"][:20, 0]
+    assert e[15] / e[14] == pytest.approx(max(np.roots([1.0, -0.4, -0.3]).real), rel=1e-3)
+    _settles(text, tmp_path / "valve.yaml")
 
 
 def _settles(text: str, path: Path) -> None:
