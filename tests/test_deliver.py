@@ -66,3 +66,11 @@ def test_a_schedule_must_beat_the_fixed_pid_by_one_percent_to_be_deployed():
     tie = choose(cand("gain schedule", 1.99), fixed, 2.0)
     assert tie.deploy == "fixed PID"
     assert "by 1% or more (1.99 vs 2)" in tie.reasons[0]
+
+
+def test_the_verdict_gives_the_overshoot_itself_when_the_fixed_pid_has_none():
+    schedule = Candidate("gain schedule", metrics(0.5, overshoot=4.0), [], [margins(1.5)], [0.0])
+    fixed = Candidate("fixed PID", metrics(1.0, overshoot=0.0), [], [margins(1.5)], [0.0])
+    text = verdict(choose(schedule, fixed, 2.0), schedule, fixed, 2.0)
+    assert "its ISE is 0.50x the fixed PID's, its overshoot 4 % (fixed PID 0 %)" in text
+    assert "peak deviation" not in text
