@@ -167,7 +167,7 @@ def verdict(decision: Decision, schedule: Candidate | None, fixed: Candidate, ma
             the_map = ("wider controller.anchor_bands" if gain_mapping == "anchored" else
                        "the anchored gain map (controller.gain_mapping: anchored, which starts training at the fixed "
                        "PID)")
-            lines.append(f"The adaptive schedule lost. To try: a longer training budget (--timesteps), {the_map}, or "
+            lines.append(f"The adaptive schedule was not deployed (why: below). To try: a longer training budget (--timesteps), {the_map}, or "
                          "training.randomize over the parameters that vary in your plant.")
     else:
         lines.append(f"**Nothing here is safe to deploy**: no controller meets the robustness limit Ms <= "
