@@ -167,8 +167,9 @@ def verdict(decision: Decision, schedule: Candidate | None, fixed: Candidate, ma
             the_map = ("wider controller.anchor_bands" if gain_mapping == "anchored" else
                        "the anchored gain map (controller.gain_mapping: anchored, which starts training at the fixed "
                        "PID)")
-            lines.append(f"The adaptive schedule was not deployed (why: below). To try: a longer training budget (--timesteps), {the_map}, or "
-                         "training.randomize over the parameters that vary in your plant.")
+            lines.append(f"The adaptive schedule was not deployed (why: below). To try: a longer training budget "
+                         f"(--timesteps), {the_map}, or training.randomize over the parameters that vary in your "
+                         "plant.")
     else:
         lines.append(f"**Nothing here is safe to deploy**: no controller meets the robustness limit Ms <= "
                      f"{max_sensitivity:g} without diverging. Narrow the gain ranges, lower the sample time, or "

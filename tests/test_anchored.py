@@ -121,7 +121,7 @@ def test_tiny_budget_deploys_the_fixed_pid_and_says_so(tmp_path, capsys):
     metrics = json.loads((run / "metrics.json").read_text())
     assert metrics["deployed"] == "fixed PID"
     report = (run / "report.md").read_text()
-    assert "Deploy the fixed PID" in report and "The adaptive schedule lost" in report
+    assert "Deploy the fixed PID" in report and "The adaptive schedule was not deployed" in report
     fixed = json.loads((run / "fixed_pid.json").read_text())["gains"]
     rows = [l for l in (run / "schedule.csv").read_text().splitlines() if l and not l.startswith("#")]
     assert len(rows) == 2  # header + one row: the fixed PID
