@@ -198,7 +198,10 @@ def measure(traj: Trajectory, config: TuningConfig, intervals=None) -> dict:
                               traj.control_signal[:n], config.sample_time_s, intervals=windows or None,
                               loop_names=[l.output for l in config.loops],
                               events=sorted({d.start_step for d in config.disturbances}),
-                              u_range=[l.u_max - l.u_min for l in config.loops], command=command)
+                              u_range=[l.u_max - l.u_min for l in config.loops], command=command,
+                              # the measurement noise is known here; actuator noise moves y by an amount only
+                              # the data can tell (then the estimate)
+                              noise_std=config.measurement_noise_std if config.actuator_noise_std == 0 else None)
     for iv in metrics["intervals"]:
         if (iv["start_step"], iv["end_step"]) in cut:
             iv["requested_end_step"] = cut[(iv["start_step"], iv["end_step"])]

@@ -37,9 +37,11 @@ linearly interpolated between samples.
 - RiseTime [s]: from the first time the response covers 10 % of the step (from the base value) to
   the first time it covers 90 %.
 - SettlingTime [s]: from the step until |e| <= band for the rest of the segment (0 if it always is),
-  band = max(2 % of |delta|, 5 * noise), where noise = std(diff(y)) / sqrt(2) over the segment's
-  last 10 % (white measurement noise of std s gives std(diff) = s*sqrt(2); a smooth response gives
-  almost 0): measurement noise cannot keep a settled loop "unsettled".
+  band = max(2 % of |delta|, 5 * noise), where noise is the measurement noise's std when the caller
+  knows it (``noise_std``: a simulation, 0 without noise), else std(diff(y)) / sqrt(2) over the
+  segment's last 10 % (white measurement noise of std s gives std(diff) = s*sqrt(2); a smooth response
+  gives almost 0): measurement noise cannot keep a settled loop "unsettled". Give noise_std whenever it
+  is known: the estimate cannot tell noise from a controller that chatters, and widens the band for it.
 - SteadyStateError [y-unit]: mean |e| over the last 10 % of the segment's samples (at least one).
 
 Regulation segments: a segment that does not start with a setpoint step (zero step size, e.g. a
@@ -152,16 +154,21 @@ def _noise(y_tail: np.ndarray) -> float:
 
 def _segment_metrics(t: np.ndarray, r_new: float, base: float, y: np.ndarray, settling_threshold: float,
                      rise_time_limits: tuple[float, float], steady_state_fraction: float,
-                     regulation: bool = False, first: bool = False) -> dict:
-    """Step (or regulation) metrics of one segment: t, y (m,) from its first sample on; step from base to r_new."""
+                     regulation: bool = False, first: bool = False, noise_std: float | None = None) -> dict:
+    """Step (or regulation) metrics of one segment: t, y (m,) from its first sample on; step from base to r_new;
+    noise_std: the measurement noise's known std [y-unit] (None: estimated from the segment's tail)."""
     m = y.size
+
+    def noise(y_tail: np.ndarray) -> float:
+        return _noise(y_tail) if noise_std is None else noise_std
+
     nan = math.nan
     delta = r_new - base
     zero = regulation or _zero_step(delta, r_new, base)
     if not zero and first and m >= 3 and np.all(np.isfinite(y)):
         # the first segment steps from the initial *measurement*: a step no larger than the noise
         # (a plant that starts at its setpoint, measured with noise) is regulation, not a step
-        zero = abs(delta) <= NOISE_BAND * _noise(y[-max(math.ceil(steady_state_fraction * m), 3):])
+        zero = abs(delta) <= NOISE_BAND * noise(y[-max(math.ceil(steady_state_fraction * m), 3):])
     if m < MIN_SEGMENT_STEPS:
         return dict(Overshoot=nan, RiseTime=nan, SettlingTime=nan, SteadyStateError=nan, PeakDeviation=nan,
                     RecoveryTime=nan)
@@ -173,7 +180,7 @@ def _segment_metrics(t: np.ndarray, r_new: float, base: float, y: np.ndarray, se
     abs_e = np.abs(r_new - y)
     n_tail = max(1, math.ceil(steady_state_fraction * m))
     sse = float(np.mean(abs_e[-n_tail:]))
-    noise_band = NOISE_BAND * _noise(y[-max(n_tail, 3):])
+    noise_band = NOISE_BAND * noise(y[-max(n_tail, 3):])
     if zero:
         peak = float(np.max(abs_e))
         recovery = _time_in_band(t, abs_e, max(RECOVERY_FRACTION * peak, noise_band))
@@ -258,7 +265,7 @@ def compute_metrics(time_s, setpoint, measurement, control_signal, sample_time_s
                     intervals: Sequence[tuple[int, int]] | None = None,
                     loop_names: Sequence[str] | None = None, events: Sequence[int] | None = None, *,
                     u_range: Sequence[float] | float | None = None, command=None,
-                    settling_threshold: float = 0.02, rise_time_limits: tuple[float, float] = (0.1, 0.9),
+                    noise_std: Sequence[float] | float | None = None, settling_threshold: float = 0.02, rise_time_limits: tuple[float, float] = (0.1, 0.9),
                     steady_state_fraction: float = 0.1) -> dict:
     """Closed-loop metrics of one run (see the module docstring for definitions and the result layout).
 
@@ -271,6 +278,8 @@ def compute_metrics(time_s, setpoint, measurement, control_signal, sample_time_s
     None or infinite: 1 % of max |u| over the run is the threshold instead.
     command: the controller's command (n,) or (n, n_loops) [input units] that Chatter is measured on
     (default: control_signal).
+    noise_std: the measurement noise's std per loop [y-unit] (scalar or (n_loops,); 0: none) when known,
+    as in a simulation; None: estimated from each segment's tail (see the module docstring).
     settling_threshold, rise_time_limits, steady_state_fraction: 2 % band, 10 %/90 % levels, last
     10 % of a segment (fractions of the step size / segment length).
     Returns a dict of plain Python floats/ints/strings/lists, serialisable with json.dumps.
@@ -319,6 +328,12 @@ def compute_metrics(time_s, setpoint, measurement, control_signal, sample_time_s
         ranges = [float(v) for v in np.broadcast_to(np.asarray(u_range, dtype=float), (n_loops,))]
         if any(math.isnan(v) or v <= 0 for v in ranges):
             raise ValueError(f"u_range must be > 0 (or inf) per loop, got {ranges}")
+    if noise_std is None:
+        noise_stds = [None] * n_loops
+    else:
+        noise_stds = [float(v) for v in np.broadcast_to(np.asarray(noise_std, dtype=float), (n_loops,))]
+        if not all(math.isfinite(v) and v >= 0 for v in noise_stds):
+            raise ValueError(f"noise_std must be finite and >= 0 per loop, got {noise_stds}")
     cmd = u if command is None else _as_2d(command, n, "command")
     if cmd.shape[1] != n_loops:
         raise ValueError(f"command must have {n_loops} loop(s), got {cmd.shape[1]}")
@@ -339,7 +354,7 @@ def compute_metrics(time_s, setpoint, measurement, control_signal, sample_time_s
             base = y[0, i] if s == 0 else r[s - 1, i]
             m = _segment_metrics(t[s:end], float(r[s, i]), float(base), y[s:end, i], settling_threshold,
                                  tuple(rise_time_limits), steady_state_fraction, regulation=s in event_starts,
-                                 first=s == 0)
+                                 first=s == 0, noise_std=noise_stds[i])
             seg = {"loop": name, "start_step": int(s), "end_step": int(end), "start_time_s": float(t[s]),
                    "StepSize": float(r[s, i] - base) if math.isfinite(base) else math.nan, **m}
             loop_segments.append(seg)

@@ -299,3 +299,46 @@ def test_chatter_is_measured_on_the_command():
     assert res["overall"]["Chatter"] == 0.0
     assert res["overall"]["TotalVariation"] == pytest.approx(np.sum(np.abs(np.diff(applied))))
     assert compute_metrics(t, np.zeros(8), np.zeros(8), applied, 0.1, u_range=10.0)["overall"]["Chatter"] == 1.0
+
+
+def test_a_known_noise_std_keeps_a_chattering_response_unsettled():
+    """y jumps from 0 to 1 ± 0.1, alternating every sample (a controller that chatters, no noise).
+    Estimated from the data, that alternation looks like noise of std 0.1 and widens the band to 0.5, so
+    the loop "settles" within one sample; told that there is no noise (noise_std=0), the band is 2 % of
+    the step and the response never settles. noise_std = 0.03: band 0.15, |e| = 0.1 from the first sample
+    on; the crossing of |e| from 1 to 0.1 is interpolated at (1 - 0.15) / (1 - 0.1) of the first sample."""
+    n, ts = 100, 0.1
+    t = ts * np.arange(n)
+    y = 1.0 + 0.1 * (-1.0) ** np.arange(n)
+    y[0] = 0.0
+    r, u = np.ones(n), np.zeros(n)
+    estimated = compute_metrics(t, r, y, u, ts)["overall"]["SettlingTime"]
+    assert estimated < ts
+    assert compute_metrics(t, r, y, u, ts, noise_std=0.0)["overall"]["SettlingTime"] == math.inf
+    assert compute_metrics(t, r, y, u, ts, noise_std=0.03)["overall"]["SettlingTime"] == pytest.approx(
+        ts * (1 - 0.15) / (1 - 0.1))
+    with pytest.raises(ValueError, match="noise_std"):
+        compute_metrics(t, r, y, u, ts, noise_std=-1.0)
+
+
+def test_the_evaluation_does_not_count_a_chattering_loop_as_settled():
+    """Kp alternating 3 / 20 every sample on 1/(s - 1) (no noise in the scenario): y keeps jumping by
+    about ±7 % of the step. The evaluation passes the scenario's noise (none), so it never settles; the
+    estimate from the data alone would have called it settled after 0.76 s."""
+    import itertools
+
+    from prlpid_fmi.evaluate import evaluate_gains
+    from prlpid_fmi.presets import scenario_path
+    from prlpid_fmi.scenario import load_scenario
+
+    s = load_scenario(scenario_path("first_order"))
+    kps = itertools.cycle([3.0, 20.0])
+    m, traj = evaluate_gains(lambda core: ([next(kps)], [1.0], [0.0], None), s.evaluation_config(),
+                             intervals=s.evaluation.intervals)
+    assert not m["terminated"] and m["overall"]["SettlingTime"] == math.inf
+    n = len(traj.measurement)
+    e_tail = traj.setpoint[n - 20:, 0] - traj.measurement[n - 20:, 0]
+    assert np.max(np.abs(e_tail)) > 0.05                                   # it really does not settle
+    estimated = compute_metrics(traj.time_s[:n], traj.setpoint[:n, 0], traj.measurement[:n, 0],
+                                traj.control_signal[:n, 0], 0.1)["overall"]["SettlingTime"]
+    assert estimated < 2.0
