@@ -166,7 +166,7 @@ def test_bundled_sweeps_are_the_paper_studies():
         return [(v.scenario.agent.algorithm, v.scenario.tuning.forecast_horizon, v.scenario.tuning.smoothing)
                 for v in load_sweep(resolve_sweep(name)).variants]
 
-    assert knobs("fig3_algorithms") == [("ppo", 3, "era"), ("ppo", 0, "none"), ("sac", 0, "none"), ("td3", 0, "none")]
+    assert knobs("fig3_algorithms") == [("ppo", 3, "era"), ("ppo", 0, "none"), ("td3", 0, "none"), ("sac", 0, "none")]
     assert [k[1] for k in knobs("fig4_5_forecast_horizon")] == [0, 1, 3, 5, 10]
     assert [k[2] for k in knobs("fig6_smoothing")] == ["none", "sma", "lwma", "era"]
     ablation = {("ppo", 0, "none"), ("ppo", 3, "none"), ("ppo", 0, "era"), ("ppo", 3, "era")}
