@@ -13,6 +13,7 @@ import json
 import math
 import os
 import textwrap
+import types
 from pathlib import Path
 
 import pytest
@@ -23,7 +24,7 @@ from prlpid_fmi.errors import PrlPidError
 from prlpid_fmi.scenario import load_scenario
 from prlpid_fmi.sweep import bundled_sweep_names, load_sweep, resolve_sweep, run_sweep, trial_status
 from prlpid_fmi.sweep.runner import Trial, run_trial
-from prlpid_fmi.sweep.summary import aggregate, band, mean_ci
+from prlpid_fmi.sweep.summary import aggregate, band, curve_seeds, mean_ci
 
 # the tiniest budget that still trains, tunes a fixed PID and evaluates every controller
 TINY = """\
@@ -201,6 +202,11 @@ def test_statistics_against_hand_computation():
     grid, m, s = band([([0.0, 10.0], [0.0, 10.0]), ([0.0, 5.0, 12.0], [2.0, 7.0, 14.0])], points=3)
     assert list(grid) == [0.0, 5.0, 10.0]  # the steps both curves cover
     assert list(m) == [1.0, 6.0, 11.0] and list(s) == [1.0, 1.0, 1.0]
+    # a variant's band comes from its finished trials once one has finished (an interrupted sweep: an unfinished
+    # trial would cut the finished curves to its few steps); before that, from every seed
+    sweep = types.SimpleNamespace(seeds=(0, 1, 2, 3, 4))
+    assert curve_seeds(sweep, "SAC", {"SAC": [0], "TD3": [0, 1]}) == (0,)
+    assert curve_seeds(sweep, "SAC", {"TD3": [0, 1]}) == (0, 1, 2, 3, 4)
 
 
 # -- running ---------------------------------------------------------------------------------------

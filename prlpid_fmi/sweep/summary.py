@@ -240,7 +240,15 @@ def band(curves: list[tuple[np.ndarray, np.ndarray]], points: int = 200):
     return grid, ys.mean(axis=0), ys.std(axis=0)
 
 
-def plot_learning_curves(sweep, out: Path, path: Path) -> Path:
+def curve_seeds(sweep, variant: str, finished: dict) -> tuple:
+    """The seeds whose learning curves a variant's band is drawn from: its finished trials, or, before any
+    has finished, every seed (the band covers only the steps all its curves reach, so an unfinished
+    trial beside finished ones would cut their curves short)."""
+    return tuple(finished.get(variant) or sweep.seeds)
+
+
+def plot_learning_curves(sweep, out: Path, path: Path, finished: dict | None = None) -> Path:
+    """finished: {variant: seeds of its finished trials} (see curve_seeds; None: every seed)."""
     import matplotlib.pyplot as plt
 
     from ..plots import _save
@@ -248,7 +256,8 @@ def plot_learning_curves(sweep, out: Path, path: Path) -> Path:
     fig, ax = plt.subplots(figsize=(9, 5))
     drawn = 0
     for i, v in enumerate(sweep.variants):
-        curves = [c for c in (seed_curve(out / v.name / f"seed{s}" / rd.MONITOR) for s in sweep.seeds) if c]
+        seeds = curve_seeds(sweep, v.name, finished or {})
+        curves = [c for c in (seed_curve(out / v.name / f"seed{s}" / rd.MONITOR) for s in seeds) if c]
         if not curves:
             continue
         grid, mean, std = band(curves)
@@ -335,6 +344,6 @@ def write_summary(sweep, out: Path, trials, failed: list[str] = ()) -> list[Path
                                                           "ended_early"))),
              write_atomic(out / "summary.csv", _csv(stats, SUMMARY_COLUMNS)),
              write_atomic(out / "summary.md", _markdown(sweep, out, stats, finished, deployed, list(failed), wall)),
-             plot_learning_curves(sweep, out, out / "learning_curves.png"),
+             plot_learning_curves(sweep, out, out / "learning_curves.png", finished),
              plot_metrics(sweep, stats, rows, out / "metrics.png")]
     return files
