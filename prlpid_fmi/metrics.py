@@ -265,8 +265,8 @@ def compute_metrics(time_s, setpoint, measurement, control_signal, sample_time_s
                     intervals: Sequence[tuple[int, int]] | None = None,
                     loop_names: Sequence[str] | None = None, events: Sequence[int] | None = None, *,
                     u_range: Sequence[float] | float | None = None, command=None,
-                    noise_std: Sequence[float] | float | None = None, settling_threshold: float = 0.02, rise_time_limits: tuple[float, float] = (0.1, 0.9),
-                    steady_state_fraction: float = 0.1) -> dict:
+                    noise_std: Sequence[float] | float | None = None, settling_threshold: float = 0.02,
+                    rise_time_limits: tuple[float, float] = (0.1, 0.9), steady_state_fraction: float = 0.1) -> dict:
     """Closed-loop metrics of one run (see the module docstring for definitions and the result layout).
 
     time_s: (n,) sample times [s], increasing. setpoint, measurement: (n,) or (n, n_loops).

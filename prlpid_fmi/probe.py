@@ -483,10 +483,13 @@ def propose_loop(result: ProbeResult) -> LoopProposal:
         ts = _snap(r.sample_time_s)
         why["sample_time"] = (f"the probe's step: {result.output} follows {r.input} within one step, so there is no "
                               "time scale to choose it from; ADJUST to the controller's period")
-        kc, ti, td_max = 0.3 / abs(K), ts, ts  # with the step's delay: closed-loop poles 0.78 and -0.38
+        if r.dead_time_s > 0:  # a gain behind a delay: low-gain integral action, slower the longer the delay
+            kc, ti, td_max = 0.15 / abs(K), 2 * (r.dead_time_s + ts), ts
+        else:  # with the step's one-sample delay: closed-loop poles 0.78 and -0.38
+            kc, ti, td_max = 0.3 / abs(K), ts, ts
         sign = math.copysign(1.0, K)
-        why["gains"] = (f"a static gain {K:.4g}: integral action does the work (Kp {kc:.3g}, Ti {ti:.3g} s, one "
-                        "step)")
+        why["gains"] = (f"a static gain {K:.4g}{f' behind a {r.dead_time_s:.3g} s delay' if r.dead_time_s else ''}: "
+                        f"integral action does the work (Kp {kc:.3g}, Ti {ti:.3g} s)")
     elif r.kind == "unstable":
         lam = r.growth_rate_per_s
         b = -r.gain * lam

@@ -152,3 +152,15 @@ def test_init_writes_the_operating_point(tmp_path):
     doc = yaml.safe_load(text)
     assert doc["plant"]["parameters"] == {"h1_0": 15.46, "h2_0": 10.04}
     assert doc["plant"]["loops"][0]["input"] == "q_in"
+
+
+def test_a_delayed_static_response_is_static_with_its_dead_time():
+    """Δy = 0 for three samples, then 2.5 per input unit for good: a gain behind a transport delay. The
+    delay is counted from the sample before the first move (the step acts over one sample): 2 samples."""
+    from prlpid_fmi.probe import _analyse
+
+    dt, du = 0.1, 0.004
+    dy = np.r_[np.zeros(3), np.full(97, 2.5 * du)]
+    kind, gain, tau, _, _, dead = _analyse(dt * np.arange(100), dy, dt, du, 1.0)
+    assert (kind, tau) == ("static", None)
+    assert gain == pytest.approx(2.5) and dead == pytest.approx(2 * dt)
