@@ -168,8 +168,8 @@ class LoopModel(Section):
     @classmethod
     def _reachable(cls, bound: float, info: ValidationInfo) -> float:
         low_high, scale = info.data.get("setpoint_range"), info.data.get("measurement_scale")
-        if low_high is not None and scale is not None and (low_high[1] - low_high[0]) / scale > bound:
-            span = (low_high[1] - low_high[0]) / scale
+        span = (low_high[1] - low_high[0]) / scale if low_high is not None and scale is not None else 0.0
+        if span > bound:
             raise problem(f"a training setpoint step across setpoint_range, {span:g} x measurement_scale, would end "
                           "the episode as diverged at once", f"a bound >= {span:g}, or a narrower setpoint_range")
         return bound
