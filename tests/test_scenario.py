@@ -193,6 +193,8 @@ MISTAKES = [
     ("unknown-anti-windup", "first_order", _set("controller.anti_windup", "clamp"), "controller.anti_windup", "'clamp'"),
     ("unknown-algorithm", "first_order", _set("agent.algorithm", "dqn"), "agent.algorithm", "'dqn'"),
     ("negative-horizon", "first_order", _set("strategies.forecast_horizon", -1), "strategies.forecast_horizon", "-1"),
+    ("horizon-as-long-as-the-episode", "first_order", _set("strategies.forecast_horizon", 200),
+     "strategies.forecast_horizon", "200"),
     ("window-lt-1", "first_order", _set("strategies.smoothing_window", 0), "strategies.smoothing_window", "0"),
     ("alpha-out-of-range", "first_order", _set("strategies.smoothing_alpha", 1.5), "strategies.smoothing_alpha", "1.5"),
     ("missing-fmu", "first_order", _set("plant.fmu", "nowhere.fmu"), "plant.fmu", "'nowhere.fmu'"),
@@ -245,6 +247,21 @@ def test_file_level_mistakes(tmp_path):
         load_scenario(_write(tmp_path, "name: x\nplant: [unclosed\n", "broken.yaml"))
     with pytest.raises(ScenarioError, match=r"list.yaml: \(top level\): not a mapping \(got \[1, 2\]"):
         load_scenario(_write(tmp_path, "[1, 2]\n", "list.yaml"))
-    with pytest.raises(ScenarioError, match="noplant.yaml: plant: missing section"):
+    with pytest.raises(ScenarioError, match="noplant.yaml: plant: missing section .*expected a mapping with fmu, loops"):
         load_scenario(_write(tmp_path, "name: x\n", "noplant.yaml"))
+    # an alias inside its own anchor would make the data contain itself (before: RecursionError)
+    with pytest.raises(ScenarioError, match=r"self.yaml: \(top level\): not valid YAML at line 2, column 8: an alias "
+                                            r"is used inside its own anchor"):
+        load_scenario(_write(tmp_path, "name: x\nplant: &p\n  fmu: *p\n", "self.yaml"))
     assert validate_scenario(SCENARIOS / "first_order.yaml") == load_scenario(SCENARIOS / "first_order.yaml")
+
+
+def test_nested_aliases_cost_no_more_than_the_text(tmp_path):
+    """Ten levels of ten aliases each stand for 10^10 leaves; the key-line walk visits each node once, so the file
+    is refused for its unknown keys at once instead of being walked 10^10 times."""
+    lines = ["l0: &l0 [1, 1, 1, 1, 1, 1, 1, 1, 1, 1]"]
+    lines += [f"l{i}: &l{i} [{', '.join([f'*l{i - 1}'] * 10)}]" for i in range(1, 11)]
+    path = _write(tmp_path, "\n".join(lines) + "\n", "aliases.yaml")
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    assert "l10: unknown key" in str(info.value)

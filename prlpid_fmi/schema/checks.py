@@ -36,6 +36,7 @@ class State:
     outputs: list = field(default_factory=list)
     episode_steps: Optional[int] = None  # of the section being validated (training, then evaluation)
     training_steps: Optional[int] = None
+    raw_training_steps: Optional[int] = None  # training.episode_steps as written (or default), if a valid count
     last_step: int = -1  # last at_step of the setpoint schedule being validated
     last_setpoint: Optional[tuple] = None  # last value of that schedule (one number per loop)
     largest_step: list = field(default_factory=list)  # per valid loop: divergence_bound x measurement_scale

@@ -47,11 +47,26 @@ class Document:
                 for loc, first, again in self.duplicates]
 
 
-def _walk(node: yaml.Node, loc: tuple, doc: Document) -> None:
+class RecursiveAlias(yaml.MarkedYAMLError):
+    """An alias used inside its own anchor (``a: &x {b: *x}``): the data would contain itself."""
+
+
+def _walk(node: yaml.Node, loc: tuple, doc: Document, path: tuple = (), seen_nodes: set | None = None) -> None:
+    """Record key lines and repeated keys under `node`. An aliased node is walked once (its keys' lines are its
+    anchor's), so nested aliases cost no more than the text; an alias inside its own anchor raises RecursiveAlias."""
+    seen_nodes = set() if seen_nodes is None else seen_nodes
+    if id(node) in path:
+        raise RecursiveAlias(problem="an alias is used inside its own anchor (the data would contain itself)",
+                             problem_mark=node.start_mark)
+    if id(node) in seen_nodes:
+        return
+    seen_nodes.add(id(node))
+    path = path + (id(node),)
     if isinstance(node, yaml.MappingNode):
         seen: dict = {}
         for key_node, value_node in node.value:
             if not isinstance(key_node, yaml.ScalarNode) or key_node.tag == "tag:yaml.org,2002:merge":
+                _walk(value_node, loc, doc, path, seen_nodes)  # a merge key's mapping: checked for recursion too
                 continue
             key = key_node.value
             child = loc + (key,)
@@ -61,11 +76,11 @@ def _walk(node: yaml.Node, loc: tuple, doc: Document) -> None:
             else:
                 seen[key] = line
                 doc.lines[child] = line
-            _walk(value_node, child, doc)
+            _walk(value_node, child, doc, path, seen_nodes)
     elif isinstance(node, yaml.SequenceNode):
         for i, item in enumerate(node.value):
             doc.lines.setdefault(loc + (i,), item.start_mark.line + 1)
-            _walk(item, loc + (i,), doc)
+            _walk(item, loc + (i,), doc, path, seen_nodes)
 
 
 def parse_yaml(text: str) -> Document:

@@ -231,7 +231,11 @@ def error_line(file: str, doc: Any, err: dict) -> str:
     elif kind == "missing":
         node = schema_at(loc) or {}
         problem_text = "missing section" if "properties" in node else "missing key"
-        expected = (node.get("description") or describe(node)).split(";")[0]
+        expected = (node.get("description") or describe(node)).split(";")[0].rstrip(".")
+        if "properties" in node:  # a section: say what it must hold
+            required = node.get("required") or []
+            expected = (f"a mapping with {', '.join(required)}: " if required else "a mapping: ") + \
+                expected[:1].lower() + expected[1:]
     elif kind in ("literal_error", "enum"):
         node = schema_at(loc) or {}
         choices = node.get("enum") or []

@@ -353,6 +353,11 @@ class StrategiesModel(Section):
     @classmethod
     def _prior_can_copy(cls, horizon: int, info: ValidationInfo) -> int:
         state = state_of(info)
+        episode = state.raw_training_steps if state is not None else None
+        if horizon > 0 and episode is not None and horizon >= episode:
+            raise problem(f"a forecast as long as a training episode ({episode} samples) or longer looks past its "
+                          f"end and costs {horizon} prior steps per sample",
+                          f"0 <= N < training.episode_steps = {episode} (the paper uses N <= 10)")
         if horizon > 0 and state is not None and state.prior_fmu_given is False and state.desc is not None:
             problems = state.desc.prior_problems()
             if problems:
@@ -690,6 +695,9 @@ class DeployModel(Section):
                                                         "the one with the lower ISE on seeded training episodes")
 
 
+_MISSING_STEPS = object()
+
+
 class ScenarioModel(Section):
     """A prlpid-fmi scenario: one tuning problem (docs/scenarios.md)."""
 
@@ -707,6 +715,20 @@ class ScenarioModel(Section):
     evaluation: EvaluationModel = section("evaluation episode and metrics intervals")
     baseline: BaselineModel = section("budget of the fixed-PID baseline search")
     deploy: DeployModel = section("deployment limits")
+
+    @model_validator(mode="before")
+    @classmethod
+    def _remember_training_steps(cls, data: Any, info: ValidationInfo) -> Any:
+        """training.episode_steps as written (or its default), for checks of sections validated before it."""
+        state = state_of(info)
+        if state is not None:
+            training = data.get("training") if isinstance(data, dict) else None
+            steps = training.get("episode_steps", _MISSING_STEPS) if isinstance(training, dict) else _MISSING_STEPS
+            if steps is _MISSING_STEPS:
+                steps = TrainingModel.model_fields["episode_steps"].default
+            state.raw_training_steps = steps if isinstance(steps, int) and not isinstance(steps, bool) and steps > 0 \
+                else None
+        return data
 
 
 def default(model: type[BaseModel], key: str) -> Any:
