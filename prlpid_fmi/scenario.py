@@ -31,7 +31,7 @@ from .errors import PlantError, ScenarioError
 from .schema import ALGORITHMS, DISTURBANCE_TYPES, GAIN_SCALES, LOOP_TARGETS, SCHEMA_FILE_NAME, ScenarioModel, default
 from .schema import model as m
 from .schema.checks import State
-from .schema.document import parse_yaml
+from .schema.document import parse_yaml, syntax_error_line
 from .schema.messages import error_line
 
 GAIN_NAMES = ("Kp", "Ti", "Td")
@@ -258,11 +258,7 @@ def load_scenario(path: str | Path) -> Scenario:
     try:
         document = parse_yaml(text)
     except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else "unknown position"
-        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
-        raise ScenarioError(f"{file}: (top level): not valid YAML at {where}: {problem} "
-                            f"(got unparsable text; expected a YAML mapping)") from None
+        raise ScenarioError(syntax_error_line(file, exc)) from None
     lines = list(zip((d[0] for d in document.duplicates), document.duplicate_lines(file)))
     model = None
     try:

@@ -78,6 +78,24 @@ def test_bad_sweep_file_gives_one_line_per_mistake(tmp_path, capsys):
     assert not (tmp_path / "out").exists()
 
 
+def test_sweep_file_syntax_errors_say_what_the_parser_found(tmp_path, capsys):
+    """One line each, with the parser's problem (before: only 'not valid YAML at line 2', and a traceback for
+    binary data in the scenario reader's place)."""
+    flow = _write(tmp_path / "flow.yaml", "scenario: first_order\nvariants: {a: {plant.loops[0].input: u}}\n")
+    looped = _write(tmp_path / "looped.yaml", "scenario: first_order\nvariants: &v {a: *v}\n")
+    binary = tmp_path / "binary.yaml"
+    binary.write_bytes(b"\xff\xfe\x00")
+    for f in (flow, looped, binary):
+        assert main(["sweep", str(f), "--out", str(tmp_path / "out")]) == 2
+    assert _lines(capsys) == [
+        f"prlpid-fmi: error: {flow}: (top level): not valid YAML at line 2, column 27: expected ',' or '}}', but got "
+        "'[' (got unparsable text; expected a YAML mapping)",
+        f"prlpid-fmi: error: {looped}: (top level): not valid YAML at line 2, column 11: this anchor is used inside "
+        "itself (an alias to it within it: the data would contain itself) (got unparsable text; expected a YAML mapping)",
+        f"prlpid-fmi: error: {binary}: (top level): not a text file (got binary data; expected UTF-8 YAML)"]
+    assert not (tmp_path / "out").exists()
+
+
 def test_every_failing_variant_is_reported_at_once(tmp_path, capsys):
     f = _write(tmp_path / "bad.yaml", """\
         scenario: first_order

@@ -56,7 +56,8 @@ def _walk(node: yaml.Node, loc: tuple, doc: Document, path: tuple = (), seen_nod
     anchor's), so nested aliases cost no more than the text; an alias inside its own anchor raises RecursiveAlias."""
     seen_nodes = set() if seen_nodes is None else seen_nodes
     if id(node) in path:
-        raise RecursiveAlias(problem="an alias is used inside its own anchor (the data would contain itself)",
+        raise RecursiveAlias(problem="this anchor is used inside itself (an alias to it within it: the data would "
+                                     "contain itself)",
                              problem_mark=node.start_mark)
     if id(node) in seen_nodes:
         return
@@ -95,6 +96,14 @@ def parse_yaml(text: str) -> Document:
         return doc
     finally:
         loader.dispose()
+
+
+def syntax_error_line(file: str, exc: yaml.YAMLError) -> str:
+    """The one-line message of a YAML syntax error in `file`: where, and what the parser found."""
+    mark = getattr(exc, "problem_mark", None)
+    where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else "unknown position"
+    problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+    return f"{file}: (top level): not valid YAML at {where}: {problem} (got unparsable text; expected a YAML mapping)"
 
 
 def load_yaml(text: str) -> Any:

@@ -38,7 +38,7 @@ from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Fie
 
 from ..errors import ScenarioError
 from ..schema.checks import did_you_mean
-from ..schema.document import parse_yaml
+from ..schema.document import parse_yaml, syntax_error_line
 from ..schema.messages import _MISSING, _PROBLEMS, key_path, raw_value, schema_at, show
 from ..schema.types import Count, Name, Steps, _integer, problem
 
@@ -285,11 +285,10 @@ def load_sweep(path: str | Path) -> Sweep:
         raise ScenarioError(f"{file}: sweep file not found (got {file!r}; expected a path to a .yaml file)")
     try:
         document = parse_yaml(p.read_text(encoding="utf-8"))
-    except (yaml.YAMLError, UnicodeDecodeError) as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        raise ScenarioError(f"{file}: (top level): not valid YAML{where} (got unparsable text; expected a YAML "
-                            "mapping)") from None
+    except UnicodeDecodeError:
+        raise ScenarioError(f"{file}: (top level): not a text file (got binary data; expected UTF-8 YAML)") from None
+    except yaml.YAMLError as exc:
+        raise ScenarioError(syntax_error_line(file, exc)) from None
     lines = document.duplicate_lines(file)
     model = None
     if not isinstance(document.data, dict):
