@@ -20,7 +20,7 @@ from .actions import Gains
 from .baseline import margins_of, operating_point
 from .deliver import Candidate, Decision, choose, meets
 from .evaluate import constant_gains, evaluate_gains
-from .schedule import LOOP_VARIABLE, GainSchedule, replay_schedule
+from .schedule import LOOP_VARIABLE, GainSchedule, fixed_schedule, replay_schedule
 
 
 def _margins_at(config, gains, points: list[list[float]]) -> list:
@@ -145,11 +145,27 @@ def robust_schedule(schedule: GainSchedule, config, limit: float) -> tuple[GainS
     return dataclasses.replace(schedule, Kp=Kp, Ti=Ti), notes
 
 
-def assess(scenario, schedule: GainSchedule | None, fixed_gains: Gains) -> tuple[Decision, Candidate | None, Candidate]:
-    """Evidence for both controllers and the decision (deliver.choose) with deploy.max_sensitivity."""
+def holdout_ise(scenario, schedule: GainSchedule, seed: int) -> float:
+    """ISE summed over HOLDOUT_EPISODES seeded episodes of the training distribution (scenario.tuning: its random
+    setpoints, noise, disturbances, randomisation), replayed as a plain PID; infinity when one diverges. The
+    seeds are disjoint from those the table was built and chosen on, and from the evaluation's."""
+    from .transients import HOLDOUT_EPISODES, HOLDOUT_SEED_OFFSET, training_ise
+
+    return training_ise(schedule, scenario.tuning, seed, episodes=HOLDOUT_EPISODES, offset=HOLDOUT_SEED_OFFSET)
+
+
+def assess(scenario, schedule: GainSchedule | None, fixed_gains: Gains,
+           seed: int | None = None) -> tuple[Decision, Candidate | None, Candidate]:
+    """Evidence for both controllers and the decision (deliver.choose) with deploy.max_sensitivity.
+
+    seed: of the held-out training-distribution episodes (holdout_ise); None = scenario.agent.seed."""
+    seed = scenario.agent.seed if seed is None else seed
     limit = max_sensitivity(scenario)
     fixed = assess_fixed(scenario, fixed_gains)
     sched = assess_schedule(scenario, schedule) if schedule is not None else None
+    if sched is not None:
+        sched.holdout_ise = holdout_ise(scenario, schedule, seed)
+        fixed.holdout_ise = holdout_ise(scenario, fixed_schedule(fixed_gains, scenario.tuning), seed)
     return choose(sched, fixed, limit), sched, fixed
 
 
@@ -164,4 +180,6 @@ def candidate_summary(c: Candidate) -> dict:
             "margins": [{"operating_point": b, "Ms": m.Ms, "gain_margin": m.gain_margin,
                          "phase_margin_deg": m.phase_margin_deg, "reliable": m.reliable, "note": m.note}
                         for b, m in zip(c.breakpoints, c.margins)],
-            "worst_Ms": c.worst_Ms if math.isfinite(c.worst_Ms) else None}
+            "worst_Ms": c.worst_Ms if math.isfinite(c.worst_Ms) else None,
+            "holdout_ise": None if math.isnan(c.holdout_ise) else c.holdout_ise if math.isfinite(c.holdout_ise)
+            else "inf"}

@@ -5,9 +5,12 @@ Rule (one place; explained in docs/architecture.md "Deliverable"):
   worst peak sensitivity Ms over its operating points is at most `max_sensitivity`.
 - Its score is the evaluation's ISE plus the mean ISE over the Monte-Carlo samples.
 - The schedule is deployed when it is eligible, scores at least MIN_IMPROVEMENT below the fixed PID (a
-  table of gains must earn its place over one set of gains: a tie is not a win), and its total variation
-  of u is at most TOTAL_VARIATION_LIMIT times the fixed PID's (no ISE bought by chattering);
-  otherwise the fixed PID when it is eligible; otherwise nothing is deployable.
+  table of gains must earn its place over one set of gains: a tie is not a win), its total variation
+  of u is at most TOTAL_VARIATION_LIMIT times the fixed PID's (no ISE bought by chattering), and its
+  ISE on held-out episodes of the training distribution (`holdout_ise`: seeds used for nothing else)
+  is no worse than the fixed PID's (a win on one evaluation schedule must carry over to setpoints and
+  disturbances it was not measured on); otherwise the fixed PID when it is eligible; otherwise nothing
+  is deployable.
 """
 from __future__ import annotations
 
@@ -32,6 +35,7 @@ class Candidate:
     monte_carlo: list = field(default_factory=list)
     margins: list = field(default_factory=list)
     breakpoints: list = field(default_factory=list)
+    holdout_ise: float = math.nan  # ISE over held-out training-distribution episodes (NaN: not measured)
 
     @property
     def diverged(self) -> bool:
@@ -110,6 +114,11 @@ def choose(schedule: Candidate | None, fixed: Candidate, max_sensitivity: float)
             if tv_s > TOTAL_VARIATION_LIMIT * tv_f:
                 problems.append(f"its control signal varies {tv_s / tv_f:.1f}x as much as the fixed PID's "
                                 f"(limit {TOTAL_VARIATION_LIMIT}x)")
+            h_s, h_f = schedule.holdout_ise, fixed.holdout_ise
+            if not (math.isnan(h_s) or math.isnan(h_f)) and not h_s <= h_f:
+                problems.append("its win does not carry over: on held-out episodes of the training distribution "
+                                + ("it diverged" if math.isinf(h_s) else
+                                   f"its ISE is {h_s:.4g} against the fixed PID's {h_f:.4g}"))
         if not problems:
             return Decision("gain schedule", (f"it beats the fixed PID on ISE ({schedule.score:.4g} vs "
                                               f"{fixed.score:.4g}) within the robustness and effort limits",))

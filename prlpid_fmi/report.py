@@ -130,6 +130,12 @@ def candidates_table(sched, fixed, units: tuple[str, str] = ("", "")) -> str:
         cells = [number(overall_metric(c.metrics["overall"], key)) for c in cands]
         lines.append(f"| {label} | {unit_label(key, y_unit, u_unit)} | " + " | ".join(cells) + " |")
     lines.append("| worst Ms (limit in the verdict) | – | " + " | ".join(number(c.worst_Ms, 3) for c in cands) + " |")
+    if all(not math.isnan(c.holdout_ise) for c in cands):
+        from .transients import HOLDOUT_EPISODES
+
+        lines.append(f"| ISE, {HOLDOUT_EPISODES} held-out training-distribution episodes | "
+                     f"{unit_label('ISE', y_unit, u_unit)} | " + " | ".join(
+                         "diverged" if math.isinf(c.holdout_ise) else number(c.holdout_ise) for c in cands) + " |")
     if any(c.monte_carlo for c in cands):
         ise = unit_label("ISE", y_unit, u_unit)
         lines.append(f"| mean ISE, Monte-Carlo set | {ise} | " + " | ".join(

@@ -23,7 +23,8 @@ over SELECTION_EPISODES further seeded training-distribution episodes (replayed 
 diverged episode scores infinity). The evaluation schedule is never used for the choice.
 
 Seeds: extraction episodes use seed + EXTRACTION_SEED_OFFSET + i, selection episodes
-seed + SELECTION_SEED_OFFSET + i (disjoint from each other and from the evaluation's seeds).
+seed + SELECTION_SEED_OFFSET + i, and the held-out episodes of the deliverable rule (assess, deliver)
+seed + HOLDOUT_SEED_OFFSET + i (disjoint from each other and from the evaluation's seeds).
 """
 from __future__ import annotations
 
@@ -45,6 +46,8 @@ TRAJECTORY_EPISODES = 8  # training-distribution episodes the trajectory table i
 SELECTION_EPISODES = 8  # further episodes the candidate tables are scored on (auto)
 EXTRACTION_SEED_OFFSET = 10_000
 SELECTION_SEED_OFFSET = 20_000
+HOLDOUT_EPISODES = 8  # further episodes the deliverable rule compares the schedule and the fixed PID on
+HOLDOUT_SEED_OFFSET = 30_000
 RESOLUTION = 1e-3  # bins whose medians lie closer than this fraction of the visited span become one row
 AUTO_CANDIDATES = ("setpoint", "error")  # what auto compares
 
@@ -133,15 +136,15 @@ def extract(policy: Policy, config: TuningConfig, schedule_by: str, points: int,
 
 
 def training_ise(schedule: GainSchedule, config: TuningConfig, seed: int = 0,
-                 episodes: int = SELECTION_EPISODES) -> float:
+                 episodes: int = SELECTION_EPISODES, offset: int = SELECTION_SEED_OFFSET) -> float:
     """ISE (summed over loops) of the replayed table, summed over seeded training-distribution episodes
-    (seeds seed + SELECTION_SEED_OFFSET + i); infinity when an episode diverges."""
+    (seeds seed + offset + i); infinity when an episode diverges."""
     from .deliver import overall_metric
     from .schedule import replay_schedule
 
     total = 0.0
     for i in range(episodes):
-        metrics, _ = replay_schedule(schedule, config, seed=seed + SELECTION_SEED_OFFSET + i)
+        metrics, _ = replay_schedule(schedule, config, seed=seed + offset + i)
         if metrics.get("terminated"):
             return math.inf
         total += overall_metric(metrics["overall"], "ISE")

@@ -127,3 +127,14 @@ def test_tiny_budget_deploys_the_fixed_pid_and_says_so(tmp_path, capsys):
     assert len(rows) == 2  # header + one row: the fixed PID
     assert float(rows[1].split(",")[1]) == fixed["Kp"][0]
     assert metrics["fixed_pid_assessment"]["worst_Ms"] <= 2.0
+    # the held-out check of the rule: 8 training-distribution episodes at seeds 30000.. (agent seed 0), the same
+    # for the schedule (the fixed PID's gains) and, recomputed here as constant gains, for the fixed PID
+    from prlpid_fmi.evaluate import evaluate_gains
+    from prlpid_fmi.scenario import load_scenario
+
+    trained = load_scenario(run / "scenario.yaml")
+    fn = constant_gains(fixed["Kp"], fixed["Ti"], fixed["Td"], None)
+    expected = sum(evaluate_gains(fn, trained.tuning, seed=30_000 + i)[0]["overall"]["ISE"] for i in range(8))
+    assert metrics["fixed_pid_assessment"]["holdout_ise"] == pytest.approx(expected, rel=1e-9)
+    assert metrics["schedule_replay"]["holdout_ise"] == pytest.approx(expected, rel=1e-6)
+    assert "| ISE, 8 held-out training-distribution episodes |" in report

@@ -74,3 +74,20 @@ def test_the_verdict_gives_the_overshoot_itself_when_the_fixed_pid_has_none():
     text = verdict(choose(schedule, fixed, 2.0), schedule, fixed, 2.0)
     assert "its ISE is 0.50x the fixed PID's, its overshoot 4 % (fixed PID 0 %)" in text
     assert "peak deviation" not in text
+
+
+def test_a_win_on_the_evaluation_that_does_not_carry_over_to_held_out_episodes_is_refused():
+    """Held-out training-distribution episodes: the schedule must be no worse there (NaN = not measured: no check)."""
+    def held_out(c, ise):
+        c.holdout_ise = ise
+        return c
+
+    fixed = held_out(cand("fixed PID", 1.0), 4.0)
+    assert choose(held_out(cand("gain schedule", 0.9), 4.0), fixed, 2.0).deploy == "gain schedule"  # a tie is enough
+    lost = choose(held_out(cand("gain schedule", 0.9), 4.4), fixed, 2.0)
+    assert lost.deploy == "fixed PID"
+    assert lost.reasons == ("The gain schedule is not deployed: its win does not carry over: on held-out episodes of "
+                            "the training distribution its ISE is 4.4 against the fixed PID's 4.",)
+    diverged = choose(held_out(cand("gain schedule", 0.9), math.inf), fixed, 2.0)
+    assert diverged.deploy == "fixed PID" and diverged.reasons[0].endswith("training distribution it diverged.")
+    assert choose(held_out(cand("gain schedule", 0.9), 99.0), cand("fixed PID", 1.0), 2.0).deploy == "gain schedule"
