@@ -115,8 +115,29 @@ def render_report(scenario, policy_m: dict, fixed_m: dict | None, fixed_gains: d
     return "\n".join(lines)
 
 
-def candidates_table(sched, fixed, units: tuple[str, str] = ("", "")) -> str:
-    """Both deployable controllers side by side (plain PIDs, no neural network), metrics with units."""
+def deployed_section(deployed: str, schedule_m: dict | None, fixed_m: dict | None,
+                     units: tuple[str, str] = ("", "")) -> str:
+    """An evaluation report's opening: what the run deployed (schedule.csv) and how it does on this evaluation."""
+    from .deliver import Candidate
+
+    lines = ["## Deployed controller on this evaluation", ""]
+    if deployed == "gain schedule" and schedule_m is not None:
+        lines += ["The run deployed its adaptive gain schedule (schedule.csv, replayed here as a plain gain-scheduled "
+                  "PID, no neural network), beside the fixed PID:", "",
+                  candidates_table(Candidate("gain schedule (deployed)", schedule_m),
+                                   Candidate("fixed PID", fixed_m) if fixed_m else None, units, margins=False)]
+    elif deployed == "fixed PID":
+        lines += ["The run deployed the fixed PID (schedule.csv holds it as a one-row table): its column below is "
+                  "the deployed controller.", ""]
+    else:
+        lines += ["The run deployed nothing (no controller met its robustness limit); the table below is for "
+                  "comparison only.", ""]
+    return "\n".join(lines)
+
+
+def candidates_table(sched, fixed, units: tuple[str, str] = ("", ""), margins: bool = True) -> str:
+    """Both deployable controllers side by side (plain PIDs, no neural network), metrics with units; margins:
+    with the worst-Ms row (their Candidates carry margins)."""
     from .deliver import overall_metric
 
     y_unit, u_unit = units
@@ -129,7 +150,9 @@ def candidates_table(sched, fixed, units: tuple[str, str] = ("", "")) -> str:
     for key, label in rows:
         cells = [number(overall_metric(c.metrics["overall"], key)) for c in cands]
         lines.append(f"| {label} | {unit_label(key, y_unit, u_unit)} | " + " | ".join(cells) + " |")
-    lines.append("| worst Ms (limit in the verdict) | – | " + " | ".join(number(c.worst_Ms, 3) for c in cands) + " |")
+    if margins:
+        lines.append("| worst Ms (limit in the verdict) | – | " + " | ".join(number(c.worst_Ms, 3) for c in cands)
+                     + " |")
     if all(not math.isnan(c.holdout_ise) for c in cands):
         from .transients import HOLDOUT_EPISODES
 

@@ -20,7 +20,7 @@ from .errors import Interrupted, PrlPidError, RunError
 from .rundir import write_atomic, write_json
 from .scenario import Scenario, load_scenario, scenario_to_yaml
 
-from .report import candidates_table, loop_units, render_report
+from .report import candidates_table, deployed_section, loop_units, render_report
 
 
 # -- trajectories to CSV ---------------------------------------------------------------------------
@@ -90,11 +90,13 @@ def _policy(run_dir: Path, algorithm: str):
 
 
 def evaluate_into(run_dir: Path, scenario: Scenario, out_dir: Path, policy, fixed: dict | None,
-                  source: Path | None = None, anchor=None, schedule=None) -> dict:
+                  source: Path | None = None, anchor=None, schedule=None, deployed: str | None = None) -> dict:
     """Evaluate `policy` (and the fixed PID) on the scenario's evaluation; write metrics, CSV, plots, report.
 
-    source: the scenario file the evaluation comes from, named in the report. schedule: the policy's
-    GainSchedule, replayed on the same evaluation and drawn in the plots as "gain schedule".
+    source: the scenario file the evaluation comes from, named in the report. schedule: a GainSchedule (the
+    policy's, or the run's deployed schedule.csv), replayed on the same evaluation and drawn in the plots as
+    "gain schedule". deployed: what the run deployed ("gain schedule" | "fixed PID" | "none"; None: not known
+    yet, as in `tune` before its choice); the report then opens with the deployed controller on this evaluation.
     """
     from . import plots
     from .evaluate import constant_gains, evaluate_gains
@@ -110,12 +112,15 @@ def evaluate_into(run_dir: Path, scenario: Scenario, out_dir: Path, policy, fixe
         g = fixed["gains"]
         fixed_m, fixed_traj = evaluate_gains(constant_gains(g["Kp"], g["Ti"], g["Td"], g.get("coupling")), config, seed=seed,
                                        intervals=intervals)
-    schedule_traj = None
+    schedule_m = schedule_traj = None
     if schedule is not None:
-        _, schedule_traj = replay_schedule(schedule, config, seed=seed, intervals=intervals)
+        schedule_m, schedule_traj = replay_schedule(schedule, config, seed=seed, intervals=intervals)
     loop_names = [l.output for l in config.loops]
     write_atomic(out_dir / rd.GAINS, trajectory_csv(traj, loop_names, config.sample_time_s))
     metrics = {"policy": policy_m, "fixed_pid": {"gains": fixed["gains"], "metrics": fixed_m} if fixed else None}
+    if deployed is not None:
+        metrics["deployed"] = deployed
+        metrics["deployed_schedule"] = schedule_m if deployed == "gain schedule" else None
     write_json(out_dir / rd.METRICS, metrics)
     plots.plot_response(traj, config, out_dir / rd.RESPONSE_PLOT, title=f"{scenario.name}: response",
                         baseline_traj=fixed_traj, schedule_traj=schedule_traj)
@@ -123,9 +128,13 @@ def evaluate_into(run_dir: Path, scenario: Scenario, out_dir: Path, policy, fixe
                               schedule_traj=schedule_traj, title=f"{scenario.name}: control signal")
     plots.plot_gains(traj, config, out_dir / rd.GAINS_PLOT, baseline_gains=fixed["gains"] if fixed else None,
                      schedule_traj=schedule_traj, title=f"{scenario.name}: PID gains set by the adaptive policy")
-    write_atomic(out_dir / rd.REPORT,
-                 render_report(scenario, policy_m, fixed_m, fixed["gains"] if fixed else None, source,
-                               loop_units(config), learning_curve=out_dir == run_dir))
+    report = render_report(scenario, policy_m, fixed_m, fixed["gains"] if fixed else None, source,
+                           loop_units(config), learning_curve=out_dir == run_dir)
+    if deployed is not None:
+        title, _, body = report.partition("\n")
+        report = "\n".join([title, "", deployed_section(deployed, schedule_m, fixed_m, loop_units(config)),
+                             body.lstrip("\n")])
+    write_atomic(out_dir / rd.REPORT, report)
     return metrics
 
 
@@ -323,10 +332,26 @@ def evaluate_run(run_dir: str | Path, scenario_path: str | Path | None = None) -
     out_dir = base / str(n)
     out_dir.mkdir()
     fixed = json.loads((run_dir / rd.FIXED_PID).read_text()) if (run_dir / rd.FIXED_PID).is_file() else None
+    deployed, schedule = _deployed(run_dir)
     write_atomic(out_dir / rd.SCENARIO, scenario_to_yaml(scenario))
     source = Path(scenario_path) if scenario_path is not None else run_dir / rd.SCENARIO
-    evaluate_into(run_dir, scenario, out_dir, policy, fixed, source, anchor=_anchor(trained, fixed))
+    evaluate_into(run_dir, scenario, out_dir, policy, fixed, source, anchor=_anchor(trained, fixed),
+                  schedule=schedule, deployed=deployed)
     return out_dir
+
+
+def _deployed(run_dir: Path):
+    """(what the run deployed, its schedule.csv as a GainSchedule when that is the adaptive schedule); (None,
+    None) for a run whose choice was not made (no metrics.json entry, e.g. an absolute map without baseline)."""
+    from .schedule import read_schedule_csv
+
+    try:
+        deployed = json.loads((run_dir / rd.METRICS).read_text()).get("deployed")
+    except (OSError, ValueError, AttributeError):
+        return None, None
+    if deployed == "gain schedule" and (run_dir / rd.SCHEDULE).is_file():
+        return deployed, read_schedule_csv(run_dir / rd.SCHEDULE)
+    return (deployed, None) if deployed in ("fixed PID", "none") else (None, None)
 
 
 def check_output(run_dir: Path, output: Path, force: bool = False) -> None:

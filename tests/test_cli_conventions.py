@@ -291,6 +291,35 @@ def test_evaluate_report_names_the_scenario_file(trained_run, tmp_path, capsys):
     assert f"Scenario file: `{trained_run / 'scenario.yaml'}`" in (out_dir / "report.md").read_text()
 
 
+def test_evaluate_opens_with_the_deployed_controller_on_that_evaluation(trained_run, tmp_path, capsys):
+    """The deployed schedule.csv is replayed on the new evaluation. Known answer: a run that deploys the one-row
+    table of the fixed PID (marked here as a deployed gain schedule) must score exactly the fixed PID's numbers."""
+    run = tmp_path / "run"
+    shutil.copytree(trained_run, run, ignore=shutil.ignore_patterns("evaluations"))
+    m = json.loads((run / "metrics.json").read_text())
+    (run / "schedule.csv").write_bytes((run / "fixed_pid.csv").read_bytes())
+    (run / "metrics.json").write_text(json.dumps({**m, "deployed": "gain schedule"}))
+    other = _small_copy(scenario_path("first_order"), tmp_path / "other.yaml",
+                        {"evaluation": {"episode_steps": 90, "setpoints": [{"at_step": 0, "value": 0.5},
+                                                                           {"at_step": 45, "value": -0.7}],
+                                        "intervals": [[0, 45], [45, 90]]}})
+    assert main(["-q", "evaluate", str(run), "--scenario", str(other)]) == 0
+    out_dir = Path(capsys.readouterr().out.split("evaluation written to ")[1].strip())
+    e = json.loads((out_dir / "metrics.json").read_text())
+    assert e["deployed"] == "gain schedule"
+    assert e["deployed_schedule"]["overall"] == pytest.approx(e["fixed_pid"]["metrics"]["overall"], rel=1e-12, nan_ok=True)
+    report = (out_dir / "report.md").read_text()
+    assert report.index("## Deployed controller on this evaluation") < report.index("Scenario file:")
+    assert "| metric (evaluation) | unit | gain schedule (deployed) | fixed PID |" in report
+    # the fixture's own verdict (the fixed PID at this budget) is named as such
+    assert main(["-q", "evaluate", str(trained_run)]) == 0
+    out_dir = Path(capsys.readouterr().out.split("evaluation written to ")[1].strip())
+    e = json.loads((out_dir / "metrics.json").read_text())
+    assert e["deployed"] == json.loads((trained_run / "metrics.json").read_text())["deployed"]
+    if e["deployed"] == "fixed PID":
+        assert "The run deployed the fixed PID" in (out_dir / "report.md").read_text()
+
+
 def test_tune_progress_goes_to_stderr_and_never_passes_the_target(tmp_path, capsys):
     scenario = _small_copy(scenario_path("first_order"), tmp_path / "s.yaml")
     run = tmp_path / "run"
