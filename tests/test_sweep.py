@@ -416,6 +416,46 @@ def test_sigterm_stops_the_workers_and_writes_the_summary(tmp_path):
     assert "Finished trials: 1 of 2." in summary and "| 1 (interrupted) |" in summary
 
 
+WORKER_SIGNALS = """\
+import os, signal, sys, time
+from prlpid_fmi.errors import Interrupted
+from prlpid_fmi.sweep import runner
+
+runner._local_worker()
+if sys.argv[1] == "in-trial":
+    runner._WORKER["in_trial"] = True
+    try:
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(5)
+    except Interrupted:
+        print("unwinding", flush=True)
+    os.kill(os.getpid(), signal.SIGTERM)  # a second one while the trial unwinds: ignored
+    time.sleep(0.2)
+    print("unwound", flush=True)
+else:  # between trials: e.g. the executor sending a finished trial's result, which catches BaseException
+    try:
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(5)
+    except BaseException:
+        pass
+    print("still running", flush=True)
+"""
+
+
+def test_a_worker_stopped_between_trials_exits_at_once(tmp_path):
+    """Before: SIGTERM raised Interrupted wherever it landed; landing in the executor's own code (sending trial 1's
+    result back) it was caught there, the handler had switched SIGTERM off, and the worker ran trial 2 to its end
+    after the sweep had stopped (seen as a flaky SIGTERM test; an hour of both cores for a SAC trial)."""
+    import subprocess
+    import sys
+
+    script = _write(tmp_path / "worker.py", WORKER_SIGNALS)
+    between = subprocess.run([sys.executable, str(script), "between"], capture_output=True, text=True, timeout=60)
+    assert (between.returncode, between.stdout) == (143, "")
+    during = subprocess.run([sys.executable, str(script), "in-trial"], capture_output=True, text=True, timeout=60)
+    assert (during.returncode, during.stdout) == (0, "unwinding\nunwound\n")
+
+
 def _still_running(pid: int, wait_s: float = 15.0) -> bool:
     """Whether process `pid` is still running (not gone, not a zombie) after up to wait_s seconds: the
     resource tracker ends a moment after the sweep's process, when its pipe closes."""

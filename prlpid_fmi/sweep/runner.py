@@ -142,17 +142,26 @@ def _one_thread() -> None:
         os.environ[var] = "1"
 
 
+_WORKER = {"in_trial": False, "stopping": False}  # a local worker's state, read by its SIGTERM handler
+
+
 def _local_worker() -> None:
     """Initializer of a local worker process: one thread; Ctrl-C is for the sweep's process, which stops the
-    workers with SIGTERM; SIGTERM raises Interrupted, so the trial unwinds as `tune` does on Ctrl-C (the training
-    saves a checkpoint, the run is marked as ended cleanly) and `--resume` continues it."""
+    workers with SIGTERM. During a trial, SIGTERM raises Interrupted once, so the trial unwinds as `tune` does on
+    Ctrl-C (the training saves a checkpoint, the run is marked as ended cleanly) and `--resume` continues it; a
+    second SIGTERM while it unwinds is ignored. Outside a trial (idle, or sending a finished trial's result back)
+    the worker exits at once: there is nothing to unwind, and an Interrupted raised inside the executor's own
+    code would be caught there and leave a worker that no longer listens, running the next trial to its end."""
     import signal
 
     from ..errors import Interrupted
 
     def stop(signum, frame):
-        signal.signal(signal.SIGTERM, signal.SIG_IGN)  # once: let the checkpoint be written
-        raise Interrupted(signum)
+        if not _WORKER["in_trial"]:
+            os._exit(128 + signum)
+        if not _WORKER["stopping"]:
+            _WORKER["stopping"] = True
+            raise Interrupted(signum)
 
     _one_thread()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -174,6 +183,7 @@ def run_trial(trial: Trial) -> dict:
     if status == FINISHED:
         return {"status": "finished earlier", "wall_s": 0.0}
     start = time.perf_counter()
+    _WORKER["in_trial"] = True
     try:
         if status == STALE:
             shutil.rmtree(trial.run_dir)
@@ -185,6 +195,8 @@ def run_trial(trial: Trial) -> dict:
         return {"status": "failed", "wall_s": time.perf_counter() - start, "error": error}
     except Interrupted as exc:  # the sweep is stopping: the trial has unwound; this worker takes no further trial
         os._exit(128 + exc.signum)
+    finally:
+        _WORKER["in_trial"] = False
     return {"status": "resumed" if status == UNFINISHED else "done", "wall_s": time.perf_counter() - start}
 
 
