@@ -78,6 +78,9 @@ class Candidate:
             out.append("its robustness margins could not be measured")
         elif self.unverified:
             pass  # said in the verdict, not a reason to refuse
+        elif math.isinf(self.worst_Ms):
+            out.append(f"its loop is not robustly stable at every operating point: in the margin measurement it "
+                       f"diverged or was held at an actuator limit (Ms = infinity; limit {max_sensitivity:g})")
         elif not self.worst_Ms <= max_sensitivity:
             out.append(f"its peak sensitivity Ms = {self.worst_Ms:.2f} exceeds the limit {max_sensitivity:g}")
         return out

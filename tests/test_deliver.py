@@ -91,3 +91,11 @@ def test_a_win_on_the_evaluation_that_does_not_carry_over_to_held_out_episodes_i
     diverged = choose(held_out(cand("gain schedule", 0.9), math.inf), fixed, 2.0)
     assert diverged.deploy == "fixed PID" and diverged.reasons[0].endswith("training distribution it diverged.")
     assert choose(held_out(cand("gain schedule", 0.9), 99.0), cand("fixed PID", 1.0), 2.0).deploy == "gain schedule"
+
+
+def test_an_infinite_ms_is_said_in_words():
+    d = choose(cand("gain schedule", 0.5, ms=math.inf), cand("fixed PID", 1.0), 2.0)
+    assert d.deploy == "fixed PID"
+    assert d.reasons == ("The gain schedule is not deployed: its loop is not robustly stable at every operating point: "
+                         "in the margin measurement it diverged or was held at an actuator limit (Ms = infinity; "
+                         "limit 2).",)
