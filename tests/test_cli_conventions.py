@@ -307,7 +307,8 @@ def test_evaluate_opens_with_the_deployed_controller_on_that_evaluation(trained_
     out_dir = Path(capsys.readouterr().out.split("evaluation written to ")[1].strip())
     e = json.loads((out_dir / "metrics.json").read_text())
     assert e["deployed"] == "gain schedule"
-    assert e["deployed_schedule"]["overall"] == pytest.approx(e["fixed_pid"]["metrics"]["overall"], rel=1e-12, nan_ok=True)
+    assert e["deployed_schedule"]["overall"] == pytest.approx(e["fixed_pid"]["metrics"]["overall"], rel=1e-12,
+                                                               nan_ok=True)
     report = (out_dir / "report.md").read_text()
     assert report.index("## Deployed controller on this evaluation") < report.index("Scenario file:")
     assert "| metric (evaluation) | unit | gain schedule (deployed) | fixed PID |" in report

@@ -247,7 +247,8 @@ def test_file_level_mistakes(tmp_path):
         load_scenario(_write(tmp_path, "name: x\nplant: [unclosed\n", "broken.yaml"))
     with pytest.raises(ScenarioError, match=r"list.yaml: \(top level\): not a mapping \(got \[1, 2\]"):
         load_scenario(_write(tmp_path, "[1, 2]\n", "list.yaml"))
-    with pytest.raises(ScenarioError, match="noplant.yaml: plant: missing section .*expected a mapping with fmu, loops"):
+    with pytest.raises(ScenarioError,
+                       match="noplant.yaml: plant: missing section .*expected a mapping with fmu, loops"):
         load_scenario(_write(tmp_path, "name: x\n", "noplant.yaml"))
     # an alias inside its own anchor would make the data contain itself (before: RecursionError)
     with pytest.raises(ScenarioError, match=r"self.yaml: \(top level\): not valid YAML at line 2, column 8: this "

@@ -91,7 +91,8 @@ def test_sweep_file_syntax_errors_say_what_the_parser_found(tmp_path, capsys):
         f"prlpid-fmi: error: {flow}: (top level): not valid YAML at line 2, column 27: expected ',' or '}}', but got "
         "'[' (got unparsable text; expected a YAML mapping)",
         f"prlpid-fmi: error: {looped}: (top level): not valid YAML at line 2, column 11: this anchor is used inside "
-        "itself (an alias to it within it: the data would contain itself) (got unparsable text; expected a YAML mapping)",
+        "itself (an alias to it within it: the data would contain itself) (got unparsable text; expected a YAML "
+        "mapping)",
         f"prlpid-fmi: error: {binary}: (top level): not a text file (got binary data; expected UTF-8 YAML)"]
     assert not (tmp_path / "out").exists()
 
