@@ -19,6 +19,7 @@ from . import rundir as rd
 from .errors import Interrupted, PrlPidError, RunError
 from .rundir import write_atomic, write_json
 from .scenario import Scenario, load_scenario, scenario_to_yaml
+from .schema.types import MAX_SEED
 
 from .report import candidates_table, deployed_section, loop_units, render_report
 
@@ -151,8 +152,8 @@ def tune(scenario_path: str | Path, timesteps: int | None = None, seed: int | No
     """
     if timesteps is not None and timesteps < 1:
         raise RunError(f"--timesteps: must be at least 1 (got {timesteps}; expected a number of training steps >= 1)")
-    if seed is not None and seed < 0:
-        raise RunError(f"--seed: must not be negative (got {seed}; expected an integer >= 0)")
+    if seed is not None and not 0 <= seed <= MAX_SEED:
+        raise RunError(f"--seed: out of range (got {seed}; expected an integer from 0 to {MAX_SEED})")
     scenario = load_scenario(scenario_path)
     run_dir, created = rd.prepare_run_dir(out, scenario.name, resume)
     crashed = rd.mark_active(run_dir)

@@ -71,6 +71,10 @@ CASES = [
     ("net-arch-empty", "first_order", _set("agent.net_arch", []), "agent.net_arch", "[]", "length 0"),
     ("net-arch-zero-layer", "first_order", _set("agent.net_arch", [64, 0]), "agent.net_arch[1]", "0", "out of range"),
     ("negative-seed", "first_order", _set("agent.seed", -1), "agent.seed", "-1", "out of range"),
+    # numpy's legacy seeding (SB3's set_random_seed) refuses 2**32 and above with a traceback
+    ("seed-2-to-the-32", "first_order", _set("agent.seed", 2**32), "agent.seed", "4294967296",
+     "an integer in [0, 2147483647]"),
+    ("eval-seed-huge", "first_order", _set("evaluation.seed", 1e30), "evaluation.seed", "1.0e+30", "out of range"),
     ("control-scale-zero", "first_order", _set("plant.loops.0.control_scale", 0), "plant.loops[0].control_scale",
      "0", "out of range"),
     ("control-variation-negative", "first_order", _set("reward.control_variation_weight", -1),

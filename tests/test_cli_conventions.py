@@ -120,7 +120,7 @@ def test_an_unknown_name_lists_the_bundled_ones(tmp_path, monkeypatch, capsys):
 
 # -- refused starts leave nothing behind -----------------------------------------------------------
 @pytest.mark.parametrize("extra, option", [(["--timesteps", "0"], "--timesteps"), (["--timesteps", "-5"], "--timesteps"),
-                                           (["--seed", "-1"], "--seed")])
+                                           (["--seed", "-1"], "--seed"), (["--seed", str(2**32)], "--seed")])
 def test_bad_numbers_are_refused_before_anything_is_created(extra, option, tmp_path, monkeypatch, capsys):
     monkeypatch.chdir(tmp_path)
     for out in ([], ["--out", "deep/run"]):

@@ -55,7 +55,7 @@ def _lines(capsys) -> list[str]:
 def test_bad_sweep_file_gives_one_line_per_mistake(tmp_path, capsys):
     f = _write(tmp_path / "bad.yaml", """\
         scenario: first_order
-        seeds: [0, -1]
+        seeds: [0, -1, 4294967296]
         timesteps: 0
         colour: red
         set:
@@ -65,7 +65,8 @@ def test_bad_sweep_file_gives_one_line_per_mistake(tmp_path, capsys):
         """)
     assert main(["sweep", str(f), "--out", str(tmp_path / "out")]) == 2
     assert _lines(capsys) == [
-        f"prlpid-fmi: error: {f}: seeds[1]: out of range (got -1; expected an integer >= 0)",
+        f"prlpid-fmi: error: {f}: seeds[1]: out of range (got -1; expected an integer in [0, 2147483647])",
+        f"prlpid-fmi: error: {f}: seeds[2]: out of range (got 4294967296; expected an integer in [0, 2147483647])",
         f"prlpid-fmi: error: {f}: timesteps: out of range (got 0; expected an integer >= 1 (training steps of every "
         "trial), or null for the scenario's budget)",
         f"prlpid-fmi: error: {f}: colour: unknown key (got 'colour'; expected a known key: one of name, scenario, "
@@ -75,6 +76,16 @@ def test_bad_sweep_file_gives_one_line_per_mistake(tmp_path, capsys):
         "mean 'strategies.forecast_horizon'?)",
         f"prlpid-fmi: error: {f}: variants.a/b: not usable as a folder name (got 'a/b'; expected letters, digits and "
         "_ . + = , - (first a letter or digit))"]
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_seed_count_beyond_any_study_is_refused_at_once(tmp_path, capsys):
+    """seeds: 1e30 once built a list of 10**30 seeds (the process hung and ate the memory)."""
+    f = _write(tmp_path / "many.yaml", "scenario: first_order\nseeds: 1e30\nvariants: {a: {agent.seed: 0}}\n")
+    assert main(["sweep", str(f), "--out", str(tmp_path / "out")]) == 2
+    assert _lines(capsys) == [
+        f"prlpid-fmi: error: {f}: seeds: out of range (got 1.0e+30; expected a number of seeds from 1 to 1000, or a "
+        "list of seeds from 0 to 2147483647)"]
     assert not (tmp_path / "out").exists()
 
 

@@ -115,16 +115,22 @@ def schema_at(loc: tuple) -> Optional[dict]:
     return None if node is None else _non_null(node)
 
 
+def _bound_text(value: float) -> str:
+    """A bound as written: integers in full (2147483647, not 2.14748e+09), other numbers with %g."""
+    return str(value) if isinstance(value, int) else f"{value:g}"
+
+
 def _bounds(node: dict) -> str:
     lo = ("> ", node["exclusiveMinimum"]) if "exclusiveMinimum" in node else (
         (">= ", node["minimum"]) if "minimum" in node else None)
     hi = ("< ", node["exclusiveMaximum"]) if "exclusiveMaximum" in node else (
         ("<= ", node["maximum"]) if "maximum" in node else None)
     if lo and hi:
-        return f" in {'(' if lo[0] == '> ' else '['}{lo[1]:g}, {hi[1]:g}{')' if hi[0] == '< ' else ']'}"
+        return (f" in {'(' if lo[0] == '> ' else '['}{_bound_text(lo[1])}, {_bound_text(hi[1])}"
+                f"{')' if hi[0] == '< ' else ']'}")
     if lo or hi:
         op, v = lo or hi
-        return f" {op}{v:g}"
+        return f" {op}{_bound_text(v)}"
     return ""
 
 

@@ -23,8 +23,8 @@ from ..control.smoothing import DEFAULT_ALPHA, DEFAULT_WINDOW
 from . import checks
 from .checks import check_variable, state_of
 from .types import (LOOP_TARGETS, Algorithm, AntiWindup, Count, DisturbanceType, Finite, Flag, Fraction,
-                    GainMapping, GainScale, Isolation, Name, NonNegative, Positive, Smoothing, Steps, VecEnv, _number, number,
-                    problem)
+                    GainMapping, GainScale, Isolation, Name, NonNegative, Positive, Seed, Smoothing, Steps, VecEnv,
+                    _number, number, problem)
 
 _REWARD = RewardWeights()
 
@@ -402,7 +402,7 @@ class AgentModel(Section):
 
     algorithm: Algorithm = Field("ppo", validate_default=True, description="ppo | sac | td3")
     total_timesteps: Count = Field(500_000, description="training budget [env steps]")
-    seed: Steps = Field(0, description="seed of training (>= 0)")
+    seed: Seed = Field(0, description="seed of training")
     n_envs: Optional[Count] = Field(None, description="parallel environments; null: 8 for PPO (8 episodes in one "
                                                       "process batch the policy's forward pass; measured in "
                                                       "docs/architecture.md), 1 for SAC / TD3 (one gradient step "
@@ -659,7 +659,7 @@ class EvaluationModel(_EpisodeSection):
     disturbances: Optional[list[DisturbanceModel]] = Field(None, description="default: training.disturbances")
     measurement_noise_std: Optional[NonNegative] = Field(None, description="[output units]; default: training's")
     actuator_noise_std: Optional[NonNegative] = Field(None, description="[input units]; default: training's")
-    seed: Steps = Field(0, description="seed of the evaluation episode (noise, random setpoints)")
+    seed: Seed = Field(0, description="seed of the evaluation episode (noise, random setpoints)")
     randomize: Optional[dict[RandomizedParameter, RandomRange]] = Field(
         None, description="{parameter: [low, high]} of the Monte-Carlo evaluation set; default: training.randomize")
     randomize_samples: Steps = Field(0, description="number of randomised evaluation episodes (parameters drawn from "

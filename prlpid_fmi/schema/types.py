@@ -87,5 +87,7 @@ NonNegative = number(ge=0)
 Fraction = number(ge=0, le=1)
 Count = integer(ge=1)  # samples, sizes
 Steps = integer(ge=0)  # sample indices, horizons
+MAX_SEED = 2**31 - 1  # seeds reach numpy's legacy seeding (< 2**32) with per-env and per-episode offsets added
+Seed = integer(ge=0, le=MAX_SEED)
 Flag = Annotated[bool, Strict()]
 Name = Annotated[str, Strict(), Field(min_length=1)]

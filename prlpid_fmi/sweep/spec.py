@@ -40,7 +40,7 @@ from ..errors import ScenarioError
 from ..schema.checks import did_you_mean
 from ..schema.document import parse_yaml, syntax_error_line
 from ..schema.messages import _MISSING, _PROBLEMS, key_path, raw_value, schema_at, show
-from ..schema.types import Count, Name, Steps, _integer, problem
+from ..schema.types import MAX_SEED, Count, Name, Seed, _integer, problem
 
 SWEEP_DIR_NAME = "sweeps"  # bundled sweep files: scenarios/sweeps/<name>.yaml
 BASE_VARIANT = "base"
@@ -95,13 +95,16 @@ def _check_variant_name(name: str) -> str:
     return name
 
 
+MAX_SEED_COUNT = 1000  # a count of seeds beyond this is a typo, not a study (each seed is a full training)
+
+
 def _seeds(value: Any) -> Any:
     """A count n means seeds 0 .. n-1."""
     if isinstance(value, list):
         return value
     n = _integer(value)
-    if n < 1:
-        raise problem("out of range", "a number of seeds >= 1, or a list of seeds >= 0")
+    if not 1 <= n <= MAX_SEED_COUNT:
+        raise problem("out of range", _EXPECTED["seeds"])
     return list(range(n))
 
 
@@ -116,7 +119,7 @@ def _unique(values: list) -> list:
 _EXPECTED = {
     "name": "a non-empty string (default: the file name; output folder runs/sweeps/<name>)",
     "scenario": "a path to a scenario file (relative to the sweep file) or a bundled scenario's name",
-    "seeds": "a number of seeds >= 1, or a list of seeds >= 0",
+    "seeds": f"a number of seeds from 1 to {MAX_SEED_COUNT}, or a list of seeds from 0 to {MAX_SEED}",
     "timesteps": "an integer >= 1 (training steps of every trial), or null for the scenario's budget",
     "set": "a mapping {scenario key: value}",
     "vary": "a mapping {scenario key: [value, ...]} with at least one value each (every combination)",
@@ -131,7 +134,7 @@ class SweepModel(BaseModel):
 
     name: Optional[Name] = Field(None, description=_EXPECTED["name"])
     scenario: Name = Field(description=_EXPECTED["scenario"])
-    seeds: Annotated[list[Steps], BeforeValidator(_seeds), AfterValidator(_unique), Field(min_length=1)] = Field(
+    seeds: Annotated[list[Seed], BeforeValidator(_seeds), AfterValidator(_unique), Field(min_length=1)] = Field(
         description=_EXPECTED["seeds"])
     timesteps: Optional[Count] = Field(None, description=_EXPECTED["timesteps"])
     set: dict[ScenarioKey, Any] = Field(default_factory=dict, description=_EXPECTED["set"])
@@ -162,7 +165,7 @@ def _error_line(file: str, doc: Any, err: dict) -> str:
     else:
         text = _PROBLEMS.get(kind, err.get("msg", "invalid").lower())
         if loc and loc[0] == "seeds" and len(loc) > 1:
-            expected = "an integer >= 0"
+            expected = f"an integer in [0, {MAX_SEED}]"
     return f"{file}: {key_path(loc, doc)}: {text} (got {got}; expected {expected})"
 
 
