@@ -59,7 +59,9 @@ def resolve_fmu(fmu: str, fmi_version: int = 2) -> Path:
         return bundled_fmu(fmu, fmi_version)
     path = Path(fmu)
     if not path.is_file():
-        raise PlantError(f"{fmu}: FMU file not found (and not a bundled plant: {', '.join(bundled_plant_names())})")
+        from .fmu.description import missing_fmu_text
+        raise PlantError(f"{fmu}: {missing_fmu_text(path)} (and not a bundled plant: "
+                         f"{', '.join(bundled_plant_names())})")
     return path
 
 

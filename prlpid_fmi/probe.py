@@ -253,10 +253,11 @@ def probe(fmu_path, output: Optional[str] = None, inputs: Optional[Sequence[str]
     inputs held there). Raises PlantError for an FMU that cannot be a plant or an unknown variable.
     """
     from .fmu import describe_fmu
+    from .fmu.archive import archive_problems
 
     path = Path(fmu_path)
     d = describe_fmu(path)
-    problems = d.plant_problems()
+    problems = archive_problems(path) or d.plant_problems()  # the archive first: no binary, unsafe names, ...
     if problems:
         raise PlantError(f"{path}: cannot be probed as a plant: {'; '.join(problems)}")
     output = output or d.output_names[0]

@@ -273,6 +273,7 @@ ARCHIVES = [
                                               else [(n, d)]), "binaries for: no platform"),
     ("corrupt-member", _corrupt, "corrupt archive member 'binaries/linux64/FirstOrderUnstable.so'"),
     ("truncated-archive", _truncated, "not a ZIP archive"),
+    ("extracted-folder", lambda t: (t / "plant.fmu").mkdir(), "a folder, not an FMU file"),
 ]
 
 

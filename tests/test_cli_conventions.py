@@ -514,14 +514,33 @@ def test_every_help_prints_and_exits_0(argv, capsys):
 
 @pytest.mark.parametrize("command", ["inspect", "probe", "init"])
 @pytest.mark.parametrize("content, problem", [(None, "FMU file not found"),
+                                              ("folder", "a folder, not an FMU file (an extracted FMU?"),
                                               (b"PK\x03\x04 not a zip", "not an FMU (expected a ZIP archive")])
 def test_a_missing_or_broken_fmu_is_one_line_naming_the_file_once(command, content, problem, tmp_path, capsys):
     fmu = tmp_path / "plant.fmu"
-    if content is not None:
+    if content == "folder":
+        fmu.mkdir()
+    elif content is not None:
         fmu.write_bytes(content)
     assert main([command, str(fmu)]) == 2
     line = _one_error_line(capsys)
     assert problem in line and line.count(str(fmu)) == 1, line
+
+
+@pytest.mark.parametrize("command", ["probe", "init"])
+def test_an_fmu_with_sources_but_no_binary_says_how_to_compile_it(command, tmp_path, capsys):
+    """probe and init once passed such an FMU to FMPy and reported only "Cannot find shared library"."""
+    import zipfile
+
+    from prlpid_fmi.fmu import bundled_fmu
+    fmu = tmp_path / "plant.fmu"
+    with zipfile.ZipFile(bundled_fmu("FirstOrderUnstable", 2)) as src, zipfile.ZipFile(fmu, "w") as dst:
+        for name in src.namelist():
+            if not name.startswith("binaries/"):
+                dst.writestr(name, src.read(name))
+    assert main([command, str(fmu)]) == 2
+    line = _one_error_line(capsys)
+    assert "no binary for this platform" in line and f"fmpy compile {fmu.name}" in line, line
 
 
 @pytest.mark.parametrize("option, expected", [

@@ -174,11 +174,18 @@ def _describe(path: str, mtime: float) -> FmuDescription:
         n_event_indicators=int(md.numberOfEventIndicators or 0))
 
 
+def missing_fmu_text(path: Path) -> str:
+    """Why `path`, which is not a file, is no FMU: a folder (e.g. an extracted FMU) or nothing there."""
+    if path.is_dir():
+        return "a folder, not an FMU file (an extracted FMU? zip its contents back into a .fmu archive)"
+    return "FMU file not found"
+
+
 def describe_fmu(path: str | Path) -> FmuDescription:
     """Read an FMU's model description (cached per file and modification time)."""
     p = Path(path)
     if not p.is_file():
-        raise PlantError(f"{p}: FMU file not found")
+        raise PlantError(f"{p}: {missing_fmu_text(p)}")
     if not zipfile.is_zipfile(p):
         raise PlantError(f"{p}: not an FMU (expected a ZIP archive with a modelDescription.xml)")
     return _describe(str(p.resolve()), p.stat().st_mtime)

@@ -73,7 +73,8 @@ def resolve_fmu(value: str, state: State) -> tuple[str, Path]:
     if not path.is_absolute():
         path = (state.base_dir / path).resolve()
     if not path.is_file():
-        raise problem(f"FMU file not found: {path}",
+        from ..fmu.description import missing_fmu_text
+        raise problem(f"{missing_fmu_text(path)}: {path}",
                       "a path to a .fmu file (relative to the scenario's folder) or a bundled plant: "
                       + (", ".join(names) or "none found"))
     return str(path), path
