@@ -77,8 +77,20 @@ def _check_plants(args: argparse.Namespace) -> int:
 
 
 def _validate(args: argparse.Namespace) -> int:
-    from .scenario import load_scenario
+    from pathlib import Path
 
+    from .presets import bundled_scenario_names
+    from .scenario import load_scenario
+    from .sweep.spec import bundled_sweep_names, is_sweep_file, load_sweep, resolve_sweep
+
+    arg = Path(args.scenario)
+    if (is_sweep_file(arg) if arg.is_file() else
+            args.scenario in bundled_sweep_names() and args.scenario not in bundled_scenario_names()):
+        sweep = load_sweep(resolve_sweep(args.scenario))
+        n, m = len(sweep.variants), len(sweep.seeds)
+        _say(args, f"{args.scenario}: ok: sweep {sweep.name}: {n} variant(s) x {m} seed(s) = {n * m} trials of "
+                   f"{sweep.base}" + (f", {sweep.timesteps} training steps each" if sweep.timesteps else ""))
+        return 0
     path = _scenario(args.scenario)
     s = load_scenario(path)
     t = s.tuning
@@ -258,8 +270,8 @@ def make_parser() -> argparse.ArgumentParser:
                    help="also run it: state save/restore, independent instances, reset, memory after 100 resets "
                         "(one line per finding; exit code 1 when one fails)")
 
-    p = command("validate", _validate, "check a scenario file; one clear line per mistake")
-    p.add_argument("scenario", help=SCENARIO_HELP)
+    p = command("validate", _validate, "check a scenario file or a sweep file; one clear line per mistake")
+    p.add_argument("scenario", help=SCENARIO_HELP + "; or a sweep file, or a bundled sweep's name")
 
     command("schema", _schema, "print the JSON Schema of scenario files (for editors and other tools)")
 

@@ -89,6 +89,28 @@ def test_a_seed_count_beyond_any_study_is_refused_at_once(tmp_path, capsys):
     assert not (tmp_path / "out").exists()
 
 
+def test_validate_checks_a_sweep_file_as_a_sweep(tmp_path, capsys):
+    """validate once read a sweep file as a scenario: four lines on `scenario`, `seeds`, ... being unknown."""
+    good = _write(tmp_path / "good.yaml", """\
+        scenario: first_order
+        seeds: [3, 7]
+        timesteps: 64
+        vary: {strategies.forecast_horizon: [0, 3, 5]}
+        """)
+    assert main(["validate", str(good)]) == 0
+    assert capsys.readouterr().out.strip() == (
+        f"{good}: ok: sweep good: 3 variant(s) x 2 seed(s) = 6 trials of "
+        f"{load_sweep(good).base}, 64 training steps each")
+    assert main(["validate", "fig3_algorithms"]) == 0  # a bundled sweep by name: 4 algorithms x 5 seeds
+    assert "ok: sweep fig3_algorithms: 4 variant(s) x 5 seed(s) = 20 trials" in capsys.readouterr().out
+    bad = _write(tmp_path / "bad.yaml", "scenario: first_order\nseeds: 1\nset: {plant.loops.0.input: u}\n")
+    assert main(["validate", str(bad)]) == 2
+    assert _lines(capsys) == [
+        f"prlpid-fmi: error: {bad}: set.plant.loops.0.input: not a scenario key path (got 'plant.loops.0.input'; "
+        "expected dotted names with optional [index], e.g. strategies.forecast_horizon; did you mean "
+        "'plant.loops[0].input'?)"]
+
+
 def test_sweep_file_syntax_errors_say_what_the_parser_found(tmp_path, capsys):
     """One line each, with the parser's problem (before: only 'not valid YAML at line 2', and a traceback for
     binary data in the scenario reader's place)."""

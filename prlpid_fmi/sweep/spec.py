@@ -79,7 +79,10 @@ def _check_key(key: str) -> str:
     try:
         loc = parse_key(key)
     except ValueError:
-        raise problem("not a scenario key path", f"dotted names with optional [index], e.g. {_EXAMPLE_KEY}") from None
+        indexed = re.sub(r"\.(\d+)(?=\.|$)", r"[\1]", key)  # plant.loops.0.input -> plant.loops[0].input
+        hint = f"; did you mean {indexed!r}?" if indexed != key else ""
+        raise problem("not a scenario key path",
+                      f"dotted names with optional [index], e.g. {_EXAMPLE_KEY}{hint}") from None
     if schema_at(loc) is None:
         raise problem("unknown scenario key", f"a key of the scenario file, e.g. {_EXAMPLE_KEY}"
                       + did_you_mean(key, _scenario_keys()))
@@ -266,6 +269,16 @@ def resolve_sweep(arg: str | Path) -> Path:
     names = ", ".join(bundled_sweep_names()) or "none found"
     raise ScenarioError(f"{arg}: no such sweep file or bundled sweep (got {str(arg)!r}; expected a path to a .yaml "
                         f"file or one of: {names})")
+
+
+def is_sweep_file(path: Path) -> bool:
+    """Does the YAML file at `path` look like a sweep file (a top-level `scenario` key, no `plant`)?
+    False for anything unreadable: the scenario reader then says what is wrong with it."""
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError, RecursionError):
+        return False
+    return isinstance(data, dict) and "scenario" in data and "plant" not in data
 
 
 def bundled_sweep_names() -> list[str]:
