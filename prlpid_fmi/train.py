@@ -7,6 +7,8 @@ from __future__ import annotations
 
 import functools
 import math
+import os
+import warnings
 from pathlib import Path
 
 import gymnasium as gym
@@ -155,6 +157,17 @@ def normalize_stats(run_dir: Path, model_file: Path) -> Path | None:
     return paired if paired.is_file() else None
 
 
+def torch_threads(requested: int) -> int:
+    """agent.torch_threads, at most the machine's cores (more only cost memory: 10**5 threads once exhausted the
+    address space, and the FMU's shared library then failed to load); a warning says when it is lowered."""
+    cores = os.cpu_count() or 1
+    if requested > cores:
+        warnings.warn(f"agent.torch_threads: {requested} is more than this machine's {cores} cores; torch uses "
+                      f"{cores}", stacklevel=2)
+        return cores
+    return requested
+
+
 def train(config: TuningConfig, agent: AgentConfig, run_dir: Path, progress_bar: bool = False,
           resume_from: Path | None = None, total_timesteps: int | None = None, anchor=None):
     """Train an agent; checkpoints, TensorBoard logs and Monitor CSVs go under run_dir.
@@ -166,7 +179,7 @@ def train(config: TuningConfig, agent: AgentConfig, run_dir: Path, progress_bar:
 
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
-    torch.set_num_threads(agent.torch_threads)
+    torch.set_num_threads(torch_threads(agent.torch_threads))
     env = make_vec_env(config, agent, run_dir / "monitor", anchor, append=resume_from is not None)
     if agent.normalize:
         stats = normalize_stats(run_dir, resume_from) if resume_from is not None else None

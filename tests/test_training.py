@@ -78,3 +78,18 @@ def test_resume_with_vecnormalize_takes_the_checkpoints_own_statistics(tmp_path)
     # 256 more steps counted on top of the checkpoint's 512 (+ a few reset observations), not on the final 1024
     resumed = model.get_vec_normalize_env().obs_rms
     assert resumed.count == pytest.approx(512 + 256, abs=8)
+
+
+def test_torch_threads_above_the_cores_are_lowered_with_a_warning():
+    """agent.torch_threads: 100000 once made torch start 10**5 threads; the FMU's library then failed to map."""
+    import os
+    import warnings
+
+    from prlpid_fmi.train import torch_threads
+
+    cores = os.cpu_count()
+    with pytest.warns(UserWarning, match=f"agent.torch_threads: 100000 is more than this machine's {cores} cores"):
+        assert torch_threads(100_000) == cores
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert torch_threads(1) == 1 and torch_threads(cores) == cores
