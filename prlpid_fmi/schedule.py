@@ -265,7 +265,7 @@ def extract_schedule(policy: Policy, config: TuningConfig, schedule_by: str = "s
         raise PrlPidError(f"hold_setpoints needs {config.n_loops} values, got {len(others)}")
     tail = max(1, math.ceil(SETTLED_FRACTION * steps))
 
-    rows, excluded = [], []
+    rows, excluded, failures = [], [], {}  # failures: reason -> setpoints (one warning per reason)
     held = _nominal(dataclasses.replace(config, episode_steps=steps, forecast_horizon=0, measurement_noise_std=0.0,
                                         actuator_noise_std=0.0, disturbances=()))
     env = PidTuningEnv(held, info=False, anchor=anchor)
@@ -287,8 +287,7 @@ def extract_schedule(policy: Policy, config: TuningConfig, schedule_by: str = "s
             if terminated:  # no safe gains exist there: leave the point out of the table
                 excluded.append(float(sp))
                 why = env.core.termination.message if env.core.termination else f"diverged at step {k + 1}"
-                warnings.warn(f"the closed loop failed at {variable} setpoint {sp:g} ({why}); "
-                              "that operating point is left out of the schedule", stacklevel=2)
+                failures.setdefault(why, []).append(float(sp))
                 continue
             g = {name: np.array([x[i] for x in gains[-tail:]], float) for i, name in enumerate(GAIN_NAMES)
                  if gains[0][i] is not None}
@@ -297,6 +296,12 @@ def extract_schedule(policy: Policy, config: TuningConfig, schedule_by: str = "s
     finally:
         env.close()
 
+    for why, where in failures.items():
+        points_text = f"setpoint {where[0]:g}" if len(where) == 1 else \
+            f"{len(where)} setpoints ({', '.join(f'{v:g}' for v in where)})"
+        warnings.warn(f"the closed loop failed at {variable} {points_text} ({why}); "
+                      f"{'that operating point is' if len(where) == 1 else 'they are'} left out of the schedule",
+                      stacklevel=2)
     if not rows:
         raise PrlPidError(f"the closed loop diverged at every operating point of {variable} "
                           f"({', '.join(f'{v:g}' for v in excluded)}): no gains can be scheduled; "

@@ -224,3 +224,19 @@ def test_edited_file_with_stale_parallel_gains_is_refused(tmp_path):
 def test_replay_refuses_a_table_for_other_loops():
     with pytest.raises(PrlPidError, match="loops"):
         replay_schedule(_table(), CONFIG)
+
+
+def test_points_that_fail_for_one_reason_get_one_warning_naming_them_all():
+    """Setpoints failing alike once printed one warning each; now one per distinct reason. On the linear
+    1/(s - 1) from x = 0, setpoints -1 and 1 diverge at the same sample (mirror images)."""
+    import warnings
+
+    unstable = lambda obs: np.array([-1.0, 1.0, -1.0], np.float32)  # Kp = 0.5 < 1 cannot hold 1/(s - 1)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        with pytest.raises(PrlPidError, match="every operating point"):
+            extract_schedule(unstable, CONFIG, points=[-1.0, 1.0], settle_steps=100)
+    texts = [str(w.message) for w in caught if "left out of the schedule" in str(w.message)]
+    assert len(texts) == 1, texts
+    assert texts[0].startswith("the closed loop failed at setpoint[y] 2 setpoints (-1, 1) (diverged"), texts[0]
+    assert texts[0].endswith("they are left out of the schedule")
