@@ -6,6 +6,7 @@ one line on stderr with exit code 2. Results go to stdout, progress to stderr; -
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import warnings
 
@@ -231,6 +232,21 @@ def _sweep(args: argparse.Namespace) -> int:
     return 1 if result.failed else 0
 
 
+def _whole_number(text: str) -> int:
+    """An integer option: 50000, 50_000 or 5e4 (written as a float, it must be a whole number)."""
+    try:
+        return int(text)
+    except ValueError:
+        pass
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not math.isfinite(value) or not value.is_integer():
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r} (expected a whole number, e.g. 3, 50000 or 5e4)")
+    return int(value)
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with the tool's error convention: one line on stderr, exit code 2."""
 
@@ -292,8 +308,8 @@ def make_parser() -> argparse.ArgumentParser:
 
     p = command("tune", _tune, "train the adaptive PID, compare it with a tuned fixed PID, export the schedule")
     p.add_argument("scenario", help=SCENARIO_HELP)
-    p.add_argument("--timesteps", type=int, default=None, help="training steps >= 1 (default: agent.total_timesteps)")
-    p.add_argument("--seed", type=int, default=None, help="seed >= 0 (default: agent.seed)")
+    p.add_argument("--timesteps", type=_whole_number, default=None, help="training steps >= 1 (default: agent.total_timesteps)")
+    p.add_argument("--seed", type=_whole_number, default=None, help="seed >= 0 (default: agent.seed)")
     p.add_argument("--out", default=None, help="run directory (default: runs/<name>-<UTC time>; never overwritten)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out from its latest checkpoint")
     p.add_argument("--no-progress", action="store_true", help="no progress on stderr")
@@ -303,7 +319,7 @@ def make_parser() -> argparse.ArgumentParser:
                                  "summarise them: mean and 95 % interval per variant")
     p.add_argument("sweep", help="sweep YAML file, or the name of a bundled sweep (scenarios/sweeps/)")
     p.add_argument("--out", default=None, help="sweep folder (default: runs/sweeps/<name>); run again to continue")
-    p.add_argument("--workers", type=int, default=None, help="local processes (default: one per CPU core)")
+    p.add_argument("--workers", type=_whole_number, default=None, help="local processes (default: one per CPU core)")
     p.add_argument("--ray", nargs="?", const="", default=None, metavar="ADDRESS",
                    help="run the trials as Ray tasks: on the cluster at ADDRESS (e.g. auto, ray://host:10001), or "
                         "without ADDRESS on RAY_ADDRESS or a new local Ray instance")
@@ -330,7 +346,7 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--schedule-by", default=None,
                    help="csv: setpoint, measurement (settled holds), error (setpoint - measurement, binned from "
                         "training-distribution trajectories), or an FMU variable name (default: setpoint)")
-    p.add_argument("--points", type=int, default=None, help="csv: number of operating points (default: 9)")
+    p.add_argument("--points", type=_whole_number, default=None, help="csv: number of operating points (default: 9)")
     p.add_argument("--replay", action="store_true",
                    help="run the table as a plain gain-scheduled PID on the FMU and compare with the policy")
     p.add_argument("--scenario", default=None,

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import re
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Optional
@@ -241,6 +242,10 @@ def _read(path: Path, file: str) -> str:
     try:
         return path.read_text(encoding="utf-8")
     except UnicodeDecodeError:
+        if zipfile.is_zipfile(path):  # most likely the plant itself, given where a scenario belongs
+            raise ScenarioError(f"{file}: (top level): a ZIP archive (an FMU?), not a scenario (got binary data; "
+                                f"expected UTF-8 YAML: write a scenario for an FMU with `prlpid-fmi init "
+                                f"{file} > scenario.yaml`)") from None
         raise ScenarioError(f"{file}: (top level): not a text file (got binary data; expected UTF-8 YAML)") from None
     except OSError as exc:
         raise ScenarioError(f"{file}: (top level): cannot be read: {exc.strerror} "

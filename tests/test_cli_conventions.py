@@ -554,3 +554,29 @@ def test_export_names_a_bad_schedule_option_and_writes_nothing(option, expected,
     assert main(["export", str(trained_run), "-o", str(out)] + option) == 2
     assert expected in _one_error_line(capsys)
     assert not out.exists()
+
+
+def test_integer_options_take_5e4_and_refuse_fractions_in_one_line(tmp_path, monkeypatch, capsys):
+    from prlpid_fmi.cli import _whole_number
+
+    assert [_whole_number(t) for t in ("50000", "50_000", "5e4", "5.0E4", "-1")] == [50000, 50000, 50000, 50000, -1]
+    monkeypatch.chdir(tmp_path)
+    for value in ("0.5", "inf", "nan", "abc"):
+        with pytest.raises(SystemExit) as info:
+            main(["tune", "first_order", "--timesteps", value])
+        assert info.value.code == 2
+        line = _one_error_line(capsys)
+        assert f"--timesteps: not a whole number: {value!r} (expected a whole number" in line, line
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_fmu_given_as_the_scenario_points_to_init(tmp_path, monkeypatch, capsys):
+    from prlpid_fmi.fmu import bundled_fmu
+
+    monkeypatch.chdir(tmp_path)
+    fmu = bundled_fmu("FirstOrderUnstable", 2)
+    for command in (["tune"], ["validate"]):
+        assert main([*command, str(fmu)]) == 2
+        line = _one_error_line(capsys)
+        assert "a ZIP archive (an FMU?), not a scenario" in line and f"prlpid-fmi init {fmu} > scenario.yaml" in line
+    assert list(tmp_path.iterdir()) == []
