@@ -8,6 +8,7 @@ from __future__ import annotations
 import functools
 import math
 import os
+import re
 import warnings
 from pathlib import Path
 
@@ -157,6 +158,13 @@ def normalize_stats(run_dir: Path, model_file: Path) -> Path | None:
     return paired if paired.is_file() else None
 
 
+def _allocation_text(exc: BaseException) -> str:
+    """What a failed allocation asked for, in GB when torch says it; else the message on one line."""
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    m = re.search(r"tried to allocate (\d+) bytes", text)
+    return f"one tensor of {int(m.group(1)) / 1e9:.3g} GB could not be allocated" if m else text
+
+
 def torch_threads(requested: int) -> int:
     """agent.torch_threads, at most the machine's cores (more only cost memory: 10**5 threads once exhausted the
     address space, and the FMU's shared library then failed to load); a warning says when it is lowered."""
@@ -194,7 +202,17 @@ def train(config: TuningConfig, agent: AgentConfig, run_dir: Path, progress_bar:
                            "`tune`; delete it to resume from an earlier one)") from None
         model.tensorboard_log = str(run_dir / "tensorboard")
     else:
-        model = build_model(agent, env, run_dir / "tensorboard", anchored=is_anchored(config, anchor))
+        try:
+            model = build_model(agent, env, run_dir / "tensorboard", anchored=is_anchored(config, anchor))
+        except (MemoryError, RuntimeError) as exc:  # torch: RuntimeError "can't allocate memory"; numpy: MemoryError
+            if isinstance(exc, RuntimeError) and "allocate" not in str(exc):
+                raise
+            env.close()
+            sizes = f"agent.net_arch {list(agent.net_arch)}" + (
+                f", agent.buffer_size {agent.buffer_size}" if agent.algorithm != "ppo" else "")
+            raise RunError(f"agent: the {agent.algorithm.upper()} model does not fit in this machine's memory "
+                           f"({sizes}: {_allocation_text(exc)}; expected smaller hidden layers"
+                           + (" or replay buffer)" if agent.algorithm != "ppo" else ")")) from None
     steps = total_timesteps if total_timesteps is not None else agent.total_timesteps
     checkpoint = CheckpointCallback(save_freq=max(agent.checkpoint_every // agent.envs, 1),
                                     save_path=str(run_dir / "checkpoints"), name_prefix="model",

@@ -93,3 +93,40 @@ def test_torch_threads_above_the_cores_are_lowered_with_a_warning():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert torch_threads(1) == 1 and torch_threads(cores) == cores
+
+
+@pytest.mark.parametrize("algorithm, failure, expected", [
+    ("ppo", RuntimeError("[enforce fail at alloc_cpu.cpp:127] err == 0. DefaultCPUAllocator: can't allocate memory: "
+                         "you tried to allocate 40000000000 bytes. Error code 12 (Cannot allocate memory)"),
+     "agent: the PPO model does not fit in this machine's memory (agent.net_arch [64, 64]: one tensor of 40 GB "
+     "could not be allocated; expected smaller hidden layers)"),
+    ("sac", MemoryError("Unable to allocate 14.6 TiB for an array with shape (1000000000000, 1, 4)"),
+     "agent: the SAC model does not fit in this machine's memory (agent.net_arch [64, 64], agent.buffer_size "
+     "200000: Unable to allocate 14.6 TiB for an array with shape (1000000000000, 1, 4); expected smaller hidden "
+     "layers or replay buffer)")])
+def test_a_model_too_large_for_memory_is_one_error_not_a_traceback(algorithm, failure, expected, tmp_path,
+                                                                  monkeypatch):
+    """net_arch [100000, 100000] once ended in torch's allocator traceback (40 GB for one weight matrix). The
+    allocation failure is simulated: a real one would depend on the machine's memory and overcommit policy."""
+    import prlpid_fmi.train as train_module
+    from prlpid_fmi.errors import RunError
+
+    def fail(*args, **kwargs):
+        raise failure
+
+    monkeypatch.setattr(train_module, "build_model", fail)
+    agent = AgentConfig(algorithm=algorithm, total_timesteps=64, n_envs=1)
+    with pytest.raises(RunError) as info:
+        train(CONFIG, agent, tmp_path / "run")
+    assert str(info.value) == expected
+
+
+def test_a_runtime_error_that_is_not_about_memory_is_not_relabelled(tmp_path, monkeypatch):
+    import prlpid_fmi.train as train_module
+
+    def fail(*args, **kwargs):
+        raise RuntimeError("mat1 and mat2 shapes cannot be multiplied")
+
+    monkeypatch.setattr(train_module, "build_model", fail)
+    with pytest.raises(RuntimeError, match="shapes cannot be multiplied"):
+        train(CONFIG, AgentConfig(total_timesteps=64, n_envs=1), tmp_path / "run")
