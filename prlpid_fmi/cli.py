@@ -243,7 +243,8 @@ def _whole_number(text: str) -> int:
     except ValueError:
         value = math.nan
     if not math.isfinite(value) or not value.is_integer():
-        raise argparse.ArgumentTypeError(f"not a whole number: {text!r} (expected a whole number, e.g. 3, 50000 or 5e4)")
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r} "
+                                         "(expected a whole number, e.g. 3, 50000 or 5e4)")
     return int(value)
 
 
@@ -308,8 +309,10 @@ def make_parser() -> argparse.ArgumentParser:
 
     p = command("tune", _tune, "train the adaptive PID, compare it with a tuned fixed PID, export the schedule")
     p.add_argument("scenario", help=SCENARIO_HELP)
-    p.add_argument("--timesteps", type=_whole_number, default=None, help="training steps >= 1 (default: agent.total_timesteps)")
-    p.add_argument("--seed", type=_whole_number, default=None, help="seed >= 0 (default: agent.seed)")
+    p.add_argument("--timesteps", type=_whole_number, default=None,
+                   help="training steps >= 1, e.g. 50000 or 5e4 (default: agent.total_timesteps)")
+    p.add_argument("--seed", type=_whole_number, default=None,
+                   help="seed, the same range as agent.seed (default: agent.seed)")
     p.add_argument("--out", default=None, help="run directory (default: runs/<name>-<UTC time>; never overwritten)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out from its latest checkpoint")
     p.add_argument("--no-progress", action="store_true", help="no progress on stderr")
