@@ -130,3 +130,17 @@ def test_a_runtime_error_that_is_not_about_memory_is_not_relabelled(tmp_path, mo
     monkeypatch.setattr(train_module, "build_model", fail)
     with pytest.raises(RuntimeError, match="shapes cannot be multiplied"):
         train(CONFIG, AgentConfig(total_timesteps=64, n_envs=1), tmp_path / "run")
+
+
+def test_the_largest_allowed_seed_with_every_offset_still_seeds_numpy_and_sb3():
+    """MAX_SEED's reason, checked against the libraries: SB3's set_random_seed calls numpy's legacy seeding,
+    which refuses 2**32; the largest seed plus the largest per-episode offset and per-env index stays below."""
+    import numpy as np
+    from stable_baselines3.common.utils import set_random_seed
+
+    from prlpid_fmi.schema.types import MAX_SEED
+    from prlpid_fmi.transients import HOLDOUT_SEED_OFFSET
+
+    set_random_seed(MAX_SEED + HOLDOUT_SEED_OFFSET + 1000)  # must not raise
+    with pytest.raises(ValueError):
+        np.random.seed(2**32)
