@@ -28,12 +28,12 @@ from pathlib import Path
 import numpy as np
 from gymnasium.utils.seeding import np_random
 
-from prlpid_fmi.core import LoopCore
-from prlpid_fmi.deliver import overall_metric
-from prlpid_fmi.evaluate import Trajectory, measure
-from prlpid_fmi.presets import scenario_path
-from prlpid_fmi.run import tune
-from prlpid_fmi.scenario import load_scenario
+from prlpid_fmi.loop.core import LoopCore
+from prlpid_fmi.deliver.rule import overall_metric
+from prlpid_fmi.loop.evaluation import Trajectory, measure
+from prlpid_fmi.scenario.presets import scenario_path
+from prlpid_fmi.run.tune import tune
+from prlpid_fmi.scenario.load import load_scenario
 
 LINEAR = ("first_order", "first_order_1p5", "time_varying")
 COLUMNS = (("ISE", "ISE"), ("IAE", "IAE"), ("Overshoot", "overshoot %"), ("SettlingTime", "settling s"),

@@ -29,13 +29,13 @@ from pathlib import Path
 
 import yaml
 
-from prlpid_fmi.deliver import overall_metric
+from prlpid_fmi.deliver.rule import overall_metric
 from prlpid_fmi.fmu import build_fmu
 from prlpid_fmi.metrics import chatter_fraction
-from prlpid_fmi.presets import scenario_path
-from prlpid_fmi.run import tune
-from prlpid_fmi.scenario import load_scenario
-from prlpid_fmi.schedule import read_schedule_csv, replay_schedule
+from prlpid_fmi.scenario.presets import scenario_path
+from prlpid_fmi.run.tune import tune
+from prlpid_fmi.scenario.load import load_scenario
+from prlpid_fmi.tuning.schedule.table import read_schedule_csv, replay_schedule
 
 HERE = Path(__file__).parent
 TEST_PLANTS = HERE.parent / "tests" / "plants"

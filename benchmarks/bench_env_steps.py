@@ -12,7 +12,7 @@ import time
 import numpy as np
 
 import prlpid_fmi
-from prlpid_fmi.presets import PRESET_NAMES
+from prlpid_fmi.scenario.presets import PRESET_NAMES
 
 
 def steps_per_s(name: str, horizon: int, steps: int) -> float:

@@ -27,11 +27,12 @@ import warnings
 from pathlib import Path
 
 from prlpid_fmi import rundir as rd
-from prlpid_fmi.actions import gains_from_values
-from prlpid_fmi.assess import assess_fixed, assess_schedule, max_sensitivity, robust_schedule
-from prlpid_fmi.run import _anchor, _load_run, _policy, gains_from_dict
-from prlpid_fmi.schedule import schedule_from_rows
-from prlpid_fmi.transients import TRAJECTORY_EPISODES, bin_rows, extract, trajectory_samples, training_ise
+from prlpid_fmi.loop.actions import gains_from_values
+from prlpid_fmi.deliver.evidence import assess_fixed, assess_schedule, max_sensitivity, robust_schedule
+from prlpid_fmi.run.tune import _anchor, _load_run, _policy, gains_from_dict
+from prlpid_fmi.tuning.schedule.table import schedule_from_rows
+from prlpid_fmi.tuning.schedule.trajectories import (
+    TRAJECTORY_EPISODES, bin_rows, extract, trajectory_samples, training_ise)
 
 
 def abs_error_table(policy, config, points: int, seed: int, anchor):

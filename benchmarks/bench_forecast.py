@@ -20,10 +20,10 @@ import statistics
 import time
 
 from prlpid_fmi.control import PID, CoupledPID
-from prlpid_fmi.control.forecast import make_forecast
-from prlpid_fmi.core import control_scales, resolve_fmu
+from prlpid_fmi.loop.forecast.base import make_forecast
+from prlpid_fmi.loop.core import control_scales, resolve_fmu
 from prlpid_fmi.fmu import FmuPlant
-from prlpid_fmi.presets import preset
+from prlpid_fmi.scenario.presets import preset
 
 SCENARIOS = ("first_order", "two_tank", "quadrotor")
 HORIZONS = (3, 10)

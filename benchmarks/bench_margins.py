@@ -15,8 +15,8 @@ import time
 import control
 import numpy as np
 
-from prlpid_fmi.margins import format_margins, loop_margins, pid_transfer_function
-from prlpid_fmi.presets import preset
+from prlpid_fmi.robustness.margins import format_margins, loop_margins, pid_transfer_function
+from prlpid_fmi.scenario.presets import preset
 
 CASES = {  # scenario: (Kp, Ti, Td) per loop, exact plant pole a of 1/(s - a) or None
     "first_order": ((3.0, 2.0, 0.05), 1.0),

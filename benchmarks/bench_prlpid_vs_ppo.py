@@ -14,11 +14,11 @@ import json
 import time
 from pathlib import Path
 
-from prlpid_fmi.baseline import tune_fixed_pid
+from prlpid_fmi.tuning.fixed_pid import tune_fixed_pid
 from prlpid_fmi.config import AgentConfig
-from prlpid_fmi.evaluate import constant_gains, evaluate, evaluate_gains, model_policy
-from prlpid_fmi.presets import preset
-from prlpid_fmi.train import train
+from prlpid_fmi.loop.evaluation import constant_gains, evaluate, evaluate_gains, model_policy
+from prlpid_fmi.scenario.presets import preset
+from prlpid_fmi.tuning.agent import train
 
 VARIANTS = {"PRL-PID": dict(forecast_horizon=3, smoothing="era"),
             "PPO-PID": dict(forecast_horizon=0, smoothing="none")}

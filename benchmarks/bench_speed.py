@@ -44,9 +44,9 @@ from fmugym_peer import UNAVAILABLE as PEER_UNAVAILABLE, make_peer  # noqa: E402
 from twins import agreement, make_twin  # noqa: E402
 
 from prlpid_fmi.config import AgentConfig  # noqa: E402
-from prlpid_fmi.env import PidTuningEnv  # noqa: E402
+from prlpid_fmi.loop.env import PidTuningEnv
 from prlpid_fmi.fmu import bundled_fmu  # noqa: E402
-from prlpid_fmi.presets import preset  # noqa: E402
+from prlpid_fmi.scenario.presets import preset
 
 REPO = Path(__file__).resolve().parents[1]
 SCENARIOS = ("first_order", "two_tank", "quadrotor")
@@ -153,7 +153,7 @@ def measure(contestants: list[Contestant], repeats: int, seed: int) -> None:
 
 def training_steps_per_s(steps: int) -> float:
     """Wall-clock steps/s of train() on first_order with AgentConfig's defaults (model build and saves included)."""
-    from prlpid_fmi.train import train
+    from prlpid_fmi.tuning.agent import train
 
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()

@@ -31,9 +31,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from prlpid_fmi.deliver import overall_metric
+from prlpid_fmi.deliver.rule import overall_metric
 from prlpid_fmi.fmu import build_fmu
-from prlpid_fmi.run import tune
+from prlpid_fmi.run.tune import tune
 
 HERE = Path(__file__).parent
 PLANTS = HERE / "plants"

@@ -13,10 +13,10 @@ ENV_ID = "prlpid_fmi/PidTuning-v0"
 def make_env(config="first_order", scenario=None, **overrides):
     """A PidTuningEnv for a TuningConfig, a preset name or a scenario file path (`config`, or `scenario`:
     a path or a bundled scenario's name), with TuningConfig fields overridden by keyword."""
-    from .config import TuningConfig
-    from .env import PidTuningEnv
-    from .presets import preset, resolve_scenario
-    from .scenario import load_scenario
+    from prlpid_fmi.config import TuningConfig
+    from prlpid_fmi.loop.env import PidTuningEnv
+    from prlpid_fmi.scenario.presets import preset, resolve_scenario
+    from prlpid_fmi.scenario.load import load_scenario
 
     if scenario is not None:
         config = load_scenario(resolve_scenario(str(scenario))).tuning

@@ -1,6 +1,6 @@
 """`python -m prlpid_fmi`: the prlpid-fmi command line."""
 import sys
 
-from .cli import main
+from prlpid_fmi.cli import main
 
 sys.exit(main())

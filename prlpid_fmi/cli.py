@@ -10,9 +10,9 @@ import math
 import sys
 import warnings
 
-from . import __version__
-from .deploy import FORMATS
-from .errors import Interrupted, PrlPidError
+from prlpid_fmi import __version__
+from prlpid_fmi.export.code import FORMATS
+from prlpid_fmi.errors import Interrupted, PrlPidError
 
 PROG = "prlpid-fmi"
 
@@ -25,14 +25,14 @@ def _say(args: argparse.Namespace, text: str) -> None:
 
 def _scenario(arg: str):
     """A scenario argument: an existing path, else a bundled scenario's name."""
-    from .presets import resolve_scenario
+    from prlpid_fmi.scenario.presets import resolve_scenario
 
     return resolve_scenario(arg)
 
 
 def _plant_names(requested: list[str]) -> list[str]:
-    from .errors import PlantError
-    from .fmu.build import PLANT_SOURCES, bundled_plant_names
+    from prlpid_fmi.errors import PlantError
+    from prlpid_fmi.fmu.build import PLANT_SOURCES, bundled_plant_names
 
     names = bundled_plant_names()
     if not names:
@@ -44,8 +44,8 @@ def _plant_names(requested: list[str]) -> list[str]:
 def _build_fmus(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from .errors import PlantError
-    from .fmu import build_fmu
+    from prlpid_fmi.errors import PlantError
+    from prlpid_fmi.fmu import build_fmu
 
     if args.out is not None and Path(args.out).exists() and not Path(args.out).is_dir():
         raise PlantError(f"{args.out}: is a file, not a folder (got --out {args.out}; expected a folder for the FMUs)")
@@ -56,11 +56,11 @@ def _build_fmus(args: argparse.Namespace) -> int:
 
 
 def _inspect(args: argparse.Namespace) -> int:
-    from .fmu import describe_fmu, format_description
+    from prlpid_fmi.fmu import describe_fmu, format_description
 
     print(format_description(describe_fmu(args.fmu)))
     if args.probe:
-        from .fmu.dynamic_check import dynamic_check, failed, format_findings
+        from prlpid_fmi.fmu.dynamic_check import dynamic_check, failed, format_findings
 
         findings = dynamic_check(args.fmu)
         print("Dynamic checks (--probe):")
@@ -70,7 +70,7 @@ def _inspect(args: argparse.Namespace) -> int:
 
 
 def _check_plants(args: argparse.Namespace) -> int:
-    from .fmu.check import step_response_report
+    from prlpid_fmi.fmu.check import step_response_report
 
     _plant_names([])
     print(step_response_report(args.fmi_version))
@@ -80,9 +80,9 @@ def _check_plants(args: argparse.Namespace) -> int:
 def _validate(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from .presets import bundled_scenario_names
-    from .scenario import load_scenario
-    from .sweep.spec import bundled_sweep_names, is_sweep_file, load_sweep, resolve_sweep
+    from prlpid_fmi.scenario.presets import bundled_scenario_names
+    from prlpid_fmi.scenario.load import load_scenario
+    from prlpid_fmi.sweep.spec import bundled_sweep_names, is_sweep_file, load_sweep, resolve_sweep
 
     arg = Path(args.scenario)
     if (is_sweep_file(arg) if arg.is_file() else
@@ -103,7 +103,7 @@ def _validate(args: argparse.Namespace) -> int:
 
 
 def _schema(args: argparse.Namespace) -> int:
-    from .schema import json_schema_text
+    from prlpid_fmi.schema import json_schema_text
 
     sys.stdout.write(json_schema_text())
     return 0
@@ -124,7 +124,7 @@ def _start_values(pairs: list[str]) -> dict:
 
 
 def _init(args: argparse.Namespace) -> int:
-    from .scenario import init_scenario
+    from prlpid_fmi.scenario.load import init_scenario
 
     sys.stdout.write(init_scenario(args.fmu, output=args.output, start_values=_start_values(args.set)))
     return 0
@@ -133,7 +133,7 @@ def _init(args: argparse.Namespace) -> int:
 def _probe(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from .probe import format_probe, plot_probe, probe
+    from prlpid_fmi.probe.step_test import format_probe, plot_probe, probe
 
     result = probe(args.fmu, output=args.output, inputs=args.input or None, start_values=_start_values(args.set))
     print(format_probe(result))
@@ -148,7 +148,7 @@ def _interrupt_on_signals():
     Returns the previous handlers."""
     import signal
 
-    from .errors import Interrupted
+    from prlpid_fmi.errors import Interrupted
 
     def handler(signum, frame):
         for s in (signal.SIGTERM, signal.SIGINT):
@@ -161,7 +161,7 @@ def _interrupt_on_signals():
 def _tune(args: argparse.Namespace) -> int:
     import signal
 
-    from .run import tune
+    from prlpid_fmi.run.tune import tune
 
     previous = _interrupt_on_signals()
     try:
@@ -177,7 +177,7 @@ def _tune(args: argparse.Namespace) -> int:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
-    from .run import evaluate_run
+    from prlpid_fmi.run.tune import evaluate_run
 
     out_dir = evaluate_run(args.run_dir, None if args.scenario is None else _scenario(args.scenario))
     _say(args, (out_dir / "report.md").read_text())
@@ -186,8 +186,8 @@ def _evaluate(args: argparse.Namespace) -> int:
 
 
 def _export(args: argparse.Namespace) -> int:
-    from .deploy import csv_only_options, export_controller
-    from .run import export_schedule
+    from prlpid_fmi.export.code import csv_only_options, export_controller
+    from prlpid_fmi.run.tune import export_schedule
 
     wrong = csv_only_options(args)
     if wrong:
@@ -216,7 +216,7 @@ def _export(args: argparse.Namespace) -> int:
 def _sweep(args: argparse.Namespace) -> int:
     import signal
 
-    from .sweep import resolve_sweep, run_sweep
+    from prlpid_fmi.sweep import resolve_sweep, run_sweep
 
     previous = _interrupt_on_signals()  # SIGTERM too (a job manager, `timeout`): stop the workers, summarise
     try:

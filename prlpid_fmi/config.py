@@ -11,10 +11,10 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Optional
 
-from .control.reward import RewardWeights
-from .schema import model as _m
-from .schema.model import default as _d
-from .schema.types import Algorithm, AntiWindup, DisturbanceKind, GainMapping, GainScale, Isolation, Smoothing, VecEnv
+from prlpid_fmi.control.reward import RewardWeights
+from prlpid_fmi.schema import model as _m
+from prlpid_fmi.schema.model import default as _d
+from prlpid_fmi.schema.types import Algorithm, AntiWindup, DisturbanceKind, GainMapping, GainScale, Isolation, Smoothing, VecEnv
 
 INF = float("inf")
 

@@ -32,7 +32,7 @@ from typing import Callable, Union
 
 import numpy as np
 
-from .errors import RunError
+from prlpid_fmi.errors import RunError
 
 SCENARIO = "scenario.yaml"
 RUN_INFO = "run.json"

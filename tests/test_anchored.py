@@ -15,14 +15,14 @@ import math
 import numpy as np
 import pytest
 
-from prlpid_fmi.actions import AnchoredActionMap, gains_from_values
+from prlpid_fmi.loop.actions import AnchoredActionMap, gains_from_values
 from prlpid_fmi.cli import main
 from prlpid_fmi.config import AnchorBands
-from prlpid_fmi.core import LoopCore
-from prlpid_fmi.env import PidTuningEnv
-from prlpid_fmi.evaluate import constant_gains, gains_rollout, rollout
-from prlpid_fmi.presets import preset, scenario_path
-from prlpid_fmi.schedule import fixed_schedule, replay_schedule
+from prlpid_fmi.loop.core import LoopCore
+from prlpid_fmi.loop.env import PidTuningEnv
+from prlpid_fmi.loop.evaluation import constant_gains, gains_rollout, rollout
+from prlpid_fmi.scenario.presets import preset, scenario_path
+from prlpid_fmi.tuning.schedule.table import fixed_schedule, replay_schedule
 
 ANCHOR = {"first_order": ([7.5], [0.8], [0.01], None),
           "two_tank": ([6.0], [40.0], [0.2], None),
@@ -129,8 +129,8 @@ def test_tiny_budget_deploys_the_fixed_pid_and_says_so(tmp_path, capsys):
     assert metrics["fixed_pid_assessment"]["worst_Ms"] <= 2.0
     # the held-out check of the rule: 8 training-distribution episodes at seeds 30000.. (agent seed 0), the same
     # for the schedule (the fixed PID's gains) and, recomputed here as constant gains, for the fixed PID
-    from prlpid_fmi.evaluate import evaluate_gains
-    from prlpid_fmi.scenario import load_scenario
+    from prlpid_fmi.loop.evaluation import evaluate_gains
+    from prlpid_fmi.scenario.load import load_scenario
 
     trained = load_scenario(run / "scenario.yaml")
     fn = constant_gains(fixed["Kp"], fixed["Ti"], fixed["Td"], None)

@@ -3,8 +3,8 @@ import gymnasium as gym
 import numpy as np
 
 import prlpid_fmi
-from prlpid_fmi.presets import scenario_path
-from prlpid_fmi.scenario import load_scenario
+from prlpid_fmi.scenario.presets import scenario_path
+from prlpid_fmi.scenario.load import load_scenario
 
 
 def test_make_env_and_gym_make_take_a_scenario_path():

@@ -20,7 +20,7 @@ import yaml
 
 from prlpid_fmi.errors import ScenarioError
 from prlpid_fmi.fmu import bundled_fmu
-from prlpid_fmi.scenario import load_scenario
+from prlpid_fmi.scenario.load import load_scenario
 from test_scenario import _raw, _set
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"

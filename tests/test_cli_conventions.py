@@ -17,10 +17,10 @@ import yaml
 from prlpid_fmi import rundir
 from prlpid_fmi.cli import main
 from prlpid_fmi.errors import PrlPidError
-from prlpid_fmi.presets import SCENARIO_DIR, scenario_path
+from prlpid_fmi.scenario.presets import SCENARIO_DIR, scenario_path
 from prlpid_fmi.progress import Progress, format_duration, stage
-from prlpid_fmi.run import export_schedule
-from prlpid_fmi.schedule import read_schedule_csv
+from prlpid_fmi.run.tune import export_schedule
+from prlpid_fmi.tuning.schedule.table import read_schedule_csv
 from test_cli import _small_copy
 
 BUNDLED = sorted(p.stem for p in SCENARIO_DIR.glob("*.yaml"))
@@ -150,12 +150,12 @@ def test_out_naming_an_existing_file_is_one_line_and_the_file_is_kept(tmp_path, 
 
 def test_a_start_refused_after_the_directory_was_made_removes_it(tmp_path, monkeypatch, capsys):
     """A user error raised after prepare_run_dir, before any result, removes the folders it created."""
-    import prlpid_fmi.baseline
+    import prlpid_fmi.tuning.fixed_pid
 
     def refuse(*args, **kwargs):
         raise PrlPidError("plant.fmu: FirstOrderUnstable: output y is NaN at t = 0.1 s")
 
-    monkeypatch.setattr(prlpid_fmi.baseline, "tune_fixed_pid", refuse)
+    monkeypatch.setattr(prlpid_fmi.tuning.fixed_pid, "tune_fixed_pid", refuse)
     scenario = _small_copy(scenario_path("first_order"), tmp_path / "s.yaml")
     assert main(["-q", "tune", str(scenario), "--out", str(tmp_path / "a" / "b" / "run"), "--timesteps", "8"]) == 2
     assert "NaN" in _one_error_line(capsys)
@@ -163,12 +163,12 @@ def test_a_start_refused_after_the_directory_was_made_removes_it(tmp_path, monke
 
 
 def test_a_start_refused_after_the_fixed_pid_search_keeps_its_result(tmp_path, monkeypatch, capsys):
-    import prlpid_fmi.train
+    import prlpid_fmi.tuning.agent
 
     def refuse(*args, **kwargs):
         raise PrlPidError("agent: cannot train (got a refusal from the test; expected nothing)")
 
-    monkeypatch.setattr(prlpid_fmi.train, "train", refuse)
+    monkeypatch.setattr(prlpid_fmi.tuning.agent, "train", refuse)
     scenario = _small_copy(scenario_path("first_order"), tmp_path / "s.yaml")
     run = tmp_path / "run"
     assert main(["-q", "tune", str(scenario), "--out", str(run), "--timesteps", "8"]) == 2

@@ -2,7 +2,7 @@
 import math
 from types import SimpleNamespace
 
-from prlpid_fmi.deliver import Candidate, choose, verdict
+from prlpid_fmi.deliver.rule import Candidate, choose, verdict
 
 
 def metrics(ise, tv=10.0, overshoot=5.0, terminated=False):

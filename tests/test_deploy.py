@@ -20,13 +20,14 @@ import numpy as np
 import pytest
 
 from prlpid_fmi import rundir as rd
-from prlpid_fmi.actions import gains_from_values
+from prlpid_fmi.loop.actions import gains_from_values
 from prlpid_fmi.cli import main
-from prlpid_fmi.deploy import controller_name, deployable_files, export_controller, from_schedule, render, st_real
+from prlpid_fmi.export.code import controller_name, deployable_files, export_controller, from_schedule, render, st_real
 from prlpid_fmi.errors import PrlPidError
-from prlpid_fmi.presets import scenario_path
-from prlpid_fmi.scenario import load_scenario
-from prlpid_fmi.schedule import GainSchedule, fixed_schedule, read_schedule_csv, replay_schedule, write_schedule_csv
+from prlpid_fmi.scenario.presets import scenario_path
+from prlpid_fmi.scenario.load import load_scenario
+from prlpid_fmi.tuning.schedule.table import (
+    GainSchedule, fixed_schedule, read_schedule_csv, replay_schedule, write_schedule_csv)
 
 from st_interpreter import FunctionBlockInstance, parse_block
 

@@ -3,8 +3,8 @@ import control
 import numpy as np
 import pytest
 
-from prlpid_fmi.baseline import DETUNE_STEP, detune, operating_point
-from prlpid_fmi.presets import preset
+from prlpid_fmi.tuning.fixed_pid import DETUNE_STEP, detune, operating_point
+from prlpid_fmi.scenario.presets import preset
 from tests.test_margins import first_order_zoh, pid_by_hand, reference_margins
 
 CONFIG = preset("first_order")  # 1/(s - 1), Ts = 0.1 s

@@ -23,7 +23,7 @@ from gymnasium.utils.env_checker import check_env
 import prlpid_fmi
 from prlpid_fmi.config import Disturbance, PriorConfig
 from prlpid_fmi.fmu import FmuPlant
-from prlpid_fmi.presets import PRESET_NAMES
+from prlpid_fmi.scenario.presets import PRESET_NAMES
 
 ENV_ID = "prlpid_fmi/PidTuning-v0"
 ALL_PRESETS = ("first_order", "second_order", "first_order_1p5", "time_varying", "two_tank", "quadrotor")
@@ -128,8 +128,8 @@ def test_all_paper_presets_exist():
 def test_check_env_through_gymnasium_make(name):
     env = gymnasium.make(ENV_ID, config=name)
     try:
-        n = len(prlpid_fmi.presets.preset(name).loops)
-        coupled = prlpid_fmi.presets.preset(name).coupled
+        n = len(prlpid_fmi.scenario.presets.preset(name).loops)
+        coupled = prlpid_fmi.scenario.presets.preset(name).coupled
         assert coupled == (name == "quadrotor") or name not in ALL_PRESETS
         assert env.action_space.shape == (3 * n + (6 if coupled else 0),)
         assert env.observation_space.shape == (4 * n,)
@@ -175,7 +175,7 @@ def test_plant_trajectory_does_not_depend_on_the_forecast(name):
         runs[horizon] = run(env, random_actions(env, n_steps), seed=11)
         env.close()
     ref = runs[0]
-    assert ref["control_signal"].shape == (n_steps, len(prlpid_fmi.presets.preset(name).loops))
+    assert ref["control_signal"].shape == (n_steps, len(prlpid_fmi.scenario.presets.preset(name).loops))
     # the run is not trivial: the plant moved and the control signal varied
     assert np.ptp(ref["measurement"]) > 0 and np.ptp(ref["control_signal"]) > 0
     for horizon in (1, 3, 10):
@@ -375,7 +375,7 @@ def test_fmu_disturbance_sets_and_restores_the_input():
     base.close()
 
 
-STABLE_FIRST_ORDER = action_for(prlpid_fmi.presets.preset("first_order").loops[0], Kp=3.0, Ti=2.0, Td=0.0)
+STABLE_FIRST_ORDER = action_for(prlpid_fmi.scenario.presets.preset("first_order").loops[0], Kp=3.0, Ti=2.0, Td=0.0)
 
 
 def test_actuator_disturbance_adds_to_the_control_signal():

@@ -20,11 +20,11 @@ import pytest
 import yaml
 
 from prlpid_fmi.cli import main
-from prlpid_fmi.core import LoopCore
-from prlpid_fmi.evaluate import constant_gains, gains_rollout
+from prlpid_fmi.loop.core import LoopCore
+from prlpid_fmi.loop.evaluation import constant_gains, gains_rollout
 from prlpid_fmi.fmu import FmuPlant, build_fmu, describe_fmu, format_description
 from prlpid_fmi.fmu.plant import rss_bytes
-from prlpid_fmi.scenario import load_scenario
+from prlpid_fmi.scenario.load import load_scenario
 
 FAULT_S = 3.0
 TS = 0.1
@@ -278,8 +278,8 @@ def test_inspect_probe_gives_one_line_per_finding_with_a_verdict(faulty, capsys)
 def test_an_isolated_loop_gives_the_same_trajectories_as_in_process(tmp_path):
     """The worker draws the episode's setpoints and noise from the generator's state it is handed: policy
     rollouts with the forecast and fixed-gain rollouts are bit-identical isolated or not, episode after episode."""
-    from prlpid_fmi.env import PidTuningEnv
-    from prlpid_fmi.isolation import IsolatedCore
+    from prlpid_fmi.loop.env import PidTuningEnv
+    from prlpid_fmi.loop.isolated import IsolatedCore
 
     config = dataclasses.replace(load_scenario(scenario_file(tmp_path, "FirstOrderUnstable")).tuning,
                                  measurement_noise_std=0.02)

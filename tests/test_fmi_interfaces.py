@@ -14,12 +14,12 @@ import yaml
 
 from prlpid_fmi.cli import main
 from prlpid_fmi.config import AgentConfig
-from prlpid_fmi.evaluate import evaluate, model_policy
+from prlpid_fmi.loop.evaluation import evaluate, model_policy
 from prlpid_fmi.fmu import FmuPlant, describe_fmu
 from prlpid_fmi.fmu.build import bundled_fmu
-from prlpid_fmi.presets import scenario_path
-from prlpid_fmi.scenario import load_scenario
-from prlpid_fmi.train import train
+from prlpid_fmi.scenario.presets import scenario_path
+from prlpid_fmi.scenario.load import load_scenario
+from prlpid_fmi.tuning.agent import train
 from test_cli import _small_copy
 
 

@@ -13,9 +13,9 @@ import pytest
 from scipy.signal import lfilter
 
 from prlpid_fmi.control.pid import PID
-from prlpid_fmi.identification import ClosedLoopRig, measure_response
-from prlpid_fmi.margins import Margins, format_margins, loop_margins, pid_transfer_function
-from prlpid_fmi.presets import preset
+from prlpid_fmi.robustness.identification import ClosedLoopRig, measure_response
+from prlpid_fmi.robustness.margins import Margins, format_margins, loop_margins, pid_transfer_function
+from prlpid_fmi.scenario.presets import preset
 
 TS = 0.1
 
@@ -207,7 +207,7 @@ def test_unstable_closed_loop_has_no_margins():
 
 
 def test_time_varying_plant_is_flagged_after_one_experiment(monkeypatch):
-    import prlpid_fmi.margins as margins
+    import prlpid_fmi.robustness.margins as margins
 
     experiments = []
     monkeypatch.setattr(margins, "measure_response",

@@ -327,9 +327,9 @@ def test_the_evaluation_does_not_count_a_chattering_loop_as_settled():
     estimate from the data alone would have called it settled after 0.76 s."""
     import itertools
 
-    from prlpid_fmi.evaluate import evaluate_gains
-    from prlpid_fmi.presets import scenario_path
-    from prlpid_fmi.scenario import load_scenario
+    from prlpid_fmi.loop.evaluation import evaluate_gains
+    from prlpid_fmi.scenario.presets import scenario_path
+    from prlpid_fmi.scenario.load import load_scenario
 
     s = load_scenario(scenario_path("first_order"))
     kps = itertools.cycle([3.0, 20.0])

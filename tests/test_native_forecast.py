@@ -12,10 +12,10 @@ import numpy as np
 import pytest
 
 from prlpid_fmi.control import PID, CoupledPID, RewardWeights
-from prlpid_fmi.control.forecast import FmiForecast, make_forecast
+from prlpid_fmi.loop.forecast.base import FmiForecast, make_forecast
 from prlpid_fmi.errors import PlantError
 from prlpid_fmi.fmu import FmuPlant
-from prlpid_fmi.fmu.native_forecast import NativeForecast, native_unavailable
+from prlpid_fmi.loop.forecast.native import NativeForecast, native_unavailable
 from conftest import PLANTS, fmu
 
 TS = 0.1

@@ -15,13 +15,13 @@ import numpy as np
 import pytest
 import yaml
 
-from prlpid_fmi.baseline import tune_fixed_pid
+from prlpid_fmi.tuning.fixed_pid import tune_fixed_pid
 from prlpid_fmi.cli import main
-from prlpid_fmi.evaluate import evaluate_gains
+from prlpid_fmi.loop.evaluation import evaluate_gains
 from prlpid_fmi.fmu import build_fmu
 from prlpid_fmi.fmu.build import bundled_fmu
-from prlpid_fmi.probe import probe, propose_loop
-from prlpid_fmi.scenario import init_scenario, load_scenario
+from prlpid_fmi.probe.step_test import probe, propose_loop
+from prlpid_fmi.scenario.load import init_scenario, load_scenario
 
 PLANTS = Path(__file__).parent / "plants"
 
@@ -157,7 +157,7 @@ def test_init_writes_the_operating_point(tmp_path):
 def test_a_delayed_static_response_is_static_with_its_dead_time():
     """Δy = 0 for three samples, then 2.5 per input unit for good: a gain behind a transport delay. The
     delay is counted from the sample before the first move (the step acts over one sample): 2 samples."""
-    from prlpid_fmi.probe import _analyse
+    from prlpid_fmi.probe.step_test import _analyse
 
     dt, du = 0.1, 0.004
     dy = np.r_[np.zeros(3), np.full(97, 2.5 * du)]

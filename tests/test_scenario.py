@@ -11,9 +11,9 @@ import yaml
 from prlpid_fmi.config import Disturbance, TuningConfig
 from prlpid_fmi.errors import ScenarioError
 from prlpid_fmi.fmu import bundled_fmu
-from prlpid_fmi.presets import PRESET_NAMES, preset
-from prlpid_fmi.scenario import (ALGORITHMS, EvaluationConfig, Scenario, init_scenario, load_scenario,
-                                 scenario_to_dict, validate_scenario)
+from prlpid_fmi.scenario.presets import PRESET_NAMES, preset
+from prlpid_fmi.scenario.load import (
+    ALGORITHMS, EvaluationConfig, Scenario, init_scenario, load_scenario, scenario_to_dict, validate_scenario)
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 EXPERIMENTS = sorted(p.stem for p in SCENARIOS.glob("*.yaml") if p.stem != "template")
@@ -70,7 +70,7 @@ def test_round_trip(name, tmp_path):
 
 
 def test_algorithms_match_training():
-    from prlpid_fmi.train import ALGORITHMS as TRAIN_ALGORITHMS
+    from prlpid_fmi.tuning.agent import ALGORITHMS as TRAIN_ALGORITHMS
     assert ALGORITHMS == TRAIN_ALGORITHMS
 
 

@@ -13,7 +13,7 @@ import control as ct
 import numpy as np
 import pytest
 
-from prlpid_fmi.scenario import load_scenario
+from prlpid_fmi.scenario.load import load_scenario
 SCENARIOS_DIR = Path(__file__).resolve().parents[1] / "scenarios"
 
 # The plants' transfer functions as the paper gives them (§4.1-4.3, eq. 17).

@@ -22,7 +22,7 @@ from prlpid_fmi.fmu import bundled_fmu
 from prlpid_fmi.schema import (AgentModel, BaselineModel, DeployModel, ScenarioModel, json_schema, json_schema_text,
                                model as m)
 from prlpid_fmi.schema.document import load_yaml
-from prlpid_fmi.scenario import init_scenario, load_scenario, scenario_to_dict
+from prlpid_fmi.scenario.load import init_scenario, load_scenario, scenario_to_dict
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"
@@ -176,7 +176,7 @@ def test_no_default_number_is_written_in_config_py():
 
 
 def test_choices_match_the_behaviour():
-    from prlpid_fmi.train import ALGORITHMS
+    from prlpid_fmi.tuning.agent import ALGORITHMS
 
     assert get_args(m.ControllerModel.model_fields["anti_windup"].annotation) == ANTI_WINDUP_MODES
     assert get_args(m.StrategiesModel.model_fields["smoothing"].annotation) == SMOOTHING_METHODS

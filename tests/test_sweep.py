@@ -19,9 +19,9 @@ from pathlib import Path
 import pytest
 
 from prlpid_fmi.cli import main
-from prlpid_fmi.deliver import overall_metric
+from prlpid_fmi.deliver.rule import overall_metric
 from prlpid_fmi.errors import PrlPidError
-from prlpid_fmi.scenario import load_scenario
+from prlpid_fmi.scenario.load import load_scenario
 from prlpid_fmi.sweep import bundled_sweep_names, load_sweep, resolve_sweep, run_sweep, trial_status
 from prlpid_fmi.sweep.runner import Trial, run_trial
 from prlpid_fmi.sweep.summary import aggregate, band, curve_seeds, mean_ci
@@ -162,7 +162,7 @@ def test_every_failing_variant_is_reported_at_once(tmp_path, capsys):
 
 
 def resolve_base(name: str) -> Path:
-    from prlpid_fmi.presets import scenario_path
+    from prlpid_fmi.scenario.presets import scenario_path
 
     return scenario_path(name)
 

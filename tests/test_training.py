@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from prlpid_fmi.config import AgentConfig
-from prlpid_fmi.evaluate import evaluate, model_policy
-from prlpid_fmi.presets import preset
-from prlpid_fmi.train import build_model, make_vec_env, train
+from prlpid_fmi.loop.evaluation import evaluate, model_policy
+from prlpid_fmi.scenario.presets import preset
+from prlpid_fmi.tuning.agent import build_model, make_vec_env, train
 
 CONFIG = dataclasses.replace(preset("first_order"), forecast_horizon=3, smoothing="era")
 SERVO = dataclasses.replace(CONFIG, setpoint_schedule=((0, (1.0,)), (100, (-0.5,))), episode_steps=200)
@@ -85,7 +85,7 @@ def test_torch_threads_above_the_cores_are_lowered_with_a_warning():
     import os
     import warnings
 
-    from prlpid_fmi.train import torch_threads
+    from prlpid_fmi.tuning.agent import torch_threads
 
     cores = os.cpu_count()
     with pytest.warns(UserWarning, match=f"agent.torch_threads: 100000 is more than this machine's {cores} cores"):
@@ -108,7 +108,7 @@ def test_a_model_too_large_for_memory_is_one_error_not_a_traceback(algorithm, fa
                                                                   monkeypatch):
     """net_arch [100000, 100000] once ended in torch's allocator traceback (40 GB for one weight matrix). The
     allocation failure is simulated: a real one would depend on the machine's memory and overcommit policy."""
-    import prlpid_fmi.train as train_module
+    import prlpid_fmi.tuning.agent as train_module
     from prlpid_fmi.errors import RunError
 
     def fail(*args, **kwargs):
@@ -122,7 +122,7 @@ def test_a_model_too_large_for_memory_is_one_error_not_a_traceback(algorithm, fa
 
 
 def test_a_runtime_error_that_is_not_about_memory_is_not_relabelled(tmp_path, monkeypatch):
-    import prlpid_fmi.train as train_module
+    import prlpid_fmi.tuning.agent as train_module
 
     def fail(*args, **kwargs):
         raise RuntimeError("mat1 and mat2 shapes cannot be multiplied")
@@ -139,7 +139,7 @@ def test_the_largest_allowed_seed_with_every_offset_still_seeds_numpy_and_sb3():
     from stable_baselines3.common.utils import set_random_seed
 
     from prlpid_fmi.schema.types import MAX_SEED
-    from prlpid_fmi.transients import HOLDOUT_SEED_OFFSET
+    from prlpid_fmi.tuning.schedule.trajectories import HOLDOUT_SEED_OFFSET
 
     set_random_seed(MAX_SEED + HOLDOUT_SEED_OFFSET + 1000)  # must not raise
     with pytest.raises(ValueError):

@@ -32,9 +32,9 @@ from xml.etree import ElementTree as ET
 
 import yaml
 
-from ..bundled import data_dir, fmu_cache_dir
-from ..errors import PlantError
-from ..rundir import write_atomic
+from prlpid_fmi.bundled import data_dir, fmu_cache_dir
+from prlpid_fmi.errors import PlantError
+from prlpid_fmi.rundir import write_atomic
 
 PLANT_SOURCES = data_dir("plant_sources")
 COMMON_SOURCES = ("plant_model.h", "instance.h", "instance.c", "faults.h", "forecast.h", "forecast.c")

@@ -5,8 +5,8 @@ import math
 
 import numpy as np
 
-from .build import bundled_fmu, bundled_plant_names
-from .plant import FmuPlant
+from prlpid_fmi.fmu.build import bundled_fmu, bundled_plant_names
+from prlpid_fmi.fmu.plant import FmuPlant
 
 # name -> (inputs, held input values, output, steps at 0.1 s, expected output, what the expectation is)
 STEP_CHECKS = {

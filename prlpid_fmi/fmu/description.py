@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
-from ..errors import PlantError
+from prlpid_fmi.errors import PlantError
 
 REAL_TYPES = ("Real", "Float64")
 

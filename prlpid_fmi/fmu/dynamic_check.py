@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .description import describe_fmu
+from prlpid_fmi.fmu.description import describe_fmu
 
 STEPS = 40
 HOLD_STEP = 20
@@ -52,7 +52,7 @@ def _inputs(path: Path, steps: int) -> tuple[list[str], np.ndarray]:
 
 
 def _plant(path: Path, name: str = "probe"):
-    from .plant import FmuPlant
+    from prlpid_fmi.fmu.plant import FmuPlant
 
     d = describe_fmu(path)
     return FmuPlant(path, list(d.input_names), list(d.output_names), d.default_step_size_s or DEFAULT_STEP_S,
@@ -157,7 +157,7 @@ def check_reset(path: Path) -> list[Finding]:
 
 
 def check_memory(path: Path) -> list[Finding]:
-    from .plant import rss_bytes
+    from prlpid_fmi.fmu.plant import rss_bytes
 
     _, u = _inputs(path, 5)
     with _plant(path) as plant:
@@ -183,7 +183,7 @@ CHECKS = (check_state, check_instances, check_reset, check_memory)
 
 def dynamic_check(path: str | Path) -> list[Finding]:
     """Every check, each in a worker process; a check whose worker dies is a FAIL naming how."""
-    from ..isolation import WorkerCrashed, call_in_worker
+    from prlpid_fmi.loop.isolated import WorkerCrashed, call_in_worker
 
     path = Path(path)
     describe_fmu(path)  # a PlantError for a file that is no FMU, before any worker starts

@@ -18,9 +18,9 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..errors import PlantError
-from .adapters import adapter_class
-from .description import FmuDescription, describe_fmu
+from prlpid_fmi.errors import PlantError
+from prlpid_fmi.fmu.adapters import adapter_class
+from prlpid_fmi.fmu.description import FmuDescription, describe_fmu
 
 _EXTRACTED: dict[tuple[str, float], str] = {}
 STATUS_LABELS = ("ok", "warning", "discard", "error", "fatal", "pending")

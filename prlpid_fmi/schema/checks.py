@@ -17,9 +17,9 @@ from typing import Any, Optional
 
 from pydantic import ValidationInfo
 
-from ..errors import PlantError
-from ..fmu.description import REAL_TYPES
-from .types import problem
+from prlpid_fmi.errors import PlantError
+from prlpid_fmi.fmu.description import REAL_TYPES
+from prlpid_fmi.schema.types import problem
 
 
 @dataclass
@@ -61,7 +61,7 @@ def did_you_mean(word: str, choices) -> str:
 
 def resolve_fmu(value: str, state: State) -> tuple[str, Path]:
     """(value for the config: a bundled name, or an absolute path; the .fmu file). Raises problem()."""
-    from ..fmu import bundled_fmu, bundled_plant_names
+    from prlpid_fmi.fmu import bundled_fmu, bundled_plant_names
 
     names = bundled_plant_names()
     if value in names:
@@ -73,7 +73,7 @@ def resolve_fmu(value: str, state: State) -> tuple[str, Path]:
     if not path.is_absolute():
         path = (state.base_dir / path).resolve()
     if not path.is_file():
-        from ..fmu.description import missing_fmu_text
+        from prlpid_fmi.fmu.description import missing_fmu_text
         raise problem(f"{missing_fmu_text(path)}: {path}",
                       "a path to a .fmu file (relative to the scenario's folder) or a bundled plant: "
                       + (", ".join(names) or "none found"))
@@ -82,8 +82,8 @@ def resolve_fmu(value: str, state: State) -> tuple[str, Path]:
 
 def describe(path: Path):
     """The FmuDescription of an FMU whose archive passed check_archive; problem() otherwise."""
-    from ..fmu import describe_fmu
-    from ..fmu.archive import archive_problems
+    from prlpid_fmi.fmu import describe_fmu
+    from prlpid_fmi.fmu.archive import archive_problems
 
     problems = archive_problems(path)
     if problems:

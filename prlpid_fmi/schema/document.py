@@ -13,7 +13,7 @@ from typing import Any
 
 import yaml
 
-from .messages import key_path, show
+from prlpid_fmi.schema.messages import key_path, show
 
 
 class _Loader(yaml.SafeLoader):

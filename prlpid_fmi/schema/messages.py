@@ -14,7 +14,7 @@ from typing import Any, Optional
 import yaml
 from pydantic import ValidationError
 
-from .checks import did_you_mean
+from prlpid_fmi.schema.checks import did_you_mean
 
 _MISSING = object()
 
@@ -70,7 +70,7 @@ def raw_value(doc: Any, loc: tuple) -> Any:
 
 @lru_cache(maxsize=1)
 def _root() -> dict:
-    from .model import ScenarioModel
+    from prlpid_fmi.schema.model import ScenarioModel
 
     return ScenarioModel.model_json_schema()
 

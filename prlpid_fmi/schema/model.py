@@ -18,11 +18,11 @@ from pydantic_core import PydanticCustomError
 from pydantic import (AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, ValidationInfo,
                       field_validator, model_validator)
 
-from ..control.reward import RewardWeights
-from ..control.smoothing import DEFAULT_ALPHA, DEFAULT_WINDOW
-from . import checks
-from .checks import check_variable, state_of
-from .types import (LOOP_TARGETS, Algorithm, AntiWindup, Count, DisturbanceType, Finite, Flag, Fraction,
+from prlpid_fmi.control.reward import RewardWeights
+from prlpid_fmi.control.smoothing import DEFAULT_ALPHA, DEFAULT_WINDOW
+from prlpid_fmi.schema import checks
+from prlpid_fmi.schema.checks import check_variable, state_of
+from prlpid_fmi.schema.types import (LOOP_TARGETS, Algorithm, AntiWindup, Count, DisturbanceType, Finite, Flag, Fraction,
                     GainMapping, GainScale, Isolation, Name, NonNegative, Positive, Seed, Smoothing, Steps, VecEnv,
                     _number, number, problem)
 

@@ -17,8 +17,8 @@ from typing import Annotated, Any, Literal, Optional, get_args
 from pydantic import BeforeValidator, Field, Strict
 from pydantic_core import PydanticCustomError
 
-from ..control.pid import ANTI_WINDUP_MODES
-from ..control.smoothing import SMOOTHING_METHODS
+from prlpid_fmi.control.pid import ANTI_WINDUP_MODES
+from prlpid_fmi.control.smoothing import SMOOTHING_METHODS
 
 # choices (the tuples of names live where the behaviour lives; these Literals type the schema and config)
 AntiWindup = Literal[ANTI_WINDUP_MODES]  # clamping | back_calculation | none

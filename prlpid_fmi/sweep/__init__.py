@@ -3,8 +3,8 @@ run in local processes or on Ray, summarised as mean and 95 % confidence interva
 
 spec.py reads and validates sweep files, runner.py runs the trials, summary.py writes the tables and figures.
 """
-from .runner import SweepRun, Trial, run_sweep, trial_status
-from .spec import Sweep, Variant, bundled_sweep_names, load_sweep, resolve_sweep
+from prlpid_fmi.sweep.runner import SweepRun, Trial, run_sweep, trial_status
+from prlpid_fmi.sweep.spec import Sweep, Variant, bundled_sweep_names, load_sweep, resolve_sweep
 
 __all__ = ["Sweep", "Variant", "SweepRun", "Trial", "bundled_sweep_names", "load_sweep", "resolve_sweep", "run_sweep",
            "trial_status"]

@@ -29,10 +29,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterator, Optional
 
-from .. import rundir as rd
-from ..errors import Interrupted, PrlPidError, RunError
-from ..rundir import write_atomic, write_json
-from .spec import Sweep
+from prlpid_fmi import rundir as rd
+from prlpid_fmi.errors import Interrupted, PrlPidError, RunError
+from prlpid_fmi.rundir import write_atomic, write_json
+from prlpid_fmi.sweep.spec import Sweep
 
 SWEEP_COPY = "sweep.yaml"
 SWEEP_INFO = "sweep.json"
@@ -114,8 +114,8 @@ def expected_scenario(sweep: Sweep, trial: Trial):
 
 def check_existing(sweep: Sweep, trials: list[Trial]) -> list[str]:
     """One line per existing trial whose scenario differs from what the sweep asks for now."""
-    from ..scenario import load_scenario, scenario_to_dict
-    from ..schema.messages import show
+    from prlpid_fmi.scenario.load import load_scenario, scenario_to_dict
+    from prlpid_fmi.schema.messages import show
 
     lines = []
     for t in trials:
@@ -154,7 +154,7 @@ def _local_worker() -> None:
     code would be caught there and leave a worker that no longer listens, running the next trial to its end."""
     import signal
 
-    from ..errors import Interrupted
+    from prlpid_fmi.errors import Interrupted
 
     def stop(signum, frame):
         if not _WORKER["in_trial"]:
@@ -176,7 +176,7 @@ def run_trial(trial: Trial) -> dict:
     _one_thread()
     import torch
 
-    from ..run import tune
+    from prlpid_fmi.run.tune import tune
 
     torch.set_num_threads(1)
     status = trial_status(trial.run_dir)
@@ -313,8 +313,8 @@ def run_sweep(path: str | Path, out: str | Path | None = None, workers: Optional
               log: Callable[[str], None] = lambda line: None) -> SweepRun:
     """Validate the sweep, run its unfinished trials (locally in `workers` processes, default one per core, or
     on Ray), then write the summary. `log` gets one progress line per event."""
-    from .spec import load_sweep
-    from .summary import write_summary
+    from prlpid_fmi.sweep.spec import load_sweep
+    from prlpid_fmi.sweep.summary import write_summary
 
     if workers is not None and workers < 1:
         raise RunError(f"--workers: must be at least 1 (got {workers}; expected a number of processes >= 1)")
@@ -335,7 +335,7 @@ def run_sweep(path: str | Path, out: str | Path | None = None, workers: Optional
     todo = [t for t in trials if status[t] != FINISHED]
     ray_started = connect_ray(ray_address) if ray and todo else False  # before anything is written
 
-    from ..scenario import scenario_to_yaml
+    from prlpid_fmi.scenario.load import scenario_to_yaml
 
     write_atomic(out / SWEEP_COPY, Path(path).read_text(encoding="utf-8"))
     for v in sweep.variants:

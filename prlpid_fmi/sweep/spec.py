@@ -36,11 +36,11 @@ from typing import Annotated, Any, Optional
 import yaml
 from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, ValidationError
 
-from ..errors import ScenarioError
-from ..schema.checks import did_you_mean
-from ..schema.document import parse_yaml, syntax_error_line
-from ..schema.messages import _MISSING, _PROBLEMS, key_path, raw_value, schema_at, show
-from ..schema.types import MAX_SEED, Count, Name, Seed, _integer, problem
+from prlpid_fmi.errors import ScenarioError
+from prlpid_fmi.schema.checks import did_you_mean
+from prlpid_fmi.schema.document import parse_yaml, syntax_error_line
+from prlpid_fmi.schema.messages import _MISSING, _PROBLEMS, key_path, raw_value, schema_at, show
+from prlpid_fmi.schema.types import MAX_SEED, Count, Name, Seed, _integer, problem
 
 SWEEP_DIR_NAME = "sweeps"  # bundled sweep files: scenarios/sweeps/<name>.yaml
 BASE_VARIANT = "base"
@@ -245,7 +245,7 @@ def _merge(into: dict, key: str, value: Any) -> None:
 
 def _resolve_base(arg: str, sweep_dir: Path) -> Path:
     """The base scenario: a file (relative to the sweep file's folder) wins over a bundled scenario's name."""
-    from ..presets import SCENARIO_DIR, bundled_scenario_names
+    from prlpid_fmi.scenario.presets import SCENARIO_DIR, bundled_scenario_names
 
     local = sweep_dir / Path(arg).expanduser()
     if local.is_file():
@@ -258,7 +258,7 @@ def _resolve_base(arg: str, sweep_dir: Path) -> Path:
 
 def resolve_sweep(arg: str | Path) -> Path:
     """A sweep argument as a file: an existing path, else a bundled sweep's name (scenarios/sweeps/<name>.yaml)."""
-    from ..presets import SCENARIO_DIR
+    from prlpid_fmi.scenario.presets import SCENARIO_DIR
 
     path = Path(arg)
     if path.exists():
@@ -283,17 +283,17 @@ def is_sweep_file(path: Path) -> bool:
 
 def bundled_sweep_names() -> list[str]:
     """Names of the bundled sweep files (scenarios/sweeps/<name>.yaml), sorted."""
-    from ..presets import SCENARIO_DIR
+    from prlpid_fmi.scenario.presets import SCENARIO_DIR
 
     return sorted(p.stem for p in (SCENARIO_DIR / SWEEP_DIR_NAME).glob("*.yaml"))
 
 
 def load_sweep(path: str | Path) -> Sweep:
     """Read and validate a sweep file and every variant's scenario. Raises ScenarioError (one line per mistake)."""
-    from ..scenario import build_scenario, load_scenario
-    from ..schema import ScenarioModel
-    from ..schema.checks import State
-    from ..schema.messages import error_line
+    from prlpid_fmi.scenario.load import build_scenario, load_scenario
+    from prlpid_fmi.schema import ScenarioModel
+    from prlpid_fmi.schema.checks import State
+    from prlpid_fmi.schema.messages import error_line
 
     p = Path(path)
     file = str(path)

@@ -31,9 +31,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .. import rundir as rd
-from ..deliver import overall_metric
-from ..rundir import write_atomic
+from prlpid_fmi import rundir as rd
+from prlpid_fmi.deliver.rule import overall_metric
+from prlpid_fmi.rundir import write_atomic
 
 CONTROLLERS = {"policy": "adaptive policy", "schedule": "replayed schedule", "fixed_pid": "fixed PID",
                "deployed": "deployed"}
@@ -222,7 +222,7 @@ def _invocations(out: Path) -> list[dict]:
 # -- figures ---------------------------------------------------------------------------------------
 def seed_curve(monitor_dir: Path) -> tuple[np.ndarray, np.ndarray] | None:
     """(training steps, rolling mean of the episode reward) of one trial, or None without finished episodes."""
-    from ..plots import load_monitor_csvs
+    from prlpid_fmi.report.plots import load_monitor_csvs
 
     steps, rewards = load_monitor_csvs(monitor_dir)
     if not rewards.size:
@@ -251,7 +251,7 @@ def plot_learning_curves(sweep, out: Path, path: Path, finished: dict | None = N
     """finished: {variant: seeds of its finished trials} (see curve_seeds; None: every seed)."""
     import matplotlib.pyplot as plt
 
-    from ..plots import _save
+    from prlpid_fmi.report.plots import _save
 
     fig, ax = plt.subplots(figsize=(9, 5))
     drawn = 0
@@ -282,7 +282,7 @@ def plot_metrics(sweep, stats: list[dict], rows: list[dict], path: Path) -> Path
     """Overall mean per variant and controller with 95 % intervals and each seed's value, one panel per metric."""
     import matplotlib.pyplot as plt
 
-    from ..plots import _save
+    from prlpid_fmi.report.plots import _save
 
     index = {(s["variant"], s["controller"], s["metric"]): s for s in stats if s["interval"] == OVERALL}
     shown = [m for m in METRICS if any(s["metric"] == m and s["n_finite"] for s in index.values())] or ["ISE"]

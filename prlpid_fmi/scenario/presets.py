@@ -11,9 +11,9 @@ from __future__ import annotations
 from functools import lru_cache
 from pathlib import Path
 
-from .bundled import data_dir
-from .config import TuningConfig
-from .errors import PrlPidError, ScenarioError
+from prlpid_fmi.bundled import data_dir
+from prlpid_fmi.config import TuningConfig
+from prlpid_fmi.errors import PrlPidError, ScenarioError
 
 SCENARIO_DIR = data_dir("scenarios")
 PRESET_NAMES = ("first_order", "second_order", "first_order_1p5", "time_varying", "two_tank", "quadrotor")
@@ -50,6 +50,6 @@ def resolve_scenario(arg: str | Path) -> Path:
 @lru_cache(maxsize=None)
 def preset(name: str) -> TuningConfig:
     """The training TuningConfig of one bundled scenario (see PRESET_NAMES)."""
-    from .scenario import load_scenario
+    from prlpid_fmi.scenario.load import load_scenario
 
     return load_scenario(scenario_path(name)).tuning

@@ -34,11 +34,12 @@ from typing import Callable
 
 import numpy as np
 
-from .actions import Gains
-from .config import TuningConfig
-from .errors import PrlPidError
-from .evaluate import GAIN_NAMES
-from .schedule import LOOP_VARIABLE, GainSchedule, _Probe, _variable_name, schedule_from_rows, table_meta
+from prlpid_fmi.loop.actions import Gains
+from prlpid_fmi.config import TuningConfig
+from prlpid_fmi.errors import PrlPidError
+from prlpid_fmi.loop.evaluation import GAIN_NAMES
+from prlpid_fmi.tuning.schedule.table import (
+    LOOP_VARIABLE, GainSchedule, _Probe, _variable_name, schedule_from_rows, table_meta)
 
 Policy = Callable[[np.ndarray], np.ndarray]
 
@@ -96,7 +97,7 @@ def trajectory_schedule(policy: Policy, config: TuningConfig, schedule_by: str =
 def trajectory_samples(policy: Policy, config: TuningConfig, variable: str, episodes: int, seed: int,
                        anchor: Gains | None = None) -> tuple[np.ndarray, dict, str, dict]:
     """The rollouts of trajectory_schedule: (values (n,), {"Kp": (n, n_loops), ...}, unit, table_meta)."""
-    from .env import PidTuningEnv
+    from prlpid_fmi.loop.env import PidTuningEnv
 
     values, applied, failed = [], [], []
     env = PidTuningEnv(config, info=False, anchor=anchor)
@@ -127,7 +128,7 @@ def trajectory_samples(policy: Policy, config: TuningConfig, variable: str, epis
 def extract(policy: Policy, config: TuningConfig, schedule_by: str, points: int, seed: int,
             anchor: Gains | None = None) -> GainSchedule:
     """One candidate table: error tables from trajectories, every other variable from settled holds."""
-    from .schedule import extract_schedule
+    from prlpid_fmi.tuning.schedule.table import extract_schedule
 
     m = LOOP_VARIABLE.match(schedule_by)
     if schedule_by == "error" or (m and m.group(1) == "error"):
@@ -139,8 +140,8 @@ def training_ise(schedule: GainSchedule, config: TuningConfig, seed: int = 0,
                  episodes: int = SELECTION_EPISODES, offset: int = SELECTION_SEED_OFFSET) -> float:
     """ISE (summed over loops) of the replayed table, summed over seeded training-distribution episodes
     (seeds seed + offset + i); infinity when an episode diverges."""
-    from .deliver import overall_metric
-    from .schedule import replay_schedule
+    from prlpid_fmi.deliver.rule import overall_metric
+    from prlpid_fmi.tuning.schedule.table import replay_schedule
 
     total = 0.0
     for i in range(episodes):
@@ -159,7 +160,7 @@ def deliverable_schedule(policy: Policy, scenario, seed: int, anchor: Gains | No
     limit (assess.robust_schedule); with several, the lowest training_ise wins. Raises PrlPidError
     when no candidate could be built (the message of each).
     """
-    from .assess import max_sensitivity, robust_schedule
+    from prlpid_fmi.deliver.evidence import max_sensitivity, robust_schedule
 
     config, limit = scenario.tuning, max_sensitivity(scenario)
     by = scenario.deploy.schedule_by

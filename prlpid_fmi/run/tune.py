@@ -15,13 +15,13 @@ from pathlib import Path
 
 import numpy as np
 
-from . import rundir as rd
-from .errors import Interrupted, PrlPidError, RunError
-from .rundir import write_atomic, write_json
-from .scenario import Scenario, load_scenario, scenario_to_yaml
-from .schema.types import MAX_SEED
+from prlpid_fmi import rundir as rd
+from prlpid_fmi.errors import Interrupted, PrlPidError, RunError
+from prlpid_fmi.rundir import write_atomic, write_json
+from prlpid_fmi.scenario.load import Scenario, load_scenario, scenario_to_yaml
+from prlpid_fmi.schema.types import MAX_SEED
 
-from .report import candidates_table, deployed_section, loop_units, render_report
+from prlpid_fmi.report.markdown import candidates_table, deployed_section, loop_units, render_report
 
 
 # -- trajectories to CSV ---------------------------------------------------------------------------
@@ -43,7 +43,7 @@ def trajectory_csv(traj, loop_names: list[str], sample_time_s: float) -> str:
                    f"Kp[{name}]", f"Ti[{name}]", f"Td[{name}]", f"Ki[{name}]", f"Kd[{name}]"]
     coupling = gains.get("coupling")
     if coupling is not None:
-        from .control import COUPLING_NAMES
+        from prlpid_fmi.control import COUPLING_NAMES
         header += list(COUPLING_NAMES)
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
@@ -67,8 +67,8 @@ def _one_line(exc: BaseException) -> str:
 
 
 def _policy(run_dir: Path, algorithm: str):
-    from .evaluate import model_policy
-    from .train import load_model
+    from prlpid_fmi.loop.evaluation import model_policy
+    from prlpid_fmi.tuning.agent import load_model
 
     path = run_dir / rd.MODEL
     try:
@@ -99,10 +99,10 @@ def evaluate_into(run_dir: Path, scenario: Scenario, out_dir: Path, policy, fixe
     "gain schedule". deployed: what the run deployed ("gain schedule" | "fixed PID" | "none"; None: not known
     yet, as in `tune` before its choice); the report then opens with the deployed controller on this evaluation.
     """
-    from . import plots
-    from .evaluate import constant_gains, evaluate_gains
-    from .evaluate import evaluate
-    from .schedule import replay_schedule
+    from prlpid_fmi.report import plots
+    from prlpid_fmi.loop.evaluation import constant_gains, evaluate_gains
+    from prlpid_fmi.loop.evaluation import evaluate
+    from prlpid_fmi.tuning.schedule.table import replay_schedule
 
     config = scenario.evaluation_config()
     intervals = list(scenario.evaluation.intervals) or None
@@ -178,15 +178,15 @@ def _isolated(scenario: Scenario, isolation: str) -> Scenario:
 
 def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None, seed: int | None, resume: bool,
           progress_bar: bool, baseline: bool, crashed: bool = False) -> Path:
-    from . import plots
-    from .baseline import tune_fixed_pid
-    from .progress import Progress, stage
-    from .assess import assess, candidate_summary, max_sensitivity
-    from .deliver import verdict
-    from .deploy import deployable_files
-    from .schedule import fixed_schedule, write_schedule_csv
-    from .transients import deliverable_schedule
-    from .train import train
+    from prlpid_fmi.report import plots
+    from prlpid_fmi.tuning.fixed_pid import tune_fixed_pid
+    from prlpid_fmi.progress import Progress, stage
+    from prlpid_fmi.deliver.evidence import assess, candidate_summary, max_sensitivity
+    from prlpid_fmi.deliver.rule import verdict
+    from prlpid_fmi.export.code import deployable_files
+    from prlpid_fmi.tuning.schedule.table import fixed_schedule, write_schedule_csv
+    from prlpid_fmi.tuning.schedule.trajectories import deliverable_schedule
+    from prlpid_fmi.tuning.agent import train
 
     info = {"command": sys.argv, "started": rd.now(), "versions": rd.package_versions()}
     if resume:
@@ -293,7 +293,7 @@ def _anchor(scenario: Scenario, fixed: dict | None):
 
 
 def gains_from_dict(g: dict):
-    from .actions import gains_from_values
+    from prlpid_fmi.loop.actions import gains_from_values
 
     return gains_from_values(g["Kp"], g["Ti"], g["Td"], g.get("coupling"))
 
@@ -344,7 +344,7 @@ def evaluate_run(run_dir: str | Path, scenario_path: str | Path | None = None) -
 def _deployed(run_dir: Path):
     """(what the run deployed, its schedule.csv as a GainSchedule when that is the adaptive schedule); (None,
     None) for a run whose choice was not made (no metrics.json entry, e.g. an absolute map without baseline)."""
-    from .schedule import read_schedule_csv
+    from prlpid_fmi.tuning.schedule.table import read_schedule_csv
 
     try:
         deployed = json.loads((run_dir / rd.METRICS).read_text()).get("deployed")
@@ -370,9 +370,9 @@ def check_output(run_dir: Path, output: Path, force: bool = False) -> None:
 
 def _check_schedule_options(trained: Scenario, schedule_by: str, points: int) -> None:
     """--points >= 1, and --schedule-by a loop signal or a real variable of the run's plant FMU (RunError)."""
-    from .core import resolve_fmu
-    from .fmu import describe_fmu
-    from .schedule import LOOP_SIGNALS, LOOP_VARIABLE
+    from prlpid_fmi.loop.core import resolve_fmu
+    from prlpid_fmi.fmu import describe_fmu
+    from prlpid_fmi.tuning.schedule.table import LOOP_SIGNALS, LOOP_VARIABLE
 
     if points < 1:
         raise RunError(f"--points: must be at least 1 (got {points}; expected a number of operating points >= 1)")
@@ -403,9 +403,9 @@ def export_schedule(run_dir: str | Path, output: str | Path, schedule_by: str = 
     scenario_path: with replay, replay on this scenario's evaluation instead of the run's own.
     Returns (csv path, comparison or None): comparison = {"policy": metrics, "schedule": metrics}.
     """
-    from .evaluate import evaluate
-    from .schedule import replay_schedule, write_schedule_csv
-    from .transients import extract
+    from prlpid_fmi.loop.evaluation import evaluate
+    from prlpid_fmi.tuning.schedule.table import replay_schedule, write_schedule_csv
+    from prlpid_fmi.tuning.schedule.trajectories import extract
 
     run_dir, output = Path(run_dir), Path(output)
     trained = _load_run(run_dir)

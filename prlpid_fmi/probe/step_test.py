@@ -21,7 +21,7 @@ from typing import Mapping, Optional, Sequence
 
 import numpy as np
 
-from .errors import PlantError
+from prlpid_fmi.errors import PlantError
 
 SAMPLES = 400                   # samples per run
 SAMPLES_PER_TIME_CONSTANT = 40  # the grid aims at T/40 (1/(40 λ) when unstable)
@@ -118,8 +118,8 @@ def _snap(dt: float) -> float:
 
 def _simulate(path, inputs, u, output, dt, parameters) -> np.ndarray:
     """Output samples (n <= SAMPLES + 1,) holding inputs u; stops at a rejected step or a non-finite output."""
-    from .fmu import FmuPlant
-    from .fmu.plant import StepRejected
+    from prlpid_fmi.fmu import FmuPlant
+    from prlpid_fmi.fmu.plant import StepRejected
 
     with FmuPlant(path, inputs=inputs, outputs=[output], sample_time_s=dt, parameters=parameters,
                   instance_name="probe") as plant:
@@ -202,7 +202,7 @@ def _step_size(v, u0: float) -> float:
 def probe_input(path, name: str, output: str, inputs: Sequence[str], u0: Sequence[float],
                 parameters: Mapping[str, float], dt0: float, y0: float) -> StepResponse:
     """The step response of input `name` on `output`, on a grid adapted to its time scale."""
-    from .fmu import describe_fmu
+    from prlpid_fmi.fmu import describe_fmu
 
     d = describe_fmu(path)
     v = d.variable(name)
@@ -252,8 +252,8 @@ def probe(fmu_path, output: Optional[str] = None, inputs: Optional[Sequence[str]
     start_values {parameter or input: value}: the operating point (parameters applied before each run,
     inputs held there). Raises PlantError for an FMU that cannot be a plant or an unknown variable.
     """
-    from .fmu import describe_fmu
-    from .fmu.archive import archive_problems
+    from prlpid_fmi.fmu import describe_fmu
+    from prlpid_fmi.fmu.archive import archive_problems
 
     path = Path(fmu_path)
     d = describe_fmu(path)
@@ -299,8 +299,8 @@ def plot_probe(result: ProbeResult, path) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .plots import _save
-    from .fmu import describe_fmu
+    from prlpid_fmi.report.plots import _save
+    from prlpid_fmi.fmu import describe_fmu
 
     d = describe_fmu(result.fmu)
     unit = d.variable(result.output).unit or ""
@@ -388,7 +388,7 @@ def _initial_slope(r: StepResponse) -> float:
 def choose_input(result: ProbeResult) -> tuple[StepResponse, str]:
     """The actuator: the input that moves the output most over its declared range (or per unit), never a
     disturbance-like input while another one moves the output. Returns (response, reason)."""
-    from .fmu import describe_fmu
+    from prlpid_fmi.fmu import describe_fmu
 
     d = describe_fmu(result.fmu)
 
@@ -415,7 +415,7 @@ def choose_input(result: ProbeResult) -> tuple[StepResponse, str]:
 
 def propose_loop(result: ProbeResult) -> LoopProposal:
     """u_limits, setpoint range, sample time and gain ranges for the chosen input (see `why`)."""
-    from .fmu import describe_fmu
+    from prlpid_fmi.fmu import describe_fmu
 
     d = describe_fmu(result.fmu)
     r, reason = choose_input(result)

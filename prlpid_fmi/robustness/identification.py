@@ -24,11 +24,11 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from .config import TuningConfig
-from .control import CoupledPID, PID
-from .control.pid import coupling_matrix
-from .env import resolve_fmu
-from .fmu import FmuPlant, StepRejected
+from prlpid_fmi.config import TuningConfig
+from prlpid_fmi.control import CoupledPID, PID
+from prlpid_fmi.control.pid import coupling_matrix
+from prlpid_fmi.loop.env import resolve_fmu
+from prlpid_fmi.fmu import FmuPlant, StepRejected
 
 SETPOINT_RAMP_STEPS = 100  # samples over which the setpoint ramps from the initial measurement to the operating point
 SETTLE_WINDOW = 50          # samples over which the closed loop must be still to count as settled

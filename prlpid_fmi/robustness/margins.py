@@ -37,8 +37,9 @@ from typing import Sequence
 import control
 import numpy as np
 
-from .config import TuningConfig
-from .identification import CONVERGENCE_TOLERANCE, ClosedLoopRig, PlantResponse, default_amplitude, measure_response
+from prlpid_fmi.config import TuningConfig
+from prlpid_fmi.robustness.identification import (
+    CONVERGENCE_TOLERANCE, ClosedLoopRig, PlantResponse, default_amplitude, measure_response)
 
 DEFAULT_PERIOD = 4096        # samples per multisine period: lowest frequency 2 pi/(N Ts), 3 decades below Nyquist
 MAX_PERIOD = 32768           # longest period the grid refinement may choose
@@ -320,11 +321,11 @@ def loop_margins(config: TuningConfig, Kp: Sequence[float], Ti: Sequence[float],
         raise ValueError(f"amplitude needs one positive value per loop ({n}), got {amplitude!r}")
     # in a worker process when the FMU runs isolated (a crash: no margins, not a dead tool) or may be
     # instantiated only once per process (the caller may hold an instance, e.g. the fixed-PID search)
-    from .core import resolve_fmu
-    from .fmu import describe_fmu
+    from prlpid_fmi.loop.core import resolve_fmu
+    from prlpid_fmi.fmu import describe_fmu
 
     path = resolve_fmu(c.fmu, c.fmi_version)
-    from .isolation import WorkerCrashed, call_in_worker, in_worker
+    from prlpid_fmi.loop.isolated import WorkerCrashed, call_in_worker, in_worker
 
     if not in_worker() and (c.isolation == "process" or describe_fmu(path).once_per_process):
         try:

@@ -36,13 +36,13 @@ from typing import Callable, Optional, Sequence
 
 import numpy as np
 
-from . import __version__
-from .actions import Gains
-from .config import TuningConfig
-from .rundir import write_atomic
-from .control import COUPLING_NAMES, parallel_gains
-from .evaluate import GAIN_NAMES
-from .errors import PrlPidError
+from prlpid_fmi import __version__
+from prlpid_fmi.loop.actions import Gains
+from prlpid_fmi.config import TuningConfig
+from prlpid_fmi.rundir import write_atomic
+from prlpid_fmi.control import COUPLING_NAMES, parallel_gains
+from prlpid_fmi.loop.evaluation import GAIN_NAMES
+from prlpid_fmi.errors import PrlPidError
 
 Policy = Callable[[np.ndarray], np.ndarray]
 
@@ -237,7 +237,7 @@ def extract_schedule(policy: Policy, config: TuningConfig, schedule_by: str = "s
     anchor: the fixed-PID gains the policy's anchored gain map was trained around (as in training).
     Raises PrlPidError when the closed loop diverges at an operating point (the table would be unsafe).
     """
-    from .env import PidTuningEnv
+    from prlpid_fmi.loop.env import PidTuningEnv
 
     names = [l.output for l in config.loops]
     variable = _variable_name(schedule_by, names)
@@ -347,8 +347,8 @@ def schedule_from_rows(config: TuningConfig, variable: str, unit: str, rows: lis
 
 def fixed_schedule(gains: Gains, config: TuningConfig) -> GainSchedule:
     """The fixed PID as a one-row table (scheduled on loop 0's setpoint; one row is held everywhere)."""
-    from .core import resolve_fmu
-    from .fmu import describe_fmu
+    from prlpid_fmi.loop.core import resolve_fmu
+    from prlpid_fmi.fmu import describe_fmu
 
     d = describe_fmu(resolve_fmu(config.fmu, config.fmi_version))
 
@@ -494,7 +494,7 @@ def replay_schedule(schedule: GainSchedule, config: TuningConfig, seed: int = 0,
     The Trajectory (evaluate.Trajectory) holds scheduling_value (n,). Metrics: compute_metrics, as
     evaluate() computes them. Raises PrlPidError when the table's loops or coupling do not match config.
     """
-    from .env import PidTuningEnv
+    from prlpid_fmi.loop.env import PidTuningEnv
 
     names = [l.output for l in config.loops]
     if list(schedule.loop_names) != names:
@@ -504,8 +504,8 @@ def replay_schedule(schedule: GainSchedule, config: TuningConfig, seed: int = 0,
     if not math.isclose(schedule.sample_time_s, config.sample_time_s, rel_tol=1e-12):
         warnings.warn(f"the schedule was tuned at Ts = {schedule.sample_time_s} s, the config runs at "
                       f"Ts = {config.sample_time_s} s", stacklevel=2)
-    from .isolation import make_core
-    from .evaluate import evaluate_gains
+    from prlpid_fmi.loop.isolated import make_core
+    from prlpid_fmi.loop.evaluation import evaluate_gains
 
     config = dataclasses.replace(config, forecast_horizon=0)
     core = make_core(config)

@@ -16,9 +16,9 @@ import ctypes
 import math
 from ctypes import c_double, c_int, c_uint, c_void_p
 
-from ..control.forecast import _Forecast
-from ..control.pid import ANTI_WINDUP_MODES
-from ..errors import PlantError
+from prlpid_fmi.loop.forecast.base import _Forecast
+from prlpid_fmi.control.pid import ANTI_WINDUP_MODES
+from prlpid_fmi.errors import PlantError
 
 ABI_VERSION = 1
 MAX_LOOPS = 3

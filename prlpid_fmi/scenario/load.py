@@ -23,17 +23,17 @@ from typing import Any, Optional
 import yaml
 from pydantic import ValidationError
 
-from .config import (AgentConfig, AnchorBands, BaselineConfig, DeployConfig, Disturbance, GainRange, LoopConfig,
+from prlpid_fmi.config import (AgentConfig, AnchorBands, BaselineConfig, DeployConfig, Disturbance, GainRange, LoopConfig,
                      PriorConfig, TuningConfig)
-from .control.pid import ANTI_WINDUP_MODES
-from .control.reward import RewardWeights
-from .control.smoothing import SMOOTHING_METHODS
-from .errors import PlantError, ScenarioError
-from .schema import ALGORITHMS, DISTURBANCE_TYPES, GAIN_SCALES, LOOP_TARGETS, SCHEMA_FILE_NAME, ScenarioModel, default
-from .schema import model as m
-from .schema.checks import State
-from .schema.document import parse_yaml, syntax_error_line
-from .schema.messages import error_line
+from prlpid_fmi.control.pid import ANTI_WINDUP_MODES
+from prlpid_fmi.control.reward import RewardWeights
+from prlpid_fmi.control.smoothing import SMOOTHING_METHODS
+from prlpid_fmi.errors import PlantError, ScenarioError
+from prlpid_fmi.schema import ALGORITHMS, DISTURBANCE_TYPES, GAIN_SCALES, LOOP_TARGETS, SCHEMA_FILE_NAME, ScenarioModel, default
+from prlpid_fmi.schema import model as m
+from prlpid_fmi.schema.checks import State
+from prlpid_fmi.schema.document import parse_yaml, syntax_error_line
+from prlpid_fmi.schema.messages import error_line
 
 GAIN_NAMES = ("Kp", "Ti", "Td")
 
@@ -287,7 +287,7 @@ validate = validate_scenario
 
 def schema_uri() -> str:
     """file:// URI of the shipped JSON Schema (for the yaml-language-server line of generated scenarios)."""
-    from .presets import SCENARIO_DIR
+    from prlpid_fmi.scenario.presets import SCENARIO_DIR
 
     return (SCENARIO_DIR / SCHEMA_FILE_NAME).resolve().as_uri()
 
@@ -303,8 +303,8 @@ def init_scenario(fmu_path: str | Path, output: Optional[str] = None,
     (parameters are written to plant.parameters). Raises ScenarioError with one line when the FMU cannot
     be read or probed.
     """
-    from .fmu import describe_fmu
-    from .probe import probe, propose_loop
+    from prlpid_fmi.fmu import describe_fmu
+    from prlpid_fmi.probe.step_test import probe, propose_loop
 
     p = Path(fmu_path)
     try:

@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from .config import GainRange, LoopConfig
+from prlpid_fmi.config import GainRange, LoopConfig
 
 PID_PARAMETERS = ("Kp", "Ti", "Td")
 

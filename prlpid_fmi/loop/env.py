@@ -17,11 +17,11 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 
-from .actions import ActionMap, AnchoredActionMap, Gains, gains_from_values
-from .config import TuningConfig
-from .control import make_smoother
-from .core import LoopCore, resolve_fmu  # noqa: F401  (resolve_fmu: public import path)
-from .isolation import make_core
+from prlpid_fmi.loop.actions import ActionMap, AnchoredActionMap, Gains, gains_from_values
+from prlpid_fmi.config import TuningConfig
+from prlpid_fmi.control import make_smoother
+from prlpid_fmi.loop.core import LoopCore, resolve_fmu
+from prlpid_fmi.loop.isolated import make_core
 
 OBS_CLIP = 10.0
 

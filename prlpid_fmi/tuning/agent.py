@@ -16,14 +16,14 @@ import gymnasium as gym
 import torch
 from torch import nn
 
-from . import schema
-from .config import AgentConfig, TuningConfig
-from .core import resolve_fmu
-from .env import PidTuningEnv, is_anchored
-from .fmu import describe_fmu
-from .errors import PrlPidError, RunError
-from .progress import training_progress
-from .rundir import write_atomic
+from prlpid_fmi import schema
+from prlpid_fmi.config import AgentConfig, TuningConfig
+from prlpid_fmi.loop.core import resolve_fmu
+from prlpid_fmi.loop.env import PidTuningEnv, is_anchored
+from prlpid_fmi.fmu import describe_fmu
+from prlpid_fmi.errors import PrlPidError, RunError
+from prlpid_fmi.progress import training_progress
+from prlpid_fmi.rundir import write_atomic
 
 ALGORITHMS = schema.ALGORITHMS  # ppo | sac | td3: the scenario schema's choices
 ANCHORED_INITIAL_STD = 0.3  # PPO's initial action std around the fixed PID (action units; the band is [-1, 1])

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import rundir as rd
+from prlpid_fmi import rundir as rd
 
 METRIC_COLUMNS = ("ISE", "IAE", "ITAE", "Overshoot", "SettlingTime", "RiseTime", "SteadyStateError",
                   "PeakDeviation", "RecoveryTime", "ControlEffort", "TotalVariation", "Chatter")
@@ -118,7 +118,7 @@ def render_report(scenario, policy_m: dict, fixed_m: dict | None, fixed_gains: d
 def deployed_section(deployed: str, schedule_m: dict | None, fixed_m: dict | None,
                      units: tuple[str, str] = ("", "")) -> str:
     """An evaluation report's opening: what the run deployed (schedule.csv) and how it does on this evaluation."""
-    from .deliver import Candidate
+    from prlpid_fmi.deliver.rule import Candidate
 
     lines = ["## Deployed controller on this evaluation", ""]
     if deployed == "gain schedule" and schedule_m is not None:
@@ -138,7 +138,7 @@ def deployed_section(deployed: str, schedule_m: dict | None, fixed_m: dict | Non
 def candidates_table(sched, fixed, units: tuple[str, str] = ("", ""), margins: bool = True) -> str:
     """Both deployable controllers side by side (plain PIDs, no neural network), metrics with units; margins:
     with the worst-Ms row (their Candidates carry margins)."""
-    from .deliver import overall_metric
+    from prlpid_fmi.deliver.rule import overall_metric
 
     y_unit, u_unit = units
     rows = [("ISE", "ISE"), ("IAE", "IAE"), ("Overshoot", "overshoot"), ("SettlingTime", "settling time"),
@@ -154,7 +154,7 @@ def candidates_table(sched, fixed, units: tuple[str, str] = ("", ""), margins: b
         lines.append("| worst Ms (limit in the verdict) | – | " + " | ".join(number(c.worst_Ms, 3) for c in cands)
                      + " |")
     if all(not math.isnan(c.holdout_ise) for c in cands):
-        from .transients import HOLDOUT_EPISODES
+        from prlpid_fmi.tuning.schedule.trajectories import HOLDOUT_EPISODES
 
         lines.append(f"| ISE, {HOLDOUT_EPISODES} held-out training-distribution episodes | "
                      f"{unit_label('ISE', y_unit, u_unit)} | " + " | ".join(
@@ -172,7 +172,7 @@ def candidates_table(sched, fixed, units: tuple[str, str] = ("", ""), margins: b
 
 def loop_units(config) -> tuple[str, str]:
     """(output unit, input unit) of the first loop, joined with "/" over loops whose units differ."""
-    from .plots import _units
+    from prlpid_fmi.report.plots import _units
 
     ys, us = _units(config)
     return "/".join(dict.fromkeys(ys)) if any(ys) else "", "/".join(dict.fromkeys(us)) if any(us) else ""

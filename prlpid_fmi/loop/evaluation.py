@@ -12,11 +12,11 @@ from typing import Callable
 import numpy as np
 from gymnasium.utils.seeding import np_random
 
-from .config import TuningConfig
-from .core import LoopCore, Termination
-from .isolation import make_core
-from .env import PidTuningEnv
-from .metrics import compute_metrics
+from prlpid_fmi.config import TuningConfig
+from prlpid_fmi.loop.core import LoopCore, Termination
+from prlpid_fmi.loop.isolated import make_core
+from prlpid_fmi.loop.env import PidTuningEnv
+from prlpid_fmi.metrics import compute_metrics
 
 GAIN_NAMES = ("Kp", "Ti", "Td", "coupling")  # order of the gains tuple LoopCore.step takes
 Policy = Callable[[np.ndarray], np.ndarray]

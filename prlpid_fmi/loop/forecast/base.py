@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import math
 
-from .reward import RewardWeights, mean_loop_reward
+from prlpid_fmi.control.reward import RewardWeights, mean_loop_reward
 
 
 class _Forecast:
@@ -85,7 +85,7 @@ class FmiForecast(_Forecast):
 
     def __init__(self, plant, prior, pid, horizon: int, scale, bound, penalty: float, weights: RewardWeights,
                  u_scale, overrides: dict | None = None, state_map: dict | None = None):
-        from ..fmu import StepRejected
+        from prlpid_fmi.fmu import StepRejected
 
         super().__init__(plant, prior, pid, horizon, scale, bound, penalty, weights, u_scale, overrides)
         self._rejected = StepRejected
@@ -167,13 +167,13 @@ def make_forecast(plant, prior, pid, *, horizon: int, scale, bound, penalty: flo
         raise ValueError(f"forecast path must be 'auto', 'fmi' or 'native', got {path!r}")
     args = (plant, prior, pid, horizon, scale, bound, penalty, weights, u_scale, overrides)
     if path != "fmi":
-        from ..fmu.native_forecast import NativeForecast, native_unavailable
+        from prlpid_fmi.loop.forecast.native import NativeForecast, native_unavailable
 
         reason = "a state_map re-initialises the prior" if state_map else native_unavailable(plant, prior)
         if reason is None:
             return NativeForecast(*args)
         if path == "native":
-            from ..errors import PlantError
+            from prlpid_fmi.errors import PlantError
 
             raise PlantError(f"{prior.path.name}: the one-call forecast is not available: {reason}")
     return FmiForecast(*args, state_map=state_map)

@@ -21,9 +21,9 @@ from matplotlib import ticker  # noqa: E402
 from matplotlib.transforms import blended_transform_factory  # noqa: E402
 import numpy as np  # noqa: E402
 
-from .config import Disturbance, TuningConfig  # noqa: E402
-from .control import COUPLING_NAMES  # noqa: E402
-from .rundir import write_atomic  # noqa: E402
+from prlpid_fmi.config import Disturbance, TuningConfig  # noqa: E402
+from prlpid_fmi.control import COUPLING_NAMES  # noqa: E402
+from prlpid_fmi.rundir import write_atomic  # noqa: E402
 
 DPI = 110
 POLICY, FIXED, SCHEDULE = "adaptive policy", "fixed PID", "gain schedule"  # the legends' controller names
@@ -52,8 +52,8 @@ def _save(fig, path) -> Path:
 def _units(config: TuningConfig) -> tuple[list[str], list[str]]:
     """Units of each loop's output and input from the FMU description, "" where unknown or unreadable."""
     try:
-        from .env import resolve_fmu
-        from .fmu import describe_fmu
+        from prlpid_fmi.loop.env import resolve_fmu
+        from prlpid_fmi.fmu import describe_fmu
 
         d = describe_fmu(resolve_fmu(config.fmu, config.fmi_version))
 

@@ -16,11 +16,11 @@ import warnings
 
 import numpy as np
 
-from .actions import Gains
-from .baseline import margins_of, operating_point
-from .deliver import Candidate, Decision, choose, meets
-from .evaluate import constant_gains, evaluate_gains
-from .schedule import LOOP_VARIABLE, GainSchedule, fixed_schedule, replay_schedule
+from prlpid_fmi.loop.actions import Gains
+from prlpid_fmi.tuning.fixed_pid import margins_of, operating_point
+from prlpid_fmi.deliver.rule import Candidate, Decision, choose, meets
+from prlpid_fmi.loop.evaluation import constant_gains, evaluate_gains
+from prlpid_fmi.tuning.schedule.table import LOOP_VARIABLE, GainSchedule, fixed_schedule, replay_schedule
 
 
 def _margins_at(config, gains, points: list[list[float]]) -> list:
@@ -119,7 +119,7 @@ def robust_schedule(schedule: GainSchedule, config, limit: float) -> tuple[GainS
     at its own setpoint. Error tables: each row at every point of range_points, detuned at its worst
     failing point until it meets the limit at all of them. Other variables: unchanged.
     """
-    from .baseline import detune
+    from prlpid_fmi.tuning.fixed_pid import detune
 
     loop = error_loop(schedule)
     if not schedule.variable.startswith("setpoint") and loop is None:
@@ -149,7 +149,7 @@ def holdout_ise(scenario, schedule: GainSchedule, seed: int) -> float:
     """ISE summed over HOLDOUT_EPISODES seeded episodes of the training distribution (scenario.tuning: its random
     setpoints, noise, disturbances, randomisation), replayed as a plain PID; infinity when one diverges. The
     seeds are disjoint from those the table was built and chosen on, and from the evaluation's."""
-    from .transients import HOLDOUT_EPISODES, HOLDOUT_SEED_OFFSET, training_ise
+    from prlpid_fmi.tuning.schedule.trajectories import HOLDOUT_EPISODES, HOLDOUT_SEED_OFFSET, training_ise
 
     return training_ise(schedule, scenario.tuning, seed, episodes=HOLDOUT_EPISODES, offset=HOLDOUT_SEED_OFFSET)
 

@@ -27,11 +27,11 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import differential_evolution
 
-from .actions import ActionMap, Gains, gains_from_values
-from .config import TuningConfig
-from .core import LoopCore
-from .isolation import make_core
-from .evaluate import Trajectory, gains_rollout
+from prlpid_fmi.loop.actions import ActionMap, Gains, gains_from_values
+from prlpid_fmi.config import TuningConfig
+from prlpid_fmi.loop.core import LoopCore
+from prlpid_fmi.loop.isolated import make_core
+from prlpid_fmi.loop.evaluation import Trajectory, gains_rollout
 
 DIVERGED_COST = 1e6
 
@@ -86,7 +86,7 @@ def operating_point(config: TuningConfig, value: float | None = None) -> list[fl
 
 def margins_of(config: TuningConfig, gains: tuple, point: list[float]):
     """prlpid_fmi.margins.Margins of constant gains (Kp, Ti, Td, coupling) at an operating point (setpoints)."""
-    from .margins import loop_margins
+    from prlpid_fmi.robustness.margins import loop_margins
 
     return loop_margins(config, gains[0], gains[1], gains[2], point, coupling=gains[3])
 

@@ -22,11 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import TuningConfig
-from .control import CoupledPID, PID
-from .control.reward import mean_loop_reward
-from .errors import PlantError
-from .fmu import FmuPlant, StepRejected, bundled_fmu, bundled_plant_names
+from prlpid_fmi.config import TuningConfig
+from prlpid_fmi.control import CoupledPID, PID
+from prlpid_fmi.control.reward import mean_loop_reward
+from prlpid_fmi.errors import PlantError
+from prlpid_fmi.fmu import FmuPlant, StepRejected, bundled_fmu, bundled_plant_names
 
 
 @dataclass(frozen=True)
@@ -59,7 +59,7 @@ def resolve_fmu(fmu: str, fmi_version: int = 2) -> Path:
         return bundled_fmu(fmu, fmi_version)
     path = Path(fmu)
     if not path.is_file():
-        from .fmu.description import missing_fmu_text
+        from prlpid_fmi.fmu.description import missing_fmu_text
         raise PlantError(f"{fmu}: {missing_fmu_text(path)} (and not a bundled plant: "
                          f"{', '.join(bundled_plant_names())})")
     return path
@@ -150,7 +150,7 @@ class LoopCore:
         return self.n_loops
 
     def _make_prior(self, path: Path, forecast_path: str):
-        from .control.forecast import make_forecast
+        from prlpid_fmi.loop.forecast.base import make_forecast
 
         c = self.config
         prior_path = resolve_fmu(c.prior.fmu, c.fmi_version) if c.prior.fmu else path

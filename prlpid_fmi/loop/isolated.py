@@ -23,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .config import TuningConfig
-from .core import LoopCore, Termination, resolve_fmu
-from .errors import PlantError
+from prlpid_fmi.config import TuningConfig
+from prlpid_fmi.loop.core import LoopCore, Termination, resolve_fmu
+from prlpid_fmi.errors import PlantError
 
 ISOLATION_MODES = ("auto", "process", "none")
 JOIN_TIMEOUT_S = 5.0
@@ -59,7 +59,7 @@ def _mp_context():
         methods = multiprocessing.get_all_start_methods()
         _context = multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
         if "forkserver" in methods:
-            _context.set_forkserver_preload(["prlpid_fmi.core", "prlpid_fmi.margins"])
+            _context.set_forkserver_preload(["prlpid_fmi.loop.core", "prlpid_fmi.robustness.margins"])
     return _context
 
 
@@ -80,7 +80,7 @@ class WorkerCrashed(PlantError):
 def _extracted_for(paths) -> dict:
     """{(path, mtime): folder} of these FMUs, extracted here once (workers reuse the folders; this process
     removes them at exit)."""
-    from .fmu.plant import _extract
+    from prlpid_fmi.fmu.plant import _extract
 
     out = {}
     for p in paths:
@@ -93,7 +93,7 @@ def _run_one(conn, fn, args, extracted: dict) -> None:
     global _in_worker
     _in_worker = True
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    from .fmu import plant as fmu_plant
+    from prlpid_fmi.fmu import plant as fmu_plant
 
     fmu_plant._EXTRACTED.update(extracted)
     try:
@@ -138,7 +138,7 @@ def _serve(conn, config: TuningConfig, forecast_path: str, extracted: dict) -> N
     global _in_worker
     _in_worker = True
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when to stop
-    from .fmu import plant as fmu_plant
+    from prlpid_fmi.fmu import plant as fmu_plant
 
     fmu_plant._EXTRACTED.update(extracted)
     try:
@@ -194,7 +194,7 @@ class _RemotePlant:
     """The plant as the drivers see it through IsolatedCore: its description, and get/set by name."""
 
     def __init__(self, core: "IsolatedCore", path: Path):
-        from .fmu import describe_fmu
+        from prlpid_fmi.fmu import describe_fmu
 
         self._core = core
         self.path = path
