@@ -29,7 +29,7 @@ import numpy as np
 from gymnasium.utils.seeding import np_random
 
 from prlpid_fmi.loop.core import LoopCore
-from prlpid_fmi.deliver.rule import overall_metric
+from prlpid_fmi.metrics import overall_metric
 from prlpid_fmi.loop.evaluation import Trajectory, measure
 from prlpid_fmi.scenario.presets import scenario_path
 from prlpid_fmi.run.tune import tune

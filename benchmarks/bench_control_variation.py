@@ -29,13 +29,14 @@ from pathlib import Path
 
 import yaml
 
-from prlpid_fmi.deliver.rule import overall_metric
+from prlpid_fmi.metrics import overall_metric
 from prlpid_fmi.fmu import build_fmu
 from prlpid_fmi.metrics import chatter_fraction
 from prlpid_fmi.scenario.presets import scenario_path
 from prlpid_fmi.run.tune import tune
 from prlpid_fmi.scenario.load import load_scenario
-from prlpid_fmi.tuning.schedule.table import read_schedule_csv, replay_schedule
+from prlpid_fmi.tuning.schedule.csv_file import read_schedule_csv
+from prlpid_fmi.tuning.schedule.replay import replay_schedule
 
 HERE = Path(__file__).parent
 TEST_PLANTS = HERE.parent / "tests" / "plants"

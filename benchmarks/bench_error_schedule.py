@@ -2,7 +2,7 @@
 
 For each run directory made by `prlpid-fmi tune` (its model.zip, scenario.yaml, fixed_pid.json), both
 candidate tables are re-extracted from the saved policy exactly as `tune` builds them
-(prlpid_fmi.transients.extract + assess.robust_schedule), scored on the seeded training-distribution
+(prlpid_fmi.tuning.schedule.extraction.extract + assess.robust_schedule), scored on the seeded training-distribution
 episodes `deploy.schedule_by: auto` uses, and assessed like the deliverable (assess.assess_schedule:
 evaluation + Monte-Carlo set + margins). Prints one markdown table: ISE and total variation of u as
 ratios to the fixed PID on the run's evaluation, worst Ms, training-episode ISE, and auto's pick.
@@ -27,12 +27,15 @@ import warnings
 from pathlib import Path
 
 from prlpid_fmi import rundir as rd
-from prlpid_fmi.loop.actions import gains_from_values
-from prlpid_fmi.deliver.evidence import assess_fixed, assess_schedule, max_sensitivity, robust_schedule
-from prlpid_fmi.run.tune import _anchor, _load_run, _policy, gains_from_dict
+from prlpid_fmi.loop.gains import gains_from_values
+from prlpid_fmi.deliver.evidence import assess_fixed, assess_schedule, max_sensitivity
+from prlpid_fmi.deliver.candidates import robust_schedule
+from prlpid_fmi.run.trained import _anchor, _load_run, _policy
+from prlpid_fmi.loop.gains import gains_from_dict
 from prlpid_fmi.tuning.schedule.table import schedule_from_rows
-from prlpid_fmi.tuning.schedule.trajectories import (
-    TRAJECTORY_EPISODES, bin_rows, extract, trajectory_samples, training_ise)
+from prlpid_fmi.tuning.schedule.trajectories import TRAJECTORY_EPISODES, bin_rows, trajectory_samples
+from prlpid_fmi.tuning.schedule.extraction import extract
+from prlpid_fmi.tuning.schedule.replay import training_ise
 
 
 def abs_error_table(policy, config, points: int, seed: int, anchor):

@@ -20,8 +20,9 @@ import statistics
 import time
 
 from prlpid_fmi.control import PID, CoupledPID
-from prlpid_fmi.loop.forecast.base import make_forecast
-from prlpid_fmi.loop.core import control_scales, resolve_fmu
+from prlpid_fmi.loop.forecast import make_forecast
+from prlpid_fmi.loop.core import control_scales
+from prlpid_fmi.fmu.resolve import resolve_fmu
 from prlpid_fmi.fmu import FmuPlant
 from prlpid_fmi.scenario.presets import preset
 

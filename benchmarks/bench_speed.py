@@ -17,7 +17,7 @@ measured once, in an order shuffled per repeat, so load on the shared machine hi
   i.e. the twin's control logic, smoothing, reward and glue without the integrator that env runs in C;
 - FMUGym: benchmarks/fmugym_peer.py, gains as its action, the PID in _process_action, reward -e^2;
   it forecasts nothing, so its cost is the same at every N.
-Run rows: training steps/s of prlpid_fmi.train.train with the AgentConfig defaults (wall time),
+Run rows: training steps/s of prlpid_fmi.tuning.agent.train with the AgentConfig defaults (wall time),
 the optional full run (wall time, peak RSS of the child), and the peak RSS of this process.
 Targets (issue 7) are printed beside the ratios they apply to.
 """

@@ -31,7 +31,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from prlpid_fmi.deliver.rule import overall_metric
+from prlpid_fmi.metrics import overall_metric
 from prlpid_fmi.fmu import build_fmu
 from prlpid_fmi.run.tune import tune
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from prlpid_fmi import __version__
+from prlpid_fmi.version import __version__
 
 PACKAGE_DIR = Path(__file__).resolve().parent
 REPO_ROOT = PACKAGE_DIR.parent
@@ -28,3 +28,6 @@ def fmu_cache_dir() -> Path:
     from platformdirs import user_cache_path
 
     return user_cache_path("prlpid-fmi", appauthor=False, version=__version__) / "fmus"
+
+
+SCENARIO_DIR = data_dir("scenarios")  # the bundled scenario files (scenarios/<name>.yaml)

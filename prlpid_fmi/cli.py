@@ -10,11 +10,17 @@ import math
 import sys
 import warnings
 
-from prlpid_fmi import __version__
-from prlpid_fmi.export.code import FORMATS
-from prlpid_fmi.errors import Interrupted, PrlPidError
+from prlpid_fmi.errors import ArgumentError, Interrupted, PrlPidError
+from prlpid_fmi.export.formats import CODE_FORMATS, FORMATS
+from prlpid_fmi.version import __version__
 
 PROG = "prlpid-fmi"
+
+
+# a library parameter -> the option that sets it (ArgumentError messages are shown with these)
+OPTIONS = {"timesteps": "--timesteps", "seed": "--seed", "points": "--points", "schedule_by": "--schedule-by",
+           "scenario_path": "--scenario", "replay": "--replay", "name": "--name", "fmt": "--format",
+           "fmi_version": "--fmi-version", "ray": "--ray", "workers": "--workers", "resume": "--resume", "out": "--out"}
 
 
 def _say(args: argparse.Namespace, text: str) -> None:
@@ -80,8 +86,8 @@ def _check_plants(args: argparse.Namespace) -> int:
 def _validate(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from prlpid_fmi.scenario.presets import bundled_scenario_names
     from prlpid_fmi.scenario.load import load_scenario
+    from prlpid_fmi.scenario.presets import bundled_scenario_names
     from prlpid_fmi.sweep.spec import bundled_sweep_names, is_sweep_file, load_sweep, resolve_sweep
 
     arg = Path(args.scenario)
@@ -124,7 +130,7 @@ def _start_values(pairs: list[str]) -> dict:
 
 
 def _init(args: argparse.Namespace) -> int:
-    from prlpid_fmi.scenario.load import init_scenario
+    from prlpid_fmi.scenario.draft import init_scenario
 
     sys.stdout.write(init_scenario(args.fmu, output=args.output, start_values=_start_values(args.set)))
     return 0
@@ -177,7 +183,7 @@ def _tune(args: argparse.Namespace) -> int:
 
 
 def _evaluate(args: argparse.Namespace) -> int:
-    from prlpid_fmi.run.tune import evaluate_run
+    from prlpid_fmi.run.evaluate import evaluate_run
 
     out_dir = evaluate_run(args.run_dir, None if args.scenario is None else _scenario(args.scenario))
     _say(args, (out_dir / "report.md").read_text())
@@ -185,15 +191,24 @@ def _evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+def csv_only_options(args) -> list[str]:
+    """The `export` options given that do not apply to args.format (CSV extraction vs code generation)."""
+    if args.format == "csv":
+        given = (("--fixed", args.fixed), ("--name", args.name is not None))
+    else:
+        given = (("--schedule-by", args.schedule_by is not None), ("--points", args.points is not None),
+                 ("--replay", args.replay), ("--scenario", args.scenario is not None))
+    return [option for option, present in given if present]
+
+
 def _export(args: argparse.Namespace) -> int:
-    from prlpid_fmi.export.code import csv_only_options, export_controller
-    from prlpid_fmi.run.tune import export_schedule
+    from prlpid_fmi.run.export import export_controller, export_schedule
 
     wrong = csv_only_options(args)
     if wrong:
         raise PrlPidError(f"{wrong[0]}: not used with --format {args.format} (expected " + (
             "--format csv; the code carries the run's deployed schedule.csv)" if args.format != "csv" else
-            "--format st, plcopen or c)"))
+            f"--format {', '.join(list(CODE_FORMATS)[:-1])} or {list(CODE_FORMATS)[-1]})"))
     if args.format != "csv":
         for path in export_controller(args.run_dir, args.output, args.format, fixed=args.fixed, name=args.name,
                                       force=args.force):
@@ -316,7 +331,10 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default=None, help="run directory (default: runs/<name>-<UTC time>; never overwritten)")
     p.add_argument("--resume", action="store_true", help="continue the run in --out from its latest checkpoint")
     p.add_argument("--no-progress", action="store_true", help="no progress on stderr")
-    p.add_argument("--no-baseline", action="store_true", help="skip tuning the fixed-PID baseline")
+    p.add_argument("--no-baseline", action="store_true",
+                   help="with controller.gain_mapping: absolute only, skip the fixed-PID search (nothing is then "
+                        "compared or chosen); the anchored map (the default) trains around the fixed PID and "
+                        "searches it anyway")
 
     p = command("sweep", _sweep, "run a scenario's variants over several seeds (local processes or Ray) and "
                                  "summarise them: mean and 95 % interval per variant")
@@ -376,7 +394,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return args.func(args)
     except PrlPidError as exc:
-        for line in str(exc).splitlines():  # a scenario with several mistakes: one line each
+        text = exc.worded(OPTIONS) if isinstance(exc, ArgumentError) else str(exc)
+        for line in text.splitlines():  # a scenario with several mistakes: one line each
             print(f"{PROG}: error: {line}", file=sys.stderr)
         return 2
     except OSError as exc:
@@ -397,3 +416,4 @@ def main(argv: list[str] | None = None) -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
+

@@ -14,9 +14,16 @@ from typing import Optional
 from prlpid_fmi.control.reward import RewardWeights
 from prlpid_fmi.schema import model as _m
 from prlpid_fmi.schema.model import default as _d
-from prlpid_fmi.schema.types import Algorithm, AntiWindup, DisturbanceKind, GainMapping, GainScale, Isolation, Smoothing, VecEnv
-
-INF = float("inf")
+from prlpid_fmi.schema.types import (
+    Algorithm,
+    AntiWindup,
+    DisturbanceKind,
+    GainMapping,
+    GainScale,
+    Isolation,
+    Smoothing,
+    VecEnv,
+)
 
 
 @dataclass(frozen=True)
@@ -109,7 +116,7 @@ class TuningConfig:
     plant_parameters: dict = field(default_factory=dict)
     sample_time_s: float = _d(_m.PlantModel, "sample_time")
     fmi_version: int = _d(_m.PlantModel, "fmi_version")  # for bundled plants only
-    isolation: Isolation = _d(_m.PlantModel, "isolation")  # auto | process | none (prlpid_fmi.isolation)
+    isolation: Isolation = _d(_m.PlantModel, "isolation")  # auto | process | none (prlpid_fmi.loop.isolated)
     leak_check_every: int = _d(_m.PlantModel, "leak_check_every")  # resets between leak checks; 0 = off
     leak_limit_mb: float = _d(_m.PlantModel, "leak_limit_mb")  # growth [MB] over one check that re-instantiates
     prior: PriorConfig = PriorConfig()

@@ -1,4 +1,7 @@
 """User-facing errors: the CLI prints their message on one line and exits with code 2."""
+from __future__ import annotations
+
+import re
 
 
 class PrlPidError(Exception):
@@ -31,3 +34,22 @@ class Interrupted(BaseException):
 
 class RunError(PrlPidError):
     """A run directory or an output file cannot be used as asked (exists, missing files, owned by a run)."""
+
+
+class ArgumentError(RunError):
+    """An argument of a library call that cannot be used as given, worded in the library's terms.
+
+    template: the message with each parameter it names written as {parameter} (e.g. "{points}: must be at least
+    1 (got 0; ...)"); str() shows the parameter names, `worded(flags)` shows the names the caller knows them by
+    (the CLI's options: {"points": "--points"}).
+    """
+
+    _FIELD = re.compile(r"\{([a-z_]+)\}")
+
+    def __init__(self, template: str):
+        self.template = template
+        super().__init__(self.worded({}))
+
+    def worded(self, names: dict[str, str]) -> str:
+        """The message with each {parameter} replaced by names[parameter] (the parameter's own name if absent)."""
+        return self._FIELD.sub(lambda m: names.get(m.group(1), m.group(1)), self.template)

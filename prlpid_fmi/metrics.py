@@ -379,3 +379,14 @@ def compute_metrics(time_s, setpoint, measurement, control_signal, sample_time_s
         "intervals": [{"start_step": a, "end_step": b, **window(a, b)} for a, b in windows],
         "segments": segments,
     }
+
+
+def overall_metric(overall: dict, key: str) -> float:
+    """`key` from compute_metrics' overall dict: plain for one loop; "key[loop]" summed (integral
+    metrics) or maximised (step metrics) over loops for several."""
+    if key in overall:
+        return float(overall[key])
+    values = [float(v) for k, v in overall.items() if k.startswith(key + "[")]
+    if not values:
+        return math.nan
+    return sum(values) if key in ("ISE", "IAE", "ITAE", "ControlEffort", "TotalVariation") else max(values)

@@ -32,7 +32,7 @@ from typing import Callable, Union
 
 import numpy as np
 
-from prlpid_fmi.errors import RunError
+from prlpid_fmi.errors import ArgumentError, RunError
 
 SCENARIO = "scenario.yaml"
 RUN_INFO = "run.json"
@@ -150,7 +150,7 @@ def prepare_run_dir(out: str | Path | None, name: str, resume: bool) -> tuple[Pa
     """
     if out is None:
         if resume:
-            raise RunError("--resume needs --out RUN_DIR naming the run to continue")
+            raise ArgumentError("{resume} needs {out} RUN_DIR naming the run to continue")
         stamp = dt.datetime.now(dt.timezone.utc).strftime("%Y%m%d-%H%M%S")
         out = Path("runs") / f"{name}-{stamp}"
     run_dir = Path(out)

@@ -15,14 +15,16 @@ import math
 import numpy as np
 import pytest
 
-from prlpid_fmi.loop.actions import AnchoredActionMap, gains_from_values
+from prlpid_fmi.loop.actions import AnchoredActionMap
+from prlpid_fmi.loop.gains import gains_from_values
 from prlpid_fmi.cli import main
 from prlpid_fmi.config import AnchorBands
 from prlpid_fmi.loop.core import LoopCore
 from prlpid_fmi.loop.env import PidTuningEnv
 from prlpid_fmi.loop.evaluation import constant_gains, gains_rollout, rollout
 from prlpid_fmi.scenario.presets import preset, scenario_path
-from prlpid_fmi.tuning.schedule.table import fixed_schedule, replay_schedule
+from prlpid_fmi.tuning.schedule.table import fixed_schedule
+from prlpid_fmi.tuning.schedule.replay import replay_schedule
 
 ANCHOR = {"first_order": ([7.5], [0.8], [0.01], None),
           "two_tank": ([6.0], [40.0], [0.2], None),

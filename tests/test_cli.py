@@ -15,7 +15,8 @@ from prlpid_fmi.cli import main
 from prlpid_fmi.fmu import FmuPlant, build_fmu
 from prlpid_fmi.scenario.presets import PRESET_NAMES, scenario_path
 from prlpid_fmi.scenario.load import load_scenario
-from prlpid_fmi.tuning.schedule.table import read_schedule_csv, replay_schedule
+from prlpid_fmi.tuning.schedule.csv_file import read_schedule_csv
+from prlpid_fmi.tuning.schedule.replay import replay_schedule
 from test_scenario import MISTAKES, _raw, _write
 
 # A small budget so each end-to-end run takes seconds: short PPO rollouts, a token baseline search.

@@ -17,10 +17,11 @@ import yaml
 from prlpid_fmi import rundir
 from prlpid_fmi.cli import main
 from prlpid_fmi.errors import PrlPidError
-from prlpid_fmi.scenario.presets import SCENARIO_DIR, scenario_path
+from prlpid_fmi.bundled import SCENARIO_DIR
+from prlpid_fmi.scenario.presets import scenario_path
 from prlpid_fmi.progress import Progress, format_duration, stage
-from prlpid_fmi.run.tune import export_schedule
-from prlpid_fmi.tuning.schedule.table import read_schedule_csv
+from prlpid_fmi.run.export import export_schedule
+from prlpid_fmi.tuning.schedule.csv_file import read_schedule_csv
 from test_cli import _small_copy
 
 BUNDLED = sorted(p.stem for p in SCENARIO_DIR.glob("*.yaml"))

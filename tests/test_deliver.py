@@ -2,7 +2,8 @@
 import math
 from types import SimpleNamespace
 
-from prlpid_fmi.deliver.rule import Candidate, choose, verdict
+from prlpid_fmi.deliver.rule import Candidate, choose
+from prlpid_fmi.report.verdict import verdict
 
 
 def metrics(ise, tv=10.0, overshoot=5.0, terminated=False):

@@ -1,6 +1,6 @@
 """The deployed controller as code: C compiled with gcc, ST parsed by blark, PLCopen XML by the TC6 bindings.
 
-Truths used: the Python replay of the same table on the FMU (prlpid_fmi.schedule.replay_schedule: its
+Truths used: the Python replay of the same table on the FMU (prlpid_fmi.tuning.schedule.replay.replay_schedule: its
 pid_output is the controller's command, its measurement and setpoint the controller's inputs; the C
 and ST blocks are driven open loop with those sequences and must reproduce every command to 1e-12),
 Python's math.sqrt (IEEE, correctly rounded) for the C square root, the TC6 2.01 bindings of the
@@ -20,14 +20,17 @@ import numpy as np
 import pytest
 
 from prlpid_fmi import rundir as rd
-from prlpid_fmi.loop.actions import gains_from_values
+from prlpid_fmi.loop.gains import gains_from_values
 from prlpid_fmi.cli import main
-from prlpid_fmi.export.code import controller_name, deployable_files, export_controller, from_schedule, render, st_real
+from prlpid_fmi.export.controller import controller_name, from_schedule
+from prlpid_fmi.run.export import deployable_files, export_controller
+from prlpid_fmi.export.formats import render, st_real
 from prlpid_fmi.errors import PrlPidError
 from prlpid_fmi.scenario.presets import scenario_path
 from prlpid_fmi.scenario.load import load_scenario
-from prlpid_fmi.tuning.schedule.table import (
-    GainSchedule, fixed_schedule, read_schedule_csv, replay_schedule, write_schedule_csv)
+from prlpid_fmi.tuning.schedule.table import GainSchedule, fixed_schedule
+from prlpid_fmi.tuning.schedule.csv_file import read_schedule_csv, write_schedule_csv
+from prlpid_fmi.tuning.schedule.replay import replay_schedule
 
 from st_interpreter import FunctionBlockInstance, parse_block
 
@@ -354,7 +357,7 @@ def test_names_and_refused_tables(deployed, tmp_path):
         from_schedule(dataclasses.replace(table, Ti=-table.Ti), "pid", source="here")
     with pytest.raises(PrlPidError, match=r"Kp\[y\]: row 1 .* \(got nan; expected a finite number\)"):
         from_schedule(dataclasses.replace(table, Kp=table.Kp * np.nan), "pid")
-    with pytest.raises(PrlPidError, match="--name 'if'"):
+    with pytest.raises(PrlPidError, match="^name 'if': not usable"):  # the CLI shows it as --name (ArgumentError)
         from_schedule(table, "if")
     files = render(from_schedule(table, "a_b"), "c", basename="ctl")
     assert list(files) == ["ctl.h", "ctl.c"] and '#include "ctl.h"' in files["ctl.c"]

@@ -3,7 +3,8 @@ import control
 import numpy as np
 import pytest
 
-from prlpid_fmi.tuning.fixed_pid import DETUNE_STEP, detune, operating_point
+from prlpid_fmi.tuning.fixed_pid import DETUNE_STEP, detune
+from prlpid_fmi.robustness.margins import operating_point
 from prlpid_fmi.scenario.presets import preset
 from tests.test_margins import first_order_zoh, pid_by_hand, reference_margins
 

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from prlpid_fmi.control import PID, CoupledPID, RewardWeights
-from prlpid_fmi.loop.forecast.base import FmiForecast, make_forecast
+from prlpid_fmi.loop.forecast.fmi import FmiForecast
+from prlpid_fmi.loop.forecast import make_forecast
 from prlpid_fmi.errors import PlantError
 from prlpid_fmi.fmu import FmuPlant
 from prlpid_fmi.loop.forecast.native import NativeForecast, native_unavailable

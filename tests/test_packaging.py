@@ -77,7 +77,7 @@ def test_wheel_holds_every_module_plant_source_and_scenario(wheel):
     scenarios = {"prlpid_fmi/" + p.relative_to(REPO).as_posix() for p in (REPO / "scenarios").iterdir()
                  if p.suffix in (".yaml", ".json")}  # the scenarios and the JSON Schema editors read
     assert {"prlpid_fmi/plant_sources/common/instance.c", "prlpid_fmi/scenarios/first_order.yaml"} <= plants | scenarios
-    templates = {p.relative_to(REPO).as_posix() for p in (REPO / "prlpid_fmi" / "templates").rglob("*.j2")}
+    templates = {p.relative_to(REPO).as_posix() for p in (REPO / "prlpid_fmi" / "export" / "templates").rglob("*.j2")}
     assert modules <= names and plants <= names and scenarios <= names and templates and templates <= names
     assert not [n for n in names if n.startswith(("fmus/", "tests/")) or n.endswith((".fmu", ".pyc"))]
     version = wheel.name.split("-")[1]
@@ -138,7 +138,7 @@ def test_editable_install_reads_the_checkouts_folders(tmp_path):
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
     env = _clean_env(XDG_CACHE_HOME=str(tmp_path / "cache"))
-    out = _run([python, "-c", "from prlpid_fmi.presets import SCENARIO_DIR; from prlpid_fmi.fmu.build import "
+    out = _run([python, "-c", "from prlpid_fmi.bundled import SCENARIO_DIR; from prlpid_fmi.fmu.build import "
                               "PLANT_SOURCES; print(SCENARIO_DIR); print(PLANT_SOURCES)"], cwd=elsewhere, env=env)
     assert out.stdout.split() == [str(src / "scenarios"), str(src / "plant_sources")]
     proc = _run([tmp_path / "venv" / "bin" / "prlpid-fmi", "validate", "two_tank"], cwd=elsewhere, env=env)

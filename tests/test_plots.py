@@ -19,7 +19,7 @@ from prlpid_fmi.report.plots import (
     control_signal_figure, gain_axis_limits, gains_figure, load_monitor_csvs, plot_control_signal, plot_gains,
     plot_learning_curve, plot_response, response_figure)
 from prlpid_fmi.scenario.presets import preset
-from prlpid_fmi.run.tune import trajectory_csv
+from prlpid_fmi.run.gains_csv import trajectory_csv
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 SISO = dataclasses.replace(preset("first_order"), setpoint_schedule=((0, (0.5,)), (60, (-0.5,))), episode_steps=120)

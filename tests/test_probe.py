@@ -20,8 +20,10 @@ from prlpid_fmi.cli import main
 from prlpid_fmi.loop.evaluation import evaluate_gains
 from prlpid_fmi.fmu import build_fmu
 from prlpid_fmi.fmu.build import bundled_fmu
-from prlpid_fmi.probe.step_test import probe, propose_loop
-from prlpid_fmi.scenario.load import init_scenario, load_scenario
+from prlpid_fmi.probe.step_test import probe
+from prlpid_fmi.probe.proposal import propose_loop
+from prlpid_fmi.scenario.draft import init_scenario
+from prlpid_fmi.scenario.load import load_scenario
 
 PLANTS = Path(__file__).parent / "plants"
 

@@ -13,7 +13,8 @@ from prlpid_fmi.errors import ScenarioError
 from prlpid_fmi.fmu import bundled_fmu
 from prlpid_fmi.scenario.presets import PRESET_NAMES, preset
 from prlpid_fmi.scenario.load import (
-    ALGORITHMS, EvaluationConfig, Scenario, init_scenario, load_scenario, scenario_to_dict, validate_scenario)
+    ALGORITHMS, EvaluationConfig, Scenario, load_scenario, scenario_to_dict, validate_scenario)
+from prlpid_fmi.scenario.draft import init_scenario
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 EXPERIMENTS = sorted(p.stem for p in SCENARIOS.glob("*.yaml") if p.stem != "template")

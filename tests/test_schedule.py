@@ -14,9 +14,10 @@ from prlpid_fmi import __version__
 from prlpid_fmi.errors import PrlPidError
 from prlpid_fmi.loop.evaluation import evaluate
 from prlpid_fmi.scenario.presets import preset
-from prlpid_fmi.tuning.schedule.table import (
-    INTERPOLATION, PID_EQUATION, GainSchedule, extract_schedule, read_schedule_csv, read_schedule_metadata,
-    replay_schedule, write_schedule_csv)
+from prlpid_fmi.tuning.schedule.table import INTERPOLATION, PID_EQUATION, GainSchedule
+from prlpid_fmi.tuning.schedule.extraction import extract_schedule
+from prlpid_fmi.tuning.schedule.csv_file import read_schedule_csv, read_schedule_metadata, write_schedule_csv
+from prlpid_fmi.tuning.schedule.replay import replay_schedule
 
 # first_order: Kp in [0.5, 30] log, Ti in [0.2, 20] log, Td in [0, 0.2] linear; setpoints in [-1, 1]
 CONFIG = dataclasses.replace(preset("first_order"), smoothing="none",

@@ -22,7 +22,8 @@ from prlpid_fmi.fmu import bundled_fmu
 from prlpid_fmi.schema import (AgentModel, BaselineModel, DeployModel, ScenarioModel, json_schema, json_schema_text,
                                model as m)
 from prlpid_fmi.schema.document import load_yaml
-from prlpid_fmi.scenario.load import init_scenario, load_scenario, scenario_to_dict
+from prlpid_fmi.scenario.draft import init_scenario
+from prlpid_fmi.scenario.load import load_scenario, scenario_to_dict
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ROOT / "scenarios"

@@ -19,7 +19,7 @@ from pathlib import Path
 import pytest
 
 from prlpid_fmi.cli import main
-from prlpid_fmi.deliver.rule import overall_metric
+from prlpid_fmi.metrics import overall_metric
 from prlpid_fmi.errors import PrlPidError
 from prlpid_fmi.scenario.load import load_scenario
 from prlpid_fmi.sweep import bundled_sweep_names, load_sweep, resolve_sweep, run_sweep, trial_status

@@ -139,7 +139,7 @@ def test_the_largest_allowed_seed_with_every_offset_still_seeds_numpy_and_sb3():
     from stable_baselines3.common.utils import set_random_seed
 
     from prlpid_fmi.schema.types import MAX_SEED
-    from prlpid_fmi.tuning.schedule.trajectories import HOLDOUT_SEED_OFFSET
+    from prlpid_fmi.deliver.evidence import HOLDOUT_SEED_OFFSET
 
     set_random_seed(MAX_SEED + HOLDOUT_SEED_OFFSET + 1000)  # must not raise
     with pytest.raises(ValueError):

@@ -12,16 +12,20 @@ import math
 import numpy as np
 import pytest
 
-from prlpid_fmi.deliver.evidence import assess_schedule, range_points, robust_schedule
-from prlpid_fmi.tuning.fixed_pid import margins_of
+from prlpid_fmi.deliver.evidence import assess_schedule, range_points
+from prlpid_fmi.deliver.candidates import robust_schedule
+from prlpid_fmi.robustness.margins import margins_of
 from prlpid_fmi.errors import PrlPidError
 from prlpid_fmi.scenario.presets import preset, scenario_path
 from prlpid_fmi.scenario.load import load_scenario, scenario_to_yaml
-from prlpid_fmi.tuning.schedule.table import (
-    GainSchedule, extract_schedule, read_schedule_csv, read_schedule_metadata, replay_schedule, schedule_from_rows,
-    write_schedule_csv)
-from prlpid_fmi.tuning.schedule.trajectories import (
-    bin_rows, deliverable_schedule, extract, trajectory_schedule, training_ise)
+from prlpid_fmi.tuning.schedule.table import GainSchedule, schedule_from_rows
+from prlpid_fmi.tuning.schedule.extraction import extract_schedule
+from prlpid_fmi.tuning.schedule.csv_file import read_schedule_csv, read_schedule_metadata, write_schedule_csv
+from prlpid_fmi.tuning.schedule.replay import replay_schedule
+from prlpid_fmi.tuning.schedule.trajectories import bin_rows, trajectory_schedule
+from prlpid_fmi.deliver.candidates import deliverable_schedule
+from prlpid_fmi.tuning.schedule.extraction import extract
+from prlpid_fmi.tuning.schedule.replay import training_ise
 
 TS = 0.1
 # first_order, 1/(s - 1): Kp in [0.5, 30] log, Ti in [0.2, 20] log, Td in [0, 0.2] linear; u in [-10, 10]
@@ -228,7 +232,7 @@ def test_a_row_whose_margins_cannot_be_judged_is_not_detuned(monkeypatch):
     # 1/(s - a(t)), a(t) = 0.5 + 0.25 (sin(0.2 pi t) + 1): no frequency response exists, so the multisine
     # estimate is finite but flagged unreliable; the deliverable's rule (deliver.meets) cannot judge it, so
     # robust_schedule measures the row once per operating point and spends no detuning scan on it.
-    import prlpid_fmi.deliver.evidence as assess
+    import prlpid_fmi.deliver.candidates as assess
     import prlpid_fmi.tuning.fixed_pid as baseline
     from prlpid_fmi.deliver.rule import counts
 

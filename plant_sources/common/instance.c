@@ -39,7 +39,7 @@ static void set_start_values(Instance *c) {
 
 Instance *instance_new(const char *name, LogFunction log, void *log_env) {
     Instance *c;
-    if (!fault_may_instantiate()) {
+    if (!prlpid_fault_may_instantiate()) {
         if (log) log(log_env, name, STATUS_ERROR, "only one instance of this FMU per process");
         return NULL;
     }
@@ -52,20 +52,20 @@ Instance *instance_new(const char *name, LogFunction log, void *log_env) {
     c->log_env = log_env;
     c->mode = MODE_INSTANTIATED;
     set_start_values(c);
-    fault_count_instance(1);
+    prlpid_fault_count_instance(1);
     return c;
 }
 
 void instance_free(Instance *c) {
     if (!c) return;
-    fault_on_free(c);
-    fault_count_instance(-1);
+    prlpid_fault_on_free(c);
+    prlpid_fault_count_instance(-1);
     free(c->name);
     free(c);
 }
 
 void instance_reset(Instance *c) {
-    fault_on_reset(c);
+    prlpid_fault_on_reset(c);
     set_start_values(c);
     c->mode = MODE_INSTANTIATED;
 }
@@ -134,7 +134,7 @@ Status instance_do_step(Instance *c, double t, double h) {
         instance_log(c, STATUS_ERROR, "communicationStepSize must be positive and finite, got %g", h);
         return STATUS_ERROR;
     }
-    if (fault_before_step(c, t) != STATUS_OK) return STATUS_DISCARD;
+    if (prlpid_fault_before_step(c, t) != STATUS_OK) return STATUS_DISCARD;
     n = (long)ceil(h / c->m.v[VR_fixed_step] - 1e-9);
     if (n < 1) n = 1;
     dt = h / (double)n;
@@ -150,7 +150,7 @@ Status instance_do_step(Instance *c, double t, double h) {
     memcpy(c->m.x, x, sizeof(x));
     c->m.time = t + h;
     model_outputs(&c->m);
-    fault_after_step(c);
+    prlpid_fault_after_step(c);
     return STATUS_OK;
 }
 
@@ -206,7 +206,7 @@ void instance_copy_state(const Instance *from, Instance *to) {
 
 Status instance_get_state(Instance *c, void **state) {
     Snapshot *s = (Snapshot *)*state;
-    if (fault_state_refused(c, 0) != STATUS_OK) return STATUS_ERROR;
+    if (prlpid_fault_state_refused(c, 0) != STATUS_OK) return STATUS_ERROR;
     if (!s) { /* otherwise overwrite a state returned earlier */
         s = (Snapshot *)malloc(sizeof(Snapshot));
         if (!s) {
@@ -222,7 +222,7 @@ Status instance_get_state(Instance *c, void **state) {
 
 Status instance_set_state(Instance *c, const void *state) {
     const Snapshot *s = (const Snapshot *)state;
-    if (fault_state_refused(c, 0) != STATUS_OK) return STATUS_ERROR;
+    if (prlpid_fault_state_refused(c, 0) != STATUS_OK) return STATUS_ERROR;
     if (!s) {
         instance_log(c, STATUS_ERROR, "the FMU state is NULL");
         return STATUS_ERROR;
@@ -245,7 +245,7 @@ size_t instance_serialized_state_size(void) {
 
 Status instance_serialize_state(Instance *c, const void *state, unsigned char *buffer, size_t size) {
     SerialHeader header;
-    if (fault_state_refused(c, 1) != STATUS_OK) return STATUS_ERROR;
+    if (prlpid_fault_state_refused(c, 1) != STATUS_OK) return STATUS_ERROR;
     if (!state || size < instance_serialized_state_size()) {
         instance_log(c, STATUS_ERROR, "buffer too small for the serialized state");
         return STATUS_ERROR;
@@ -262,7 +262,7 @@ Status instance_serialize_state(Instance *c, const void *state, unsigned char *b
 
 Status instance_deserialize_state(Instance *c, const unsigned char *buffer, size_t size, void **state) {
     SerialHeader header;
-    if (fault_state_refused(c, 1) != STATUS_OK) return STATUS_ERROR;
+    if (prlpid_fault_state_refused(c, 1) != STATUS_OK) return STATUS_ERROR;
     if (size != instance_serialized_state_size()) {
         instance_log(c, STATUS_ERROR, "serialized state has %lu bytes, expected %lu",
                      (unsigned long)size, (unsigned long)instance_serialized_state_size());

@@ -18,7 +18,7 @@ typedef struct {
     LogFunction log;
     void *log_env;
 #ifdef PRLPID_FAULT_RESET_LEAK_BYTES
-    void *fault_leak; /* test builds only: blocks the leaking reset allocated (faults.h) */
+    void *fault_leak; /* test builds only: blocks the leaking reset allocated (faults.c) */
 #endif
 } Instance;
 

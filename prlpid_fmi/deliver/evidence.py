@@ -1,9 +1,9 @@
-"""Assess the deployable controllers of a run and pick one (rule: prlpid_fmi.deliver).
+"""The evidence on both deployable controllers of a run, and the decision (rule: prlpid_fmi.deliver.rule).
 
 The gain schedule is replayed as a plain PID (no neural network) and the fixed PID runs with exactly
 the gains the search returned, both on the evaluation schedule and on the Monte-Carlo set
 (evaluation.randomize_samples episodes with parameters drawn from evaluation.randomize, seeds
-evaluation.seed + 1, + 2, ...). Robustness margins (prlpid_fmi.margins) are measured at every
+evaluation.seed + 1, + 2, ...). Robustness margins (prlpid_fmi.robustness.margins) are measured at every
 breakpoint of a setpoint schedule; for every row of an error schedule (and its gains at error 0) at
 the low end, middle and high end of the setpoint range (range_points); and at the middle of the
 setpoint range for the fixed PID and any other table.
@@ -14,13 +14,12 @@ import dataclasses
 import math
 import warnings
 
-import numpy as np
-
-from prlpid_fmi.loop.actions import Gains
-from prlpid_fmi.tuning.fixed_pid import margins_of, operating_point
-from prlpid_fmi.deliver.rule import Candidate, Decision, choose, meets
+from prlpid_fmi.deliver.rule import Candidate, Decision, choose
 from prlpid_fmi.loop.evaluation import constant_gains, evaluate_gains
-from prlpid_fmi.tuning.schedule.table import LOOP_VARIABLE, GainSchedule, fixed_schedule, replay_schedule
+from prlpid_fmi.loop.gains import Gains
+from prlpid_fmi.robustness.margins import margins_of, operating_point
+from prlpid_fmi.tuning.schedule.replay import replay_schedule
+from prlpid_fmi.tuning.schedule.table import LOOP_VARIABLE, GainSchedule, fixed_schedule
 
 
 def _margins_at(config, gains, points: list[list[float]]) -> list:
@@ -69,7 +68,7 @@ def assess_schedule(scenario, schedule: GainSchedule) -> Candidate:
 
     loop = error_loop(schedule)
     if loop is not None:  # every row, and the steady-state gains (error 0), at every operating point
-        rows = [_row(schedule, j) for j in range(len(schedule.breakpoints))] + [gains([0.0])]
+        rows = [schedule.row(j) for j in range(len(schedule.breakpoints))] + [gains([0.0])]
         pairs = [(row, point) for row in rows for point in range_points(scenario.tuning, loop)]
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -101,62 +100,23 @@ def range_points(config, loop: int) -> list[list[float]]:
     return points
 
 
-def _row(schedule: GainSchedule, j: int) -> tuple:
-    """Row j as (Kp, Ti, Td, coupling) lists."""
-    return (schedule.Kp[j].tolist(), schedule.Ti[j].tolist(), schedule.Td[j].tolist(),
-            None if schedule.coupling is None else schedule.coupling[j].tolist())
 
 
-def robust_schedule(schedule: GainSchedule, config, limit: float) -> tuple[GainSchedule, list[str]]:
-    """The schedule with every row whose Ms exceeds `limit` detuned (baseline.detune) until it meets it.
-
-    The agent's reward does not see robustness, so the gains it settles on can leave the Ms limit that
-    the fixed PID it started from meets; this keeps the adaptation pattern of every row and restores the
-    margin. A row is detuned only where the deliverable's rule (deliver.meets) rejects it: a finite but
-    unreliable estimate (a time-varying or nonlinear plant) cannot be judged, so it neither justifies a
-    detune nor can confirm one. Rows that cannot be detuned to the limit stay as they are (the deliverable
-    then refuses the schedule). Returns (schedule, one note per detuned row). Setpoint tables: each row
-    at its own setpoint. Error tables: each row at every point of range_points, detuned at its worst
-    failing point until it meets the limit at all of them. Other variables: unchanged.
-    """
-    from prlpid_fmi.tuning.fixed_pid import detune
-
-    loop = error_loop(schedule)
-    if not schedule.variable.startswith("setpoint") and loop is None:
-        return schedule, []
-    Kp, Ti, notes = schedule.Kp.copy(), schedule.Ti.copy(), []
-    for j, b in enumerate(schedule.breakpoints):
-        points = [operating_point(config, b)] if loop is None else range_points(config, loop)
-        row, first = _row(schedule, j), None
-        for _ in points:  # each pass detunes at the worst failing point; that usually settles the others too
-            failing = [(m.Ms, p) for m, p in ((margins_of(config, row, p), p) for p in points) if not meets(m, limit)]
-            if not failing:
-                break
-            ms, point = max(failing, key=lambda x: x[0])
-            first = ms if first is None else first
-            fixed = detune(config, row, point, limit)
-            if fixed is None:
-                break
-            row = (list(fixed[0]), list(fixed[1]), row[2], row[3])
-        if row[0] != schedule.Kp[j].tolist() or row[1] != schedule.Ti[j].tolist():
-            Kp[j], Ti[j] = row[0], row[1]
-            notes.append(f"row {b:g}: Ms {first:.2f} > {limit:g}, detuned to Kp {np.round(Kp[j], 4).tolist()}, "
-                         f"Ti {np.round(Ti[j], 4).tolist()}")
-    return dataclasses.replace(schedule, Kp=Kp, Ti=Ti), notes
 
 
 def holdout_ise(scenario, schedule: GainSchedule, seed: int) -> float:
     """ISE summed over HOLDOUT_EPISODES seeded episodes of the training distribution (scenario.tuning: its random
     setpoints, noise, disturbances, randomisation), replayed as a plain PID; infinity when one diverges. The
     seeds are disjoint from those the table was built and chosen on, and from the evaluation's."""
-    from prlpid_fmi.tuning.schedule.trajectories import HOLDOUT_EPISODES, HOLDOUT_SEED_OFFSET, training_ise
+    from prlpid_fmi.deliver.evidence import HOLDOUT_EPISODES, HOLDOUT_SEED_OFFSET
+    from prlpid_fmi.tuning.schedule.replay import training_ise
 
     return training_ise(schedule, scenario.tuning, seed, episodes=HOLDOUT_EPISODES, offset=HOLDOUT_SEED_OFFSET)
 
 
 def assess(scenario, schedule: GainSchedule | None, fixed_gains: Gains,
            seed: int | None = None) -> tuple[Decision, Candidate | None, Candidate]:
-    """Evidence for both controllers and the decision (deliver.choose) with deploy.max_sensitivity.
+    """Evidence for both controllers and the decision (deliver.rule.choose) with deploy.max_sensitivity.
 
     seed: of the held-out training-distribution episodes (holdout_ise); None = scenario.agent.seed."""
     seed = scenario.agent.seed if seed is None else seed
@@ -183,3 +143,9 @@ def candidate_summary(c: Candidate) -> dict:
             "worst_Ms": c.worst_Ms if math.isfinite(c.worst_Ms) else None,
             "holdout_ise": None if math.isnan(c.holdout_ise) else c.holdout_ise if math.isfinite(c.holdout_ise)
             else "inf"}
+
+
+HOLDOUT_EPISODES = 8  # further episodes the deliverable rule compares the schedule and the fixed PID on
+
+
+HOLDOUT_SEED_OFFSET = 30_000

@@ -14,8 +14,34 @@ Rule (one place; explained in docs/architecture.md "Deliverable"):
 """
 from __future__ import annotations
 
+import enum
 import math
 from dataclasses import dataclass, field
+
+from prlpid_fmi.metrics import overall_metric
+
+
+class Deployed(str, enum.Enum):
+    """What a run deploys. The value is the word metrics.json, schedule.csv's report and the sweep tables write."""
+
+    SCHEDULE = "gain schedule"
+    FIXED_PID = "fixed PID"
+    NONE = "none"
+
+    def __str__(self) -> str:
+        return self.value
+
+    def __format__(self, spec: str) -> str:
+        return format(self.value, spec)
+
+    @classmethod
+    def read(cls, word) -> "Deployed | None":
+        """The member a metrics.json value names (None for a missing or unknown word)."""
+        try:
+            return cls(word)
+        except ValueError:
+            return None
+
 
 TOTAL_VARIATION_LIMIT = 1.5
 MIN_IMPROVEMENT = 0.01  # the schedule's score must be at most (1 - this) x the fixed PID's
@@ -26,7 +52,7 @@ class Candidate:
     """One deployable controller's evidence.
 
     name: "gain schedule" | "fixed PID". metrics: evaluation metrics (compute_metrics + "terminated").
-    monte_carlo: metrics of each Monte-Carlo sample. margins: prlpid_fmi.margins.Margins per operating
+    monte_carlo: metrics of each Monte-Carlo sample. margins: prlpid_fmi.robustness.margins.Margins per operating
     point (one for the fixed PID), with `breakpoints` the matching operating points.
     """
 
@@ -98,9 +124,9 @@ def meets(m, limit: float) -> bool:
 
 @dataclass(frozen=True)
 class Decision:
-    """deploy: "gain schedule" | "fixed PID" | "none"; reasons: why, one sentence each."""
+    """deploy: what is deployed; reasons: why, one sentence each."""
 
-    deploy: str
+    deploy: Deployed
     reasons: tuple[str, ...]
 
 
@@ -123,73 +149,23 @@ def choose(schedule: Candidate | None, fixed: Candidate, max_sensitivity: float)
                                 + ("it diverged" if math.isinf(h_s) else
                                    f"its ISE is {h_s:.4g} against the fixed PID's {h_f:.4g}"))
         if not problems:
-            return Decision("gain schedule", (f"it beats the fixed PID on ISE ({schedule.score:.4g} vs "
+            return Decision(Deployed.SCHEDULE, (f"it beats the fixed PID on ISE ({schedule.score:.4g} vs "
                                               f"{fixed.score:.4g}) within the robustness and effort limits",))
         reasons += [f"The gain schedule is not deployed: {p}." for p in problems]
     problems = fixed.problems(max_sensitivity)
     if not problems:
-        return Decision("fixed PID", tuple(reasons))
+        return Decision(Deployed.FIXED_PID, tuple(reasons))
     reasons += [f"The fixed PID is not deployable either: {p}." for p in problems]
-    return Decision("none", tuple(reasons))
+    return Decision(Deployed.NONE, tuple(reasons))
 
 
-def overall_metric(overall: dict, key: str) -> float:
-    """`key` from compute_metrics' overall dict: plain for one loop; "key[loop]" summed (integral
-    metrics) or maximised (step metrics) over loops for several."""
-    if key in overall:
-        return float(overall[key])
-    values = [float(v) for k, v in overall.items() if k.startswith(key + "[")]
-    if not values:
-        return math.nan
-    return sum(values) if key in ("ISE", "IAE", "ITAE", "ControlEffort", "TotalVariation") else max(values)
 
 
 def _total_variation(c: Candidate) -> float:
     return c.overall("TotalVariation")
 
 
-def _ms(c: Candidate) -> str:
-    return "not verified" if math.isnan(c.worst_Ms) else f"{c.worst_Ms:.2f}"
 
 
-def _ratio(a: float, b: float) -> str:
-    return f"{a / b:.2f}x" if b and math.isfinite(a) and math.isfinite(b) else "n/a"
 
 
-def verdict(decision: Decision, schedule: Candidate | None, fixed: Candidate, max_sensitivity: float,
-            gain_mapping: str = "anchored") -> str:
-    """The report's opening paragraph, in words (markdown); gain_mapping: the run's controller.gain_mapping."""
-    lines = ["## Verdict", ""]
-    if decision.deploy == "gain schedule":
-        s, f = schedule, fixed
-        if math.isfinite(s.overall("Overshoot")) and f.overall("Overshoot") > 0:
-            shape = f"its overshoot {_ratio(s.overall('Overshoot'), f.overall('Overshoot'))}"
-        elif math.isfinite(s.overall("Overshoot")):  # the fixed PID does not overshoot: no ratio
-            shape = f"its overshoot {s.overall('Overshoot'):.2g} % (fixed PID {f.overall('Overshoot'):.2g} %)"
-        else:  # no setpoint step: disturbance rejection
-            shape = f"its peak deviation {_ratio(s.overall('PeakDeviation'), f.overall('PeakDeviation'))}"
-        lines.append(f"**Deploy the adaptive gain schedule** (schedule.csv, a plain gain-scheduled PID; no neural "
-                     f"network). On the evaluation its ISE is {_ratio(s.overall('ISE'), f.overall('ISE'))} the fixed "
-                     f"PID's, {shape}, and its worst Ms {_ms(s)} (fixed PID {_ms(f)}; limit "
-                     f"{max_sensitivity:g}). Ratios are gain schedule ÷ fixed PID; lower is better.")
-    elif decision.deploy == "fixed PID":
-        lines.append(f"**Deploy the fixed PID** (schedule.csv holds it as a one-row table; also fixed_pid.csv). "
-                     f"Its worst Ms is {_ms(fixed)} (limit {max_sensitivity:g}).")
-        if schedule is not None:
-            the_map = ("wider controller.anchor_bands" if gain_mapping == "anchored" else
-                       "the anchored gain map (controller.gain_mapping: anchored, which starts training at the fixed "
-                       "PID)")
-            lines.append(f"The adaptive schedule was not deployed (why: below). To try: a longer training budget "
-                         f"(--timesteps), {the_map}, or training.randomize over the parameters that vary in your "
-                         "plant.")
-    else:
-        lines.append(f"**Nothing here is safe to deploy**: no controller meets the robustness limit Ms <= "
-                     f"{max_sensitivity:g} without diverging. Narrow the gain ranges, lower the sample time, or "
-                     "check the plant's limits and operating range.")
-    unverified = [c.name for c in (schedule, fixed) if c is not None and c.unverified]
-    if unverified:
-        lines.append(f"Robustness could not be verified for: {', '.join(unverified)} (the frequency-response "
-                     "estimate on the FMU was unreliable, e.g. a time-varying or strongly nonlinear plant); "
-                     "the choice rests on the evaluation alone.")
-    lines += [""] + [f"- {r}" for r in decision.reasons]
-    return "\n".join(lines) + "\n"

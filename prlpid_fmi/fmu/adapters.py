@@ -130,8 +130,14 @@ class Fmi2Adapter(FmiAdapter):
     def instantiate(cls, description, unzipdir: str, instance_name: str, sink) -> "Fmi2Adapter":
         """Instantiate with a logger that stores each message as `sink.last_message`."""
         import fmpy.fmi2
-        from fmpy.fmi2 import calloc, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE
-        from fmpy.fmi2 import fmi2CallbackFunctions, fmi2CallbackLoggerTYPE, free
+        from fmpy.fmi2 import (
+            calloc,
+            fmi2CallbackAllocateMemoryTYPE,
+            fmi2CallbackFreeMemoryTYPE,
+            fmi2CallbackFunctions,
+            fmi2CallbackLoggerTYPE,
+            free,
+        )
         from fmpy.logging import addLoggerProxy
 
         callbacks = fmi2CallbackFunctions()
@@ -311,8 +317,15 @@ class Fmi1Adapter(Fmi2Adapter):
     @classmethod
     def instantiate(cls, description, unzipdir: str, instance_name: str, sink) -> "Fmi1Adapter":
         """Instantiate with a logger that stores each message as `sink.last_message`."""
-        from fmpy.fmi1 import FMU1Slave, calloc, fmi1CallbackAllocateMemoryTYPE, fmi1CallbackFreeMemoryTYPE
-        from fmpy.fmi1 import fmi1CallbackFunctions, fmi1CallbackLoggerTYPE, free
+        from fmpy.fmi1 import (
+            FMU1Slave,
+            calloc,
+            fmi1CallbackAllocateMemoryTYPE,
+            fmi1CallbackFreeMemoryTYPE,
+            fmi1CallbackFunctions,
+            fmi1CallbackLoggerTYPE,
+            free,
+        )
         from fmpy.fmi2 import fmi2CallbackLoggerTYPE
         from fmpy.logging import addLoggerProxy
 

@@ -33,11 +33,11 @@ from xml.etree import ElementTree as ET
 import yaml
 
 from prlpid_fmi.bundled import data_dir, fmu_cache_dir
-from prlpid_fmi.errors import PlantError
+from prlpid_fmi.errors import ArgumentError, PlantError
 from prlpid_fmi.rundir import write_atomic
 
 PLANT_SOURCES = data_dir("plant_sources")
-COMMON_SOURCES = ("plant_model.h", "instance.h", "instance.c", "faults.h", "forecast.h", "forecast.c")
+COMMON_SOURCES = ("plant_model.h", "instance.h", "instance.c", "faults.h", "faults.c", "forecast.h", "forecast.c")
 API_SOURCE = {1: "fmi1_api.c", 2: "fmi2_api.c", 3: "fmi3_api.c"}
 INTERFACES = ("co-simulation", "model-exchange")
 DEFAULT_FMI_VERSION = 2
@@ -368,7 +368,7 @@ def build_fmu(name: str, fmi_version: int = DEFAULT_FMI_VERSION, out_dir: Path |
 def _build(name: str, fmi_version: int, out_dir: Path | None, source_dir: Path | None,
            defines: dict | None = None, capabilities: dict | None = None, interface: str = "co-simulation") -> Path:
     if fmi_version not in API_SOURCE:
-        raise PlantError(f"--fmi-version must be 1, 2 or 3, got {fmi_version!r}")
+        raise ArgumentError(f"{{fmi_version}} must be 1, 2 or 3, got {fmi_version!r}")
     if interface not in INTERFACES or (interface == "model-exchange" and fmi_version != 2):
         raise PlantError(f"interface must be one of {', '.join(INTERFACES)} (model exchange with FMI 2.0 only), "
                          f"got {interface!r} with FMI {fmi_version}.0")

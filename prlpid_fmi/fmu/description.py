@@ -57,6 +57,11 @@ class FmuDescription:
                 return v
         return None
 
+    def unit_of(self, name: str) -> str:
+        """The declared unit of variable `name` ("" when the variable is unknown or has no unit)."""
+        v = self.variable(name)
+        return (v.unit or "") if v is not None else ""
+
     def _names(self, causality: str) -> tuple[str, ...]:
         return tuple(v.name for v in self.variables if v.causality == causality and v.scalar_real)
 

@@ -1,6 +1,6 @@
 """`prlpid-fmi inspect --probe`: dynamic checks of an FMU that a modelDescription validator cannot make.
 
-Each check runs in its own worker process (prlpid_fmi.isolation), so an FMU that crashes gets a
+Each check runs in its own worker process (prlpid_fmi.loop.isolated), so an FMU that crashes gets a
 verdict instead of ending the tool. The FMU is driven through its real inputs with a fixed, gently
 varying input sequence u_k = start + amplitude * sin(0.7 k) (amplitude 0.1 * max(1, |start|)) at
 its default step size (else 0.1 s); outputs are compared bit for bit (NaN equals NaN):
@@ -183,7 +183,7 @@ CHECKS = (check_state, check_instances, check_reset, check_memory)
 
 def dynamic_check(path: str | Path) -> list[Finding]:
     """Every check, each in a worker process; a check whose worker dies is a FAIL naming how."""
-    from prlpid_fmi.loop.isolated import WorkerCrashed, call_in_worker
+    from prlpid_fmi.fmu.worker import WorkerCrashed, call_in_worker
 
     path = Path(path)
     describe_fmu(path)  # a PlantError for a file that is no FMU, before any worker starts

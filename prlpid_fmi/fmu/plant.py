@@ -26,7 +26,7 @@ _EXTRACTED: dict[tuple[str, float], str] = {}
 STATUS_LABELS = ("ok", "warning", "discard", "error", "fatal", "pending")
 
 
-def _extract(path: Path) -> str:
+def extracted_folder(path: Path) -> str:
     """Extract an FMU once per (path, mtime); directories are removed at interpreter exit."""
     from fmpy import extract
 
@@ -36,6 +36,17 @@ def _extract(path: Path) -> str:
         atexit.register(shutil.rmtree, unzipdir, True)
         _EXTRACTED[key] = unzipdir
     return _EXTRACTED[key]
+
+
+def extracted_folders(paths) -> dict:
+    """{(path, mtime): folder} of these FMUs, extracted here once (a worker process reuses the folders through
+    reuse_extracted; this process removes them at exit)."""
+    return {(str(Path(p).resolve()), Path(p).stat().st_mtime): extracted_folder(Path(p)) for p in paths}
+
+
+def reuse_extracted(folders: dict) -> None:
+    """Use folders another process extracted (extracted_folders) instead of extracting the FMUs again."""
+    _EXTRACTED.update(folders)
 
 
 def rss_bytes() -> int | None:
@@ -113,7 +124,7 @@ class FmuPlant:
 
     def _instantiate(self, instance_name: str) -> None:
         d = self.description
-        unzipdir = _extract(self.path)
+        unzipdir = extracted_folder(self.path)
         try:
             self._fmi = adapter_class(d.fmi_version, d.co_simulation).instantiate(d, unzipdir, instance_name, self)
         except Exception as exc:  # a broken binary or a platform without one
@@ -122,6 +133,10 @@ class FmuPlant:
         self._set_inputs = fmi.real_setter(self._in_vr, self._in_val, len(self.inputs))
         self._get_outputs = fmi.real_getter(self._out_vr, self._out_val, len(self.outputs))
         self._do_step = fmi.stepper(self.sample_time_s)
+
+    def value_reference(self, name: str) -> int:
+        """The FMI value reference of variable `name` (KeyError for a name the FMU does not have)."""
+        return self._vr_by_name[name]
 
     @property
     def library(self) -> ctypes.CDLL:

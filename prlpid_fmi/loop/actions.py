@@ -18,49 +18,20 @@ result is clipped into the loop's gain range::
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import math
 
 import numpy as np
 
 from prlpid_fmi.config import GainRange, LoopConfig
+from prlpid_fmi.loop.gains import Gains, gains_from_values, split_values
 
 PID_PARAMETERS = ("Kp", "Ti", "Td")
 
 
-@dataclass(frozen=True)
-class Gains:
-    """PID parameters for every loop: Kp, Ti (s), Td (s) of shape (n_loops,); coupling (6,) or None."""
-
-    Kp: np.ndarray
-    Ti: np.ndarray
-    Td: np.ndarray
-    coupling: np.ndarray | None = None
-
-    def as_dict(self) -> dict[str, np.ndarray]:
-        d = {"Kp": self.Kp.copy(), "Ti": self.Ti.copy(), "Td": self.Td.copy()}
-        if self.coupling is not None:
-            d["coupling"] = self.coupling.copy()
-        return d
 
 
-def gains_from_values(Kp: list, Ti: list, Td: list, coupling: list | None = None) -> Gains:
-    """Gains (numpy arrays) from per-loop lists."""
-    return Gains(np.array(Kp, float), np.array(Ti, float), np.array(Td, float),
-                 None if coupling is None else np.array(coupling, float))
 
 
-def _split(values: list, n: int, coupled: bool) -> tuple[list, list, list, list | None]:
-    return values[0:3 * n:3], values[1:3 * n:3], values[2:3 * n:3], (values[3 * n:] if coupled else None)
-
-
-def map_range(a: np.ndarray, r: GainRange) -> np.ndarray:
-    """Map a in [-1, 1] into r (clipped to the range)."""
-    frac = (np.clip(a, -1.0, 1.0) + 1.0) / 2.0
-    if r.scale == "log":
-        return np.exp(np.log(r.low) + frac * (np.log(r.high) - np.log(r.low)))
-    return r.low + frac * (r.high - r.low)
 
 
 class ActionMap:
@@ -88,7 +59,7 @@ class ActionMap:
             a = -1.0 if a < -1.0 else 1.0 if a > 1.0 else a
             frac = (a + 1.0) / 2.0
             out.append(math.exp(base + frac * span) if is_log else base + frac * span)
-        return _split(out, len(self.loops), self.coupled)
+        return split_values(out, len(self.loops), self.coupled)
 
     def names(self, loop_names: list[str]) -> list[str]:
         """Column names of the mapped parameters, e.g. Kp[y], Ti[y], Td[y], c_rp, ..."""
@@ -131,4 +102,4 @@ class AnchoredActionMap(ActionMap):
             a = -1.0 if a < -1.0 else 1.0 if a > 1.0 else a
             g = value * math.exp(a * band) if multiplicative else value + a * band
             out.append(low if g < low else high if g > high else g)
-        return _split(out, len(self.loops), self.coupled)
+        return split_values(out, len(self.loops), self.coupled)

@@ -23,10 +23,11 @@ from pathlib import Path
 import numpy as np
 
 from prlpid_fmi.config import TuningConfig
-from prlpid_fmi.control import CoupledPID, PID
+from prlpid_fmi.control import PID, CoupledPID
 from prlpid_fmi.control.reward import mean_loop_reward
 from prlpid_fmi.errors import PlantError
-from prlpid_fmi.fmu import FmuPlant, StepRejected, bundled_fmu, bundled_plant_names
+from prlpid_fmi.fmu import FmuPlant, StepRejected
+from prlpid_fmi.fmu.resolve import resolve_fmu
 
 
 @dataclass(frozen=True)
@@ -53,16 +54,6 @@ class Termination:
         return self.kind != "diverged"
 
 
-def resolve_fmu(fmu: str, fmi_version: int = 2) -> Path:
-    """A bundled plant's name -> its (freshly built if needed) FMU; otherwise the path itself."""
-    if fmu in bundled_plant_names():
-        return bundled_fmu(fmu, fmi_version)
-    path = Path(fmu)
-    if not path.is_file():
-        from prlpid_fmi.fmu.description import missing_fmu_text
-        raise PlantError(f"{fmu}: {missing_fmu_text(path)} (and not a bundled plant: "
-                         f"{', '.join(bundled_plant_names())})")
-    return path
 
 
 def control_scales(config: TuningConfig) -> list[float]:
@@ -86,7 +77,44 @@ def randomized_parameters(config: TuningConfig) -> list[tuple[str, float, float]
     return [(name, float(lo), float(hi)) for name, lo, hi in spec]
 
 
-class LoopCore:
+def make_pid(config: TuningConfig) -> PID | CoupledPID:
+    """The scenario's PID law, the one construction every loop driver uses: one positional PID (eq. 2) per loop,
+    or the cross-axis coupled PID (eq. 26-27) of three loops; actuator limits, anti-windup and derivative filter
+    from the config."""
+    n = config.n_loops
+    args = dict(sample_time_s=config.sample_time_s, u_min=[float(l.u_min) for l in config.loops],
+                u_max=[float(l.u_max) for l in config.loops], anti_windup=config.anti_windup,
+                derivative_filter_N=config.derivative_filter_N)
+    if config.coupled:
+        if n != 3:
+            raise PlantError(f"the cross-axis coupled PID needs 3 loops (roll, pitch, yaw), got {n}")
+        return CoupledPID(**args)
+    return PID(n_loops=n, **args)
+
+
+class LoopConstants:
+    """What every core (LoopCore, and IsolatedCore in front of a worker process) exposes to its drivers, set
+    from the config: config, n_loops, loop_names, inputs, scale, bound, u_min, u_max, u_scale, weights,
+    penalty (lists of n_loops floats where per loop)."""
+
+    def set_loop_constants(self, config: TuningConfig) -> int:
+        """config, n_loops, loop_names, inputs, scale, bound, u_min, u_max, u_scale, weights, penalty from
+        `config` (what every core exposes to its drivers); returns n_loops."""
+        c = self.config = config
+        self.n_loops = c.n_loops
+        self.loop_names = [l.output for l in c.loops]
+        self.inputs = [l.input for l in c.loops]
+        self.scale = [float(l.measurement_scale) for l in c.loops]
+        self.bound = [float(l.divergence_bound) for l in c.loops]
+        self.u_min = [float(l.u_min) for l in c.loops]
+        self.u_max = [float(l.u_max) for l in c.loops]
+        self.u_scale = control_scales(c)
+        self.weights = c.reward
+        self.penalty = float(c.divergence_penalty)
+        return self.n_loops
+
+
+class LoopCore(LoopConstants):
     """The closed loop of one TuningConfig, stepped with PID gains.
 
     Args:
@@ -101,18 +129,11 @@ class LoopCore:
 
     def __init__(self, config: TuningConfig, forecast_path: str = "auto"):
         c = config
-        n = self.set_loop_constants(c)
+        self.set_loop_constants(c)
         path = resolve_fmu(c.fmu, c.fmi_version)
         self.plant = FmuPlant(path, self.inputs, self.loop_names, c.sample_time_s, c.plant_parameters, "plant")
         self.plant.guard_leaks(c.leak_check_every, c.leak_limit_mb)
-        pid_args = dict(sample_time_s=c.sample_time_s, u_min=self.u_min, u_max=self.u_max,
-                        anti_windup=c.anti_windup, derivative_filter_N=c.derivative_filter_N)
-        if c.coupled:
-            if n != 3:
-                raise PlantError(f"the cross-axis coupled PID needs 3 loops (roll, pitch, yaw), got {n}")
-            self.pid = CoupledPID(**pid_args)
-        else:
-            self.pid = PID(n_loops=n, **pid_args)
+        self.pid = make_pid(c)
         self._randomize = randomized_parameters(c)
         for name, _, _ in self._randomize:
             self.plant.description.require(name, ("parameter", "input"), "a randomised parameter")
@@ -132,25 +153,8 @@ class LoopCore:
         self.termination: Termination | None = None
         self._rng = np.random.default_rng(0)
 
-    # -- construction ---------------------------------------------------------------------------
-    def set_loop_constants(self, config: TuningConfig) -> int:
-        """config, n_loops, loop_names, inputs, scale, bound, u_min, u_max, u_scale, weights, penalty from
-        `config` (what every core exposes to its drivers); returns n_loops."""
-        c = self.config = config
-        self.n_loops = c.n_loops
-        self.loop_names = [l.output for l in c.loops]
-        self.inputs = [l.input for l in c.loops]
-        self.scale = [float(l.measurement_scale) for l in c.loops]
-        self.bound = [float(l.divergence_bound) for l in c.loops]
-        self.u_min = [float(l.u_min) for l in c.loops]
-        self.u_max = [float(l.u_max) for l in c.loops]
-        self.u_scale = control_scales(c)
-        self.weights = c.reward
-        self.penalty = float(c.divergence_penalty)
-        return self.n_loops
-
     def _make_prior(self, path: Path, forecast_path: str):
-        from prlpid_fmi.loop.forecast.base import make_forecast
+        from prlpid_fmi.loop.forecast import make_forecast
 
         c = self.config
         prior_path = resolve_fmu(c.prior.fmu, c.fmi_version) if c.prior.fmu else path

@@ -1,4 +1,4 @@
-"""PidTuningEnv: the agent's action path in front of the loop core (prlpid_fmi.core.LoopCore).
+"""PidTuningEnv: the agent's action path in front of the loop core (prlpid_fmi.loop.core.LoopCore).
 
 One step: action in [-1, 1] -> smoothing (eq. 19-21) -> gain map (anchored at the tuned fixed PID,
 or the paper's absolute map) -> LoopCore.step(Kp, Ti, Td[, coupling]) -> observation.
@@ -17,10 +17,10 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 
-from prlpid_fmi.loop.actions import ActionMap, AnchoredActionMap, Gains, gains_from_values
 from prlpid_fmi.config import TuningConfig
 from prlpid_fmi.control import make_smoother
-from prlpid_fmi.loop.core import LoopCore, resolve_fmu
+from prlpid_fmi.loop.actions import ActionMap, AnchoredActionMap
+from prlpid_fmi.loop.gains import Gains, gains_from_values
 from prlpid_fmi.loop.isolated import make_core
 
 OBS_CLIP = 10.0

@@ -14,8 +14,8 @@ from gymnasium.utils.seeding import np_random
 
 from prlpid_fmi.config import TuningConfig
 from prlpid_fmi.loop.core import LoopCore, Termination
-from prlpid_fmi.loop.isolated import make_core
 from prlpid_fmi.loop.env import PidTuningEnv
+from prlpid_fmi.loop.isolated import make_core
 from prlpid_fmi.metrics import compute_metrics
 
 GAIN_NAMES = ("Kp", "Ti", "Td", "coupling")  # order of the gains tuple LoopCore.step takes

@@ -7,38 +7,31 @@ real LoopCore. When the FMU kills the worker (a segmentation fault, an abort), t
 the divergence penalty and a Termination of kind "crash" naming the FMU and the time; the next
 `reset` starts a fresh worker. A worker that crashes while resetting twice in a row is a PlantError.
 
-Workers are forked from multiprocessing's fork server (with this package preloaded), so a restart
-costs a fork and the FMU's instantiation, not an interpreter start. The FMU is extracted once, by
-the parent, and the workers use that folder.
+Workers come from prlpid_fmi.fmu.worker (the fork server, FMUs extracted once by the parent), so a
+restart costs a fork and the FMU's instantiation, not an interpreter start.
 
 `plant.isolation` in a scenario: "none" runs LoopCore in this process (the fast path, unchanged);
 "process" runs IsolatedCore; "auto" is "none" until `tune --resume` finds the run ended in a crash.
 """
 from __future__ import annotations
 
-import multiprocessing
-import signal
 import warnings
 from pathlib import Path
 
 import numpy as np
 
 from prlpid_fmi.config import TuningConfig
-from prlpid_fmi.loop.core import LoopCore, Termination, resolve_fmu
 from prlpid_fmi.errors import PlantError
+from prlpid_fmi.fmu.plant import extracted_folders, reuse_extracted
+from prlpid_fmi.fmu.resolve import resolve_fmu
+from prlpid_fmi.fmu.worker import JOIN_TIMEOUT_S, become_worker, mp_context, signal_name
+from prlpid_fmi.loop.core import LoopConstants, LoopCore, Termination
 
-ISOLATION_MODES = ("auto", "process", "none")
-JOIN_TIMEOUT_S = 5.0
 _SNAPSHOT = ("k", "setpoint", "measurement", "previous_error", "applied_setpoint", "control_signal", "pid_output",
              "forecast_reward", "step_reward", "termination")
-_context = None
 _warned: set[str] = set()
-_in_worker = False
 
 
-def in_worker() -> bool:
-    """True inside a worker process of this module."""
-    return _in_worker
 
 
 def runs_isolated(config: TuningConfig) -> bool:
@@ -53,79 +46,16 @@ def make_core(config: TuningConfig, forecast_path: str = "auto"):
     return LoopCore(config, forecast_path)
 
 
-def _mp_context():
-    global _context
-    if _context is None:
-        methods = multiprocessing.get_all_start_methods()
-        _context = multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
-        if "forkserver" in methods:
-            _context.set_forkserver_preload(["prlpid_fmi.loop.core", "prlpid_fmi.robustness.margins"])
-    return _context
 
 
-def signal_name(exitcode: int | None) -> str:
-    """'SIGSEGV' for a worker killed by signal 11, 'exit code 3' otherwise."""
-    if exitcode is not None and exitcode < 0:
-        try:
-            return signal.Signals(-exitcode).name
-        except ValueError:
-            return f"signal {-exitcode}"
-    return f"exit code {exitcode}"
 
 
-class WorkerCrashed(PlantError):
-    """A worker process running an FMU died (the FMU crashed it)."""
 
 
-def _extracted_for(paths) -> dict:
-    """{(path, mtime): folder} of these FMUs, extracted here once (workers reuse the folders; this process
-    removes them at exit)."""
-    from prlpid_fmi.fmu.plant import _extract
-
-    out = {}
-    for p in paths:
-        p = Path(p)
-        out[(str(p.resolve()), p.stat().st_mtime)] = _extract(p)
-    return out
 
 
-def _run_one(conn, fn, args, extracted: dict) -> None:
-    global _in_worker
-    _in_worker = True
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-    from prlpid_fmi.fmu import plant as fmu_plant
-
-    fmu_plant._EXTRACTED.update(extracted)
-    try:
-        conn.send(("ok", fn(*args)))
-    except Exception as exc:  # noqa: BLE001 - raised in the parent
-        conn.send(("error", exc))
-    conn.close()
 
 
-def call_in_worker(fn, *args, fmus=(), what: str = "the call"):
-    """fn(*args) in a worker process (fn and the result picklable); its exceptions are raised here.
-
-    fmus: FMU paths fn opens (extracted here first, once). Raises WorkerCrashed naming the FMU and how
-    the worker ended when it dies before answering.
-    """
-    ctx = _mp_context()
-    parent, child = ctx.Pipe()
-    proc = ctx.Process(target=_run_one, args=(child, fn, args, _extracted_for(fmus)), daemon=True)
-    proc.start()
-    child.close()
-    try:
-        tag, payload = parent.recv()
-    except (EOFError, OSError):
-        proc.join(JOIN_TIMEOUT_S)
-        names = ", ".join(Path(p).name for p in fmus) or "the FMU"
-        raise WorkerCrashed(f"{names} crashed ({signal_name(proc.exitcode)}) in a worker process during {what}") from None
-    finally:
-        parent.close()
-    proc.join(JOIN_TIMEOUT_S)
-    if tag == "error":
-        raise payload
-    return payload
 
 
 # -- the worker ------------------------------------------------------------------------------------
@@ -135,12 +65,8 @@ def _snapshot(core: LoopCore) -> tuple:
 
 def _serve(conn, config: TuningConfig, forecast_path: str, extracted: dict) -> None:
     """Worker main: build a LoopCore, then answer (operation, arguments) messages until "close" or EOF."""
-    global _in_worker
-    _in_worker = True
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides when to stop
-    from prlpid_fmi.fmu import plant as fmu_plant
-
-    fmu_plant._EXTRACTED.update(extracted)
+    become_worker()  # the parent decides when to stop
+    reuse_extracted(extracted)
     try:
         core = LoopCore(config, forecast_path)
     except Exception as exc:  # noqa: BLE001 - sent to the parent, raised there
@@ -209,7 +135,7 @@ class _RemotePlant:
         self._core._call("set", dict(values))
 
 
-class IsolatedCore:
+class IsolatedCore(LoopConstants):
     """LoopCore's interface with the loop in a worker process (see the module docstring).
 
     Args: as LoopCore. Attributes read after reset/step: as LoopCore (setpoint, measurement,
@@ -219,11 +145,11 @@ class IsolatedCore:
 
     def __init__(self, config: TuningConfig, forecast_path: str = "auto"):
         c = config
-        LoopCore.set_loop_constants(self, c)
+        self.set_loop_constants(c)
         self.forecast_path = forecast_path
         path = resolve_fmu(c.fmu, c.fmi_version)
         paths = [path] + ([resolve_fmu(c.prior.fmu, c.fmi_version)] if c.prior.fmu and c.forecast_horizon else [])
-        self._extracted = _extracted_for(paths)
+        self._extracted = extracted_folders(paths)
         self.plant = _RemotePlant(self, path)
         self.prior = self.forecast = self.pid = None  # in the worker
         self.crashes = 0
@@ -236,7 +162,7 @@ class IsolatedCore:
 
     # -- the worker's life --------------------------------------------------------------------
     def _start(self) -> None:
-        ctx = _mp_context()
+        ctx = mp_context()
         parent, child = ctx.Pipe()
         proc = ctx.Process(target=_serve, args=(child, self.config, self.forecast_path, self._extracted),
                            name=f"prlpid-fmi plant {self.plant.path.name}", daemon=True)

@@ -109,7 +109,7 @@ class ProbeResult:
         return next(r for r in self.responses if r.input == name)
 
 
-def _snap(dt: float) -> float:
+def snap_sample_time(dt: float) -> float:
     """dt rounded down to the 1-2-5 series, clipped to [MIN_DT_S, MAX_DT_S]."""
     dt = min(max(dt, MIN_DT_S), MAX_DT_S)
     decade = 10 ** math.floor(math.log10(dt))
@@ -210,7 +210,7 @@ def probe_input(path, name: str, output: str, inputs: Sequence[str], u0: Sequenc
     du = _step_size(v, u0[i])
     stepped_u = list(u0)
     stepped_u[i] += du
-    dt, tried, result = _snap(dt0), set(), None
+    dt, tried, result = snap_sample_time(dt0), set(), None
     for _ in range(8):
         tried.add(dt)
         trim = _simulate(path, inputs, u0, output, dt, parameters)
@@ -222,11 +222,11 @@ def probe_input(path, name: str, output: str, inputs: Sequence[str], u0: Sequenc
         if kind == "static":  # no time scale to resolve: a finer grid would show the same
             break
         if kind in ("stable", "unstable"):
-            target = _snap(tau / SAMPLES_PER_TIME_CONSTANT)
+            target = snap_sample_time(tau / SAMPLES_PER_TIME_CONSTANT)
             if n < SAMPLES // 2:  # blew up early: finer grid
-                target = _snap(dt / 10)
+                target = snap_sample_time(dt / 10)
         elif kind in ("integrating", "none"):  # too short to see it settle, or too slow to see it move
-            target = _snap(dt * 10)
+            target = snap_sample_time(dt * 10)
         if target in tried or target == dt:
             break
         if kind in ("integrating", "none") and len(tried) >= 3:
@@ -294,18 +294,14 @@ def format_probe(result: ProbeResult) -> str:
 def plot_probe(result: ProbeResult, path) -> Path:
     """One panel per input: the step response Δy (step run minus trim run) with the fitted model, and the
     trim run on the right axis, annotated. Returns path."""
-    import matplotlib
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from prlpid_fmi.report.plots import _save
     from prlpid_fmi.fmu import describe_fmu
+    from prlpid_fmi.report.plots import new_figure, save_figure
 
     d = describe_fmu(result.fmu)
-    unit = d.variable(result.output).unit or ""
+    unit = d.unit_of(result.output)
     n = len(result.responses)
-    fig, axes = plt.subplots(n, 1, figsize=(8, 0.8 + 2.8 * n), squeeze=False)
+    fig, axes = new_figure(n, 1, figsize=(8, 0.8 + 2.8 * n), squeeze=False)
     for ax, r in zip(axes[:, 0], result.responses):
         scale, tunit = _time_unit(r.time_s[-1] if len(r.time_s) else 1.0)
         t = r.time_s / scale
@@ -327,7 +323,7 @@ def plot_probe(result: ProbeResult, path) -> Path:
         ax.legend(handles=handles, fontsize=8, loc="best")
     fig.suptitle(f"Open-loop step and trim test of {d.model_name}", fontsize=11)
     fig.tight_layout()
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def _time_unit(span_s: float) -> tuple[float, str]:
@@ -354,172 +350,11 @@ def _model_response(r: StepResponse) -> Optional[np.ndarray]:
 # ---------------------------------------------------------------------------------------------
 # what init proposes from a probe
 
-@dataclass(frozen=True)
-class LoopProposal:
-    """A loop for a starter scenario, every number with the reason it was chosen (`why`, one line each)."""
-
-    input: str
-    output: str
-    u_limits: tuple[float, float]
-    setpoint_range: tuple[float, float]
-    measurement_scale: float
-    sample_time_s: float
-    gains: dict                      # {Kp|Ti|Td: (low, high, scale)}
-    why: dict                        # {key: one-line reason}
-    others: tuple[str, ...]          # one comment line per input not chosen
-    trim_input: float                # the input that holds the output at its start value
 
 
-def _round(x: float, digits: int = 3) -> float:
-    """x to `digits` significant digits (readable YAML)."""
-    if x == 0 or not math.isfinite(x):
-        return float(x)
-    return float(f"{x:.{digits}g}")
 
 
-def _initial_slope(r: StepResponse) -> float:
-    """dy/dt of the trim run at t = 0 (second-order forward difference), output units per s."""
-    y = r.trim
-    if len(y) < 3:
-        return 0.0
-    return float((-3 * y[0] + 4 * y[1] - y[2]) / (2 * r.sample_time_s))
 
 
-def choose_input(result: ProbeResult) -> tuple[StepResponse, str]:
-    """The actuator: the input that moves the output most over its declared range (or per unit), never a
-    disturbance-like input while another one moves the output. Returns (response, reason)."""
-    from prlpid_fmi.fmu import describe_fmu
-
-    d = describe_fmu(result.fmu)
-
-    def authority(r: StepResponse) -> float:
-        v = d.variable(r.input)
-        span = (v.max - v.min) if v.min is not None and v.max is not None else 1.0
-        return r.output_change_per_unit * span
-
-    moving = [r for r in result.responses if r.kind != "none"]
-    if not moving:
-        raise PlantError(f"{result.fmu}: no input moves {result.output} (probed: "
-                         f"{', '.join(r.input for r in result.responses)})")
-    actuators = [r for r in moving if not r.disturbance_like] or moving
-    best = max(actuators, key=authority)
-    if best.disturbance_like:
-        reason = (f"every input that moves {result.output} looks like a disturbance; {best.input} moves it most: "
-                  "ADJUST if it is not the actuator")
-    elif len(moving) > 1:
-        reason = f"moves {result.output} most of the inputs that are not disturbances"
-    else:
-        reason = f"the only input that moves {result.output}"
-    return best, reason
 
 
-def propose_loop(result: ProbeResult) -> LoopProposal:
-    """u_limits, setpoint range, sample time and gain ranges for the chosen input (see `why`)."""
-    from prlpid_fmi.fmu import describe_fmu
-
-    d = describe_fmu(result.fmu)
-    r, reason = choose_input(result)
-    v, out = d.variable(r.input), d.variable(result.output)
-    why = {"input": reason}
-    s0 = _initial_slope(r)
-    y0 = result.y0
-    # the input that holds y0, from the trim run's drift and the fitted model
-    if r.kind == "stable":
-        u_trim = r.u0 - s0 * r.time_constant_s / r.gain
-    elif r.kind == "unstable":
-        b = -r.gain * r.growth_rate_per_s          # high-frequency gain of b/(s - λ)
-        u_trim = r.u0 - s0 / b
-    elif r.kind == "static":
-        u_trim = r.u0                              # y0 was read at u0, and nothing drifts
-    else:
-        u_trim = r.u0 - s0 / r.rate
-    u_trim = _round(u_trim, 4)
-    # u_limits: declared, else around the trim input
-    if v.min is not None and v.max is not None:
-        u_limits = (v.min, v.max)
-        why["u_limits"] = f"{r.input}'s declared min and max"
-    else:
-        nominal = abs(v.nominal) if v.nominal is not None else 0.0
-        reach = max(2 * abs(u_trim - r.u0), nominal, abs(r.u0), 10 * abs(r.du))
-        lo, hi = u_trim - reach, u_trim + reach
-        if v.min is not None:
-            lo = max(lo, v.min)
-        if v.max is not None:
-            hi = min(hi, v.max)
-        u_limits = (_round(lo), _round(hi))
-        why["u_limits"] = (f"ADJUST to the actuator: ±{_round(reach)} around the trim input {u_trim:g} that holds "
-                           f"{result.output} = {y0:.4g} (probe)")
-    # setpoint range the actuator can hold at steady state
-    if r.kind in ("stable", "unstable", "static"):
-        held = sorted(y0 + r.gain * (u - u_trim) for u in u_limits)
-        shrink = 0.25 if r.kind == "unstable" else 0.1
-        width = held[1] - held[0]
-        sp = [held[0] + shrink * width, held[1] - shrink * width]
-        why["setpoint_range"] = (f"{100 * (1 - 2 * shrink):.0f} % of what u_limits hold in steady state "
-                                 f"({held[0]:.4g} to {held[1]:.4g}: gain {r.gain:.4g} from the probe)")
-    else:
-        span = abs(out.nominal) if out.nominal else max(abs(y0), 1.0)
-        sp = [y0, y0 + span]
-        why["setpoint_range"] = (f"an integrating plant holds any {result.output} while the trim input {u_trim:g} is "
-                                 f"inside u_limits; ADJUST (span: {'nominal value' if out.nominal else 'start value'})")
-    if out.min is not None:
-        sp[0] = max(sp[0], out.min)
-    if out.max is not None:
-        sp[1] = min(sp[1], out.max)
-    sp = (_round(sp[0]), _round(sp[1]))
-    scale = _round(max((sp[1] - sp[0]) / 2, 1e-12))
-    # sample time and gains
-    sign = 1.0
-    if r.kind == "stable":
-        T, K, L = r.time_constant_s, r.gain, r.dead_time_s
-        ts = _snap(min(T / 20, L / 2) if L > 0 else T / 20)
-        why["sample_time"] = f"time constant {T:.4g} s / 20 (probe){'; dead time ' + format(L, '.3g') + ' s' if L else ''}"
-        tau_c = max(L, T / 4, 2 * ts)                       # SIMC closed-loop time constant
-        kc, ti = T / (abs(K) * (tau_c + L)), min(T, 4 * (tau_c + L))
-        td_max = max(L, 2 * ts)
-        sign = math.copysign(1.0, K)
-        why["gains"] = f"around SIMC for gain {K:.4g}, T = {T:.4g} s, dead time {L:.3g} s (Kp {kc:.3g}, Ti {ti:.3g} s)"
-    elif r.kind == "static":
-        K = r.gain
-        ts = _snap(r.sample_time_s)
-        why["sample_time"] = (f"the probe's step: {result.output} follows {r.input} within one step, so there is no "
-                              "time scale to choose it from; ADJUST to the controller's period")
-        if r.dead_time_s > 0:  # a gain behind a delay: low-gain integral action, slower the longer the delay
-            kc, ti, td_max = 0.15 / abs(K), 2 * (r.dead_time_s + ts), ts
-        else:  # with the step's one-sample delay: closed-loop poles 0.78 and -0.38
-            kc, ti, td_max = 0.3 / abs(K), ts, ts
-        sign = math.copysign(1.0, K)
-        why["gains"] = (f"a static gain {K:.4g}{f' behind a {r.dead_time_s:.3g} s delay' if r.dead_time_s else ''}: "
-                        f"integral action does the work (Kp {kc:.3g}, Ti {ti:.3g} s)")
-    elif r.kind == "unstable":
-        lam = r.growth_rate_per_s
-        b = -r.gain * lam
-        ts = _snap(1 / (10 * lam))
-        why["sample_time"] = f"1/(10 λ): the response grows as e^(λt), λ = {lam:.4g} 1/s (probe)"
-        kc, ti, td_max = 3.0 * lam / abs(b), 2.0 / lam, 0.2 / lam
-        sign = math.copysign(1.0, b)
-        why["gains"] = (f"unstable: Kp must exceed λ/b = {lam / abs(b):.3g} to stabilise (b = {b:.4g} per s, "
-                        f"λ = {lam:.4g} 1/s)")
-    else:
-        authority = abs(r.rate) * max(u_limits[1] - u_trim, u_trim - u_limits[0], 1e-12)
-        traverse = (sp[1] - sp[0]) / authority
-        ts = _snap(traverse / 20)
-        why["sample_time"] = (f"1/20 of the {traverse:.3g} s the actuator needs to move {result.output} across the "
-                              f"setpoint range (rate {r.rate:.4g} per s per input unit, probe)")
-        tau_c = 10 * ts
-        kc, ti, td_max = 1 / (abs(r.rate) * tau_c), 4 * tau_c, tau_c
-        sign = math.copysign(1.0, r.rate)
-        why["gains"] = f"around SIMC for an integrator with rate {r.rate:.4g} (Kp {kc:.3g}, Ti {ti:.3g} s)"
-    if sign > 0:
-        kp = (_round(kc / 10), _round(kc * 10), "log")
-    else:
-        kp = (_round(-kc * 10), _round(-kc / 10), "linear")
-        why["gains"] += "; negative gain: a negative linear Kp range"
-    gains = {"Kp": kp, "Ti": (_round(ti / 10), _round(ti * 10), "log"), "Td": (0.0, _round(td_max), "linear")}
-    others = tuple(
-        f"{o.input}: {'looks like a disturbance; ' if o.disturbance_like else ''}"
-        + (f"moves {result.output} by {o.output_change_per_unit:.4g} per unit ({o.kind})" if o.kind != "none"
-           else f"does not move {result.output}")
-        for o in result.responses if o.input != r.input)
-    return LoopProposal(r.input, result.output, (float(u_limits[0]), float(u_limits[1])), sp, scale, ts, gains, why,
-                        others, u_trim)

@@ -2,7 +2,8 @@
 
 Every metric carries its unit (the loop's output unit y and input unit u from the FMU); the ratio column
 is adaptive policy ÷ fixed PID, where lower is better for every metric shown; a missing value is "–",
-never `nan`; gains are numbers with their units. The run workflows (run.py) call these functions.
+never `nan`; gains are numbers with their units. The run workflows (prlpid_fmi.run) compose report.md from
+these sections.
 """
 from __future__ import annotations
 
@@ -12,6 +13,10 @@ from pathlib import Path
 import numpy as np
 
 from prlpid_fmi import rundir as rd
+from prlpid_fmi.deliver.evidence import HOLDOUT_EPISODES
+from prlpid_fmi.deliver.rule import Candidate, Deployed
+from prlpid_fmi.fmu.resolve import loop_units as units_of_loops
+from prlpid_fmi.metrics import overall_metric
 
 METRIC_COLUMNS = ("ISE", "IAE", "ITAE", "Overshoot", "SettlingTime", "RiseTime", "SteadyStateError",
                   "PeakDeviation", "RecoveryTime", "ControlEffort", "TotalVariation", "Chatter")
@@ -77,8 +82,11 @@ def plot_links() -> list[str]:
 
 def render_report(scenario, policy_m: dict, fixed_m: dict | None, fixed_gains: dict | None,
                   source: Path | None = None, units: tuple[str, str] = ("", ""),
-                  learning_curve: bool = True) -> str:
-    """report.md of one evaluation: the metric table with units and the ratio adaptive ÷ fixed."""
+                  learning_curve: bool = True, opening: tuple[str, ...] = ()) -> str:
+    """report.md of one evaluation: the metric table with units and the ratio adaptive ÷ fixed.
+
+    opening: sections (markdown text each) placed between the title and the evaluation, in order (the verdict
+    of `tune`, the deployed controller of `evaluate`)."""
     y_unit, u_unit = units
     loops = policy_m["loops"]
     keys = [k for k in policy_m["overall"] if k.split("[")[0] in METRIC_COLUMNS]
@@ -112,21 +120,19 @@ def render_report(scenario, policy_m: dict, fixed_m: dict | None, fixed_gains: d
                 iae = sum(v for k, v in iv.items() if k.split("[")[0] == "IAE")
                 lines.append(f"| {iv['start_step']}–{iv['end_step']} | {number(ise)} | {number(iae)} |")
     lines += [""] + [line for line in plot_links() if learning_curve or rd.LEARNING_CURVE_PLOT not in line]
-    return "\n".join(lines)
+    return "\n".join([lines[0], "", *opening, "\n".join(lines[2:])])
 
 
-def deployed_section(deployed: str, schedule_m: dict | None, fixed_m: dict | None,
+def deployed_section(deployed: Deployed, schedule_m: dict | None, fixed_m: dict | None,
                      units: tuple[str, str] = ("", "")) -> str:
     """An evaluation report's opening: what the run deployed (schedule.csv) and how it does on this evaluation."""
-    from prlpid_fmi.deliver.rule import Candidate
-
     lines = ["## Deployed controller on this evaluation", ""]
-    if deployed == "gain schedule" and schedule_m is not None:
+    if deployed == Deployed.SCHEDULE and schedule_m is not None:
         lines += ["The run deployed its adaptive gain schedule (schedule.csv, replayed here as a plain gain-scheduled "
                   "PID, no neural network), beside the fixed PID:", "",
                   candidates_table(Candidate("gain schedule (deployed)", schedule_m),
                                    Candidate("fixed PID", fixed_m) if fixed_m else None, units, margins=False)]
-    elif deployed == "fixed PID":
+    elif deployed == Deployed.FIXED_PID:
         lines += ["The run deployed the fixed PID (schedule.csv holds it as a one-row table): its column below is "
                   "the deployed controller.", ""]
     else:
@@ -138,8 +144,6 @@ def deployed_section(deployed: str, schedule_m: dict | None, fixed_m: dict | Non
 def candidates_table(sched, fixed, units: tuple[str, str] = ("", ""), margins: bool = True) -> str:
     """Both deployable controllers side by side (plain PIDs, no neural network), metrics with units; margins:
     with the worst-Ms row (their Candidates carry margins)."""
-    from prlpid_fmi.deliver.rule import overall_metric
-
     y_unit, u_unit = units
     rows = [("ISE", "ISE"), ("IAE", "IAE"), ("Overshoot", "overshoot"), ("SettlingTime", "settling time"),
             ("PeakDeviation", "peak deviation (regulation)"), ("RecoveryTime", "recovery time (regulation)"),
@@ -154,8 +158,6 @@ def candidates_table(sched, fixed, units: tuple[str, str] = ("", ""), margins: b
         lines.append("| worst Ms (limit in the verdict) | – | " + " | ".join(number(c.worst_Ms, 3) for c in cands)
                      + " |")
     if all(not math.isnan(c.holdout_ise) for c in cands):
-        from prlpid_fmi.tuning.schedule.trajectories import HOLDOUT_EPISODES
-
         lines.append(f"| ISE, {HOLDOUT_EPISODES} held-out training-distribution episodes | "
                      f"{unit_label('ISE', y_unit, u_unit)} | " + " | ".join(
                          "diverged" if math.isinf(c.holdout_ise) else number(c.holdout_ise) for c in cands) + " |")
@@ -172,7 +174,5 @@ def candidates_table(sched, fixed, units: tuple[str, str] = ("", ""), margins: b
 
 def loop_units(config) -> tuple[str, str]:
     """(output unit, input unit) of the first loop, joined with "/" over loops whose units differ."""
-    from prlpid_fmi.report.plots import _units
-
-    ys, us = _units(config)
+    ys, us = units_of_loops(config)
     return "/".join(dict.fromkeys(ys)) if any(ys) else "", "/".join(dict.fromkeys(us)) if any(us) else ""

@@ -1,6 +1,6 @@
 """Report figures (matplotlib, Agg backend: no display needed), each written to a PNG atomically.
 
-Trajectories are evaluate.Trajectory: time_s (n+1,), setpoint, measurement, control_signal (n+1,
+Trajectories are loop.evaluation.Trajectory: time_s (n+1,), setpoint, measurement, control_signal (n+1,
 n_loops), gains {Kp, Ti, Td: (n, n_loops), coupling: (n, 6)}. Signal names and units come from the
 config's loops (the FMU variable names). Every figure names its controllers the same way: "adaptive
 policy" (the trained policy), "fixed PID" (the baseline with constant gains) and "gain schedule" (a
@@ -14,16 +14,16 @@ from pathlib import Path
 from typing import Optional
 
 import matplotlib
+import numpy as np
+from matplotlib import ticker
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from matplotlib.transforms import blended_transform_factory
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-from matplotlib import ticker  # noqa: E402
-from matplotlib.transforms import blended_transform_factory  # noqa: E402
-import numpy as np  # noqa: E402
-
-from prlpid_fmi.config import Disturbance, TuningConfig  # noqa: E402
-from prlpid_fmi.control import COUPLING_NAMES  # noqa: E402
-from prlpid_fmi.rundir import write_atomic  # noqa: E402
+from prlpid_fmi.config import Disturbance, TuningConfig
+from prlpid_fmi.control import COUPLING_NAMES
+from prlpid_fmi.fmu.resolve import loop_units
+from prlpid_fmi.rundir import write_atomic
 
 DPI = 110
 POLICY, FIXED, SCHEDULE = "adaptive policy", "fixed PID", "gain schedule"  # the legends' controller names
@@ -38,32 +38,20 @@ MIN_SPAN_OF_VALUE = 0.2
 LOG_AXIS_MIN_RATIO = 10.0  # a log-scale gain gets a log axis only when the axis spans this factor
 
 __all__ = ["plot_response", "plot_control_signal", "plot_gains", "plot_learning_curve", "load_monitor_csvs",
-           "response_figure", "control_signal_figure", "gains_figure", "gain_axis_limits", "disturbance_label"]
+           "new_figure", "save_figure", "response_figure", "control_signal_figure", "gains_figure", "gain_axis_limits", "disturbance_label"]
 
 
-def _save(fig, path) -> Path:
-    """Save fig as PNG atomically (rundir.write_atomic); close fig."""
-    try:
-        return write_atomic(path, lambda tmp: fig.savefig(tmp, format="png", dpi=DPI))
-    finally:
-        plt.close(fig)
+def new_figure(nrows: int = 1, ncols: int = 1, figsize=None, **kwargs):
+    """(figure, axes) as pyplot's subplots returns them, outside pyplot: drawn by Agg, so no GUI backend is
+    chosen or needed and importing this module changes no matplotlib setting."""
+    fig = Figure(figsize=figsize)
+    FigureCanvasAgg(fig)
+    return fig, fig.subplots(nrows, ncols, **kwargs)
 
 
-def _units(config: TuningConfig) -> tuple[list[str], list[str]]:
-    """Units of each loop's output and input from the FMU description, "" where unknown or unreadable."""
-    try:
-        from prlpid_fmi.loop.env import resolve_fmu
-        from prlpid_fmi.fmu import describe_fmu
-
-        d = describe_fmu(resolve_fmu(config.fmu, config.fmi_version))
-
-        def unit(name):
-            v = d.variable(name)
-            return (v.unit or "") if v is not None else ""
-
-        return [unit(l.output) for l in config.loops], [unit(l.input) for l in config.loops]
-    except Exception:  # a figure must not fail because the FMU moved; fall back to unit-less labels
-        return [""] * config.n_loops, [""] * config.n_loops
+def save_figure(fig, path) -> Path:
+    """Save fig as PNG atomically (rundir.write_atomic)."""
+    return write_atomic(path, lambda tmp: fig.savefig(tmp, format="png", dpi=DPI))
 
 
 def _label(name: str, unit: str) -> str:
@@ -71,7 +59,7 @@ def _label(name: str, unit: str) -> str:
 
 
 def _axes(n: int, height: float = 2.6):
-    fig, axes = plt.subplots(n, 1, figsize=(10, 0.8 + height * n), sharex=True, squeeze=False)
+    fig, axes = new_figure(n, 1, figsize=(10, 0.8 + height * n), sharex=True, squeeze=False)
     return fig, axes[:, 0]
 
 
@@ -221,14 +209,14 @@ def _legend(ax, **kw) -> None:
 # -- figures -------------------------------------------------------------------------------------------
 def plot_response(traj, config: TuningConfig, path, title: str = "Closed-loop response", **kw) -> Path:
     """response_figure written to `path` (PNG)."""
-    return _save(response_figure(traj, config, title, **kw), path)
+    return save_figure(response_figure(traj, config, title, **kw), path)
 
 
 def response_figure(traj, config: TuningConfig, title: str = "Closed-loop response", baseline_traj=None,
                     baseline_label: str = FIXED, schedule_traj=None, label: str = POLICY):
     """Measurement and setpoint against time, one panel per loop, for the adaptive policy and, when
     given, the fixed PID (baseline_traj) and a gain-schedule replay (schedule_traj); disturbances marked."""
-    y_units, _ = _units(config)
+    y_units, _ = loop_units(config)
     fig, axes = _axes(config.n_loops)
     pairs = _controllers(traj, baseline_traj, baseline_label, schedule_traj, label)
     for i, (ax, loop) in enumerate(zip(axes, config.loops)):
@@ -251,14 +239,14 @@ def response_figure(traj, config: TuningConfig, title: str = "Closed-loop respon
 
 def plot_control_signal(traj, config: TuningConfig, path, title: str = "Control signal", **kw) -> Path:
     """control_signal_figure written to `path` (PNG)."""
-    return _save(control_signal_figure(traj, config, title, **kw), path)
+    return save_figure(control_signal_figure(traj, config, title, **kw), path)
 
 
 def control_signal_figure(traj, config: TuningConfig, title: str = "Control signal", baseline_traj=None,
                           baseline_label: str = FIXED, schedule_traj=None, label: str = POLICY):
     """Control signal (after saturation) per loop as a zero-order hold, with the output limits, for the
     same controllers as response_figure; disturbances marked."""
-    _, u_units = _units(config)
+    _, u_units = loop_units(config)
     fig, axes = _axes(config.n_loops)
     pairs = _controllers(traj, baseline_traj, baseline_label, schedule_traj, label)
     for i, (ax, loop) in enumerate(zip(axes, config.loops)):
@@ -284,7 +272,7 @@ def control_signal_figure(traj, config: TuningConfig, title: str = "Control sign
 def plot_gains(traj, config: TuningConfig, path, title: str = "PID parameters set by the adaptive policy",
                baseline_gains: Optional[dict] = None, schedule_traj=None) -> Path:
     """gains_figure written to `path` (PNG)."""
-    return _save(gains_figure(traj, config, title, baseline_gains, schedule_traj), path)
+    return save_figure(gains_figure(traj, config, title, baseline_gains, schedule_traj), path)
 
 
 def _held(traj, key: str) -> tuple[np.ndarray, np.ndarray]:
@@ -303,12 +291,12 @@ def gains_figure(traj, config: TuningConfig, title: str = "PID parameters set by
     a gain-schedule replay, whose table gains are drawn dotted. Each axis follows gain_axis_limits; what
     lies outside a loop's gain range (loop.Kp.low/high, ...) is shaded.
     """
-    y_units, u_units = _units(config)
+    y_units, u_units = loop_units(config)
     panels = [("Kp", None), ("Ti", "s"), ("Td", "s")] + ([("coupling", "1")] if "coupling" in traj.gains else [])
     fig, axes = _axes(len(panels), height=2.0)
     base = baseline_gains or {}
     multi = config.n_loops > 1
-    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    colors = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
 
     for ax, (key, unit) in zip(axes, panels):
         t, values = _held(traj, key)
@@ -391,7 +379,7 @@ def load_monitor_csvs(monitor_dir) -> tuple[np.ndarray, np.ndarray]:
 def plot_learning_curve(monitor_dir, path, window: int = 20, title: str = "Learning curve") -> Path:
     """Episode reward against training timesteps from Monitor CSVs, with a rolling mean over `window` episodes."""
     steps, rewards = load_monitor_csvs(monitor_dir)
-    fig, ax = plt.subplots(figsize=(8, 4))
+    fig, ax = new_figure(figsize=(8, 4))
     if rewards.size:
         ax.plot(steps, rewards, ".", color="tab:blue", alpha=0.35, ms=4, label="episode reward")
         w = max(1, min(window, rewards.size // 5))  # keep a visible curve for short runs
@@ -405,4 +393,4 @@ def plot_learning_curve(monitor_dir, path, window: int = 20, title: str = "Learn
     ax.set_title(title)
     ax.grid(True, alpha=0.3)
     fig.tight_layout()
-    return _save(fig, path)
+    return save_figure(fig, path)

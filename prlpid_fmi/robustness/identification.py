@@ -25,10 +25,10 @@ from typing import Callable, Sequence
 import numpy as np
 
 from prlpid_fmi.config import TuningConfig
-from prlpid_fmi.control import CoupledPID, PID
 from prlpid_fmi.control.pid import coupling_matrix
-from prlpid_fmi.loop.env import resolve_fmu
 from prlpid_fmi.fmu import FmuPlant, StepRejected
+from prlpid_fmi.fmu.resolve import resolve_fmu
+from prlpid_fmi.loop.core import make_pid
 
 SETPOINT_RAMP_STEPS = 100  # samples over which the setpoint ramps from the initial measurement to the operating point
 SETTLE_WINDOW = 50          # samples over which the closed loop must be still to count as settled
@@ -131,18 +131,15 @@ class ClosedLoopRig:
         self.u_max = np.array([l.u_max for l in c.loops], float)
         self.scale = np.array([l.measurement_scale for l in c.loops], float)
         self.bound = np.array([l.divergence_bound for l in c.loops], float)
-        pid_args = dict(sample_time_s=c.sample_time_s, u_min=self.u_min, u_max=self.u_max,
-                        anti_windup=c.anti_windup, derivative_filter_N=c.derivative_filter_N)
         if c.coupled:
             if coupling is None or len(coupling) != 6:
                 raise ValueError(f"the coupled PID needs 6 coupling coefficients, got {coupling!r}")
             self.coupling = [float(v) for v in coupling]
-            self.pid = CoupledPID(**pid_args)
             self.coupling_matrix = coupling_matrix(self.coupling)
         else:
             self.coupling = None
-            self.pid = PID(n_loops=n, **pid_args)
             self.coupling_matrix = np.zeros((n, n))
+        self.pid = make_pid(c)
         path = resolve_fmu(c.fmu, c.fmi_version)
         self.plant = FmuPlant(path, [l.input for l in c.loops], [l.output for l in c.loops], c.sample_time_s,
                               c.plant_parameters, "margins")

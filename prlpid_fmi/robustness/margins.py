@@ -1,7 +1,7 @@
 """Robustness margins of a deployable PID, measured on the FMU at an operating point.
 
 ``loop_margins`` estimates the plant's frequency response on the FMU with the loop closed by the PID
-(prlpid_fmi.identification: a small multisine at the plant input), forms the loop transfer
+(prlpid_fmi.robustness.identification: a small multisine at the plant input), forms the loop transfer
 L = C * P at the sample time Ts with C the discrete PID of eq. 2 exactly as prlpid_fmi/control/pid.py
 computes it, and reads through python-control (``frd``, ``stability_margins``):
 
@@ -39,7 +39,12 @@ import numpy as np
 
 from prlpid_fmi.config import TuningConfig
 from prlpid_fmi.robustness.identification import (
-    CONVERGENCE_TOLERANCE, ClosedLoopRig, PlantResponse, default_amplitude, measure_response)
+    CONVERGENCE_TOLERANCE,
+    ClosedLoopRig,
+    PlantResponse,
+    default_amplitude,
+    measure_response,
+)
 
 DEFAULT_PERIOD = 4096        # samples per multisine period: lowest frequency 2 pi/(N Ts), 3 decades below Nyquist
 MAX_PERIOD = 32768           # longest period the grid refinement may choose
@@ -321,11 +326,11 @@ def loop_margins(config: TuningConfig, Kp: Sequence[float], Ti: Sequence[float],
         raise ValueError(f"amplitude needs one positive value per loop ({n}), got {amplitude!r}")
     # in a worker process when the FMU runs isolated (a crash: no margins, not a dead tool) or may be
     # instantiated only once per process (the caller may hold an instance, e.g. the fixed-PID search)
-    from prlpid_fmi.loop.core import resolve_fmu
     from prlpid_fmi.fmu import describe_fmu
+    from prlpid_fmi.fmu.resolve import resolve_fmu
 
     path = resolve_fmu(c.fmu, c.fmi_version)
-    from prlpid_fmi.loop.isolated import WorkerCrashed, call_in_worker, in_worker
+    from prlpid_fmi.fmu.worker import WorkerCrashed, call_in_worker, in_worker
 
     if not in_worker() and (c.isolation == "process" or describe_fmu(path).once_per_process):
         try:
@@ -377,3 +382,18 @@ def format_margins(m: Margins) -> str:
     if m.per_loop:
         text += f" [worst loop: {m.loop}]"
     return text
+
+
+def operating_point(config: TuningConfig, value: float | None = None) -> list[float]:
+    """Setpoints per loop at the middle of their ranges, loop 0's replaced by `value` when given."""
+    point = [0.5 * (l.setpoint_range[0] + l.setpoint_range[1]) for l in config.loops]
+    if value is not None:
+        point[0] = float(value)
+    return point
+
+
+def margins_of(config: TuningConfig, gains: tuple, point: list[float]):
+    """prlpid_fmi.robustness.margins.Margins of constant gains (Kp, Ti, Td, coupling) at an operating point (setpoints)."""
+    from prlpid_fmi.robustness.margins import loop_margins
+
+    return loop_margins(config, gains[0], gains[1], gains[2], point, coupling=gains[3])

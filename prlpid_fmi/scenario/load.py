@@ -14,7 +14,6 @@ from the model; it loads back into an equal Scenario. ``init_scenario(fmu)`` wri
 from __future__ import annotations
 
 import dataclasses
-import re
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,13 +22,28 @@ from typing import Any, Optional
 import yaml
 from pydantic import ValidationError
 
-from prlpid_fmi.config import (AgentConfig, AnchorBands, BaselineConfig, DeployConfig, Disturbance, GainRange, LoopConfig,
-                     PriorConfig, TuningConfig)
-from prlpid_fmi.control.pid import ANTI_WINDUP_MODES
+from prlpid_fmi.config import (
+    AgentConfig,
+    AnchorBands,
+    BaselineConfig,
+    DeployConfig,
+    Disturbance,
+    GainRange,
+    LoopConfig,
+    PriorConfig,
+    TuningConfig,
+)
 from prlpid_fmi.control.reward import RewardWeights
-from prlpid_fmi.control.smoothing import SMOOTHING_METHODS
-from prlpid_fmi.errors import PlantError, ScenarioError
-from prlpid_fmi.schema import ALGORITHMS, DISTURBANCE_TYPES, GAIN_SCALES, LOOP_TARGETS, SCHEMA_FILE_NAME, ScenarioModel, default
+from prlpid_fmi.errors import ScenarioError
+from prlpid_fmi.schema import (
+    ALGORITHMS,
+    DISTURBANCE_TYPES,
+    GAIN_SCALES,
+    LOOP_TARGETS,
+    SCHEMA_FILE_NAME,
+    ScenarioModel,
+    default,
+)
 from prlpid_fmi.schema import model as m
 from prlpid_fmi.schema.checks import State
 from prlpid_fmi.schema.document import parse_yaml, syntax_error_line
@@ -287,108 +301,11 @@ validate = validate_scenario
 
 def schema_uri() -> str:
     """file:// URI of the shipped JSON Schema (for the yaml-language-server line of generated scenarios)."""
-    from prlpid_fmi.scenario.presets import SCENARIO_DIR
+    from prlpid_fmi.bundled import SCENARIO_DIR
 
     return (SCENARIO_DIR / SCHEMA_FILE_NAME).resolve().as_uri()
 
 
-def init_scenario(fmu_path: str | Path, output: Optional[str] = None,
-                  start_values: Optional[dict] = None) -> str:
-    """YAML text of a ready-to-edit scenario for an FMU, from a step and trim test (prlpid_fmi.probe).
-
-    The loop's input is the one that moves `output` (default: the first output) most, never a
-    disturbance-like input while another one moves it; u_limits, setpoint range, sample time and gain
-    ranges come from the probe and the FMU's declared min, max and nominal values, each with a comment
-    saying where it came from. start_values {parameter or input: value}: the operating point to probe at
-    (parameters are written to plant.parameters). Raises ScenarioError with one line when the FMU cannot
-    be read or probed.
-    """
-    from prlpid_fmi.fmu import describe_fmu
-    from prlpid_fmi.probe.step_test import probe, propose_loop
-
-    p = Path(fmu_path)
-    try:
-        d = describe_fmu(p)
-    except PlantError as exc:  # its message already names the file
-        raise ScenarioError(str(exc)) from None
-    problems = d.plant_problems()
-    if problems:
-        raise ScenarioError(f"{fmu_path}: cannot be a plant: {'; '.join(problems)} "
-                            f"(got {d.model_name!r}; expected an FMU with scalar real inputs and outputs)")
-    start_values = dict(start_values or {})
-    try:
-        loop = propose_loop(probe(p, output=output, start_values=start_values))
-    except PlantError as exc:
-        raise ScenarioError(f"{fmu_path}: the step and trim test failed: {exc}") from None
-    tunable = [v for v in d.parameters if v.variability == "tunable" and v.scalar_real]
-
-    def unit(name):
-        v = d.variable(name)
-        return f" [{v.unit}]" if v is not None and v.unit else ""
-
-    params = "\n".join(f"  #   {v.name}: {v.start}{'   # ' + v.unit if v.unit else ''}" for v in tunable[:20])
-    given = {k: v for k, v in start_values.items() if k not in d.input_names}
-    others = "\n".join(f"    #   {line}" for line in loop.others) or "    #   none"
-    strategies, agent = m.StrategiesModel(), m.AgentModel()
-    n_train = default(m.TrainingModel, "episode_steps")
-    n_eval = 2 * n_train
-    prior_problems = d.prior_problems()
-    if prior_problems:
-        forecast = (f"forecast_horizon: 0   # this FMU cannot be its own prior ({'; '.join(prior_problems)}); "
-                    "give prior.fmu + prior.state_map to use the reward forecast")
-    else:
-        forecast = f"forecast_horizon: {strategies.forecast_horizon}   # reward forecast over N steps on a copy of the FMU; 0 = off"
-    fmu_text = yaml.safe_dump(str(p.resolve()), default_style='"').strip()
-    name = re.sub(r"[^A-Za-z0-9_.-]+", "-", d.model_name).strip("-") or "my-plant"
-    lo, hi = loop.setpoint_range
-    sp1, sp2 = (float(f"{lo + f * (hi - lo):.4g}") for f in (0.3, 0.7))
-    parameters = "{" + ", ".join(f"{k}: {v!r}" for k, v in given.items()) + "}"
-    gains = {g: f"[{a!r}, {b!r}, {s}]" for g, (a, b, s) in loop.gains.items()}
-    w = loop.why
-    return f"""\
-# yaml-language-server: $schema={schema_uri()}
-# Scenario for {d.model_name} ({p.name}), written by `prlpid-fmi init` from an open-loop step and trim test
-# (`prlpid-fmi probe` shows it with a plot). Check it with `prlpid-fmi validate <this file>`.
-# Every key, unit and default: docs/scenarios.md. Lines marked ADJUST need your plant's numbers.
-name: {name}
-plant:
-  fmu: {fmu_text}   # a relative path resolves against this file's folder
-  sample_time: {loop.sample_time_s!r}   # s, control period: {w['sample_time']}
-  parameters: {parameters}   # {{FMU parameter: value}} set before each episode
-  # tunable parameters of this FMU (start values):
-{params or '  #   none'}
-  loops:
-    # inputs not chosen (each held at its start value; a disturbance can be stepped in training.disturbances):
-{others}
-    - input: {loop.input}   # FMU input the PID drives{unit(loop.input)}: {w['input']}
-      output: {loop.output}   # FMU output it measures{unit(loop.output)}
-      u_limits: [{loop.u_limits[0]!r}, {loop.u_limits[1]!r}]   # actuator saturation{unit(loop.input)}: {w['u_limits']}
-      setpoint_range: [{lo!r}, {hi!r}]   # training setpoints{unit(loop.output)}: {w['setpoint_range']}
-      measurement_scale: {loop.measurement_scale!r}   # typical setpoint step{unit(loop.output)}: half the setpoint range
-      divergence_bound: 10.0   # |error| / measurement_scale that ends an episode as diverged
-      gains:   # ranges the agent's actions map into: {w['gains']}
-        Kp: {gains['Kp']}
-        Ti: {gains['Ti']}   # s
-        Td: {gains['Td']}   # s
-controller:
-  anti_windup: {default(m.ControllerModel, 'anti_windup')}   # {' | '.join(ANTI_WINDUP_MODES)}
-strategies:
-  {forecast}
-  smoothing: {strategies.smoothing}   # {' | '.join(SMOOTHING_METHODS)}
-agent:
-  algorithm: {agent.algorithm}   # {' | '.join(ALGORITHMS)}
-  total_timesteps: {agent.total_timesteps}
-  seed: {agent.seed}
-training:
-  episode_steps: {n_train}   # a few closed-loop settling times at the sample time above [samples]
-  setpoint_hold_steps: {default(m.TrainingModel, 'setpoint_hold_steps')}   # samples between random setpoint changes
-evaluation:
-  episode_steps: {n_eval}
-  setpoints:   # value: a number (one loop) or a list with one number per loop
-    - {{at_step: 0, value: {sp1!r}}}
-    - {{at_step: {n_eval // 2}, value: {sp2!r}}}
-  intervals: [[0, {n_eval // 2}], [{n_eval // 2}, {n_eval}]]
-"""
 
 
 __all__ = ["Scenario", "EvaluationConfig", "load_scenario", "validate_scenario", "validate", "build_scenario",

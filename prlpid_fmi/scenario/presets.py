@@ -8,14 +8,15 @@ Ts = 0.1 s (grid search of fixed PIDs on the ZOH-discretised plants: e.g. 1/(s-1
 """
 from __future__ import annotations
 
+import dataclasses
+import os
 from functools import lru_cache
 from pathlib import Path
 
-from prlpid_fmi.bundled import data_dir
+from prlpid_fmi.bundled import SCENARIO_DIR
 from prlpid_fmi.config import TuningConfig
 from prlpid_fmi.errors import PrlPidError, ScenarioError
 
-SCENARIO_DIR = data_dir("scenarios")
 PRESET_NAMES = ("first_order", "second_order", "first_order_1p5", "time_varying", "two_tank", "quadrotor")
 
 
@@ -53,3 +54,21 @@ def preset(name: str) -> TuningConfig:
     from prlpid_fmi.scenario.load import load_scenario
 
     return load_scenario(scenario_path(name)).tuning
+
+
+def make_env(config="first_order", scenario=None, **overrides):
+    """A PidTuningEnv for a TuningConfig, a preset name or a scenario file path (`config`, or `scenario`:
+    a path or a bundled scenario's name), with TuningConfig fields overridden by keyword."""
+    from prlpid_fmi.config import TuningConfig
+    from prlpid_fmi.loop.env import PidTuningEnv
+    from prlpid_fmi.scenario.load import load_scenario
+
+    if scenario is not None:
+        config = load_scenario(resolve_scenario(str(scenario))).tuning
+    elif isinstance(config, (str, os.PathLike)) and (os.path.isfile(config) or str(config).endswith((".yaml", ".yml"))):
+        config = load_scenario(config).tuning
+    elif not isinstance(config, TuningConfig):
+        config = preset(config)
+    if overrides:
+        config = dataclasses.replace(config, **overrides)
+    return PidTuningEnv(config)

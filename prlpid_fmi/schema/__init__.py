@@ -9,11 +9,41 @@ from __future__ import annotations
 import json
 from typing import Any
 
-from prlpid_fmi.schema.model import (AgentModel, AnchorBandsModel, BaselineModel, ControllerModel, DeployModel, DisturbanceModel,
-                    EvaluationModel, GainsModel, LoopModel, PlantModel, PriorModel, RewardModel, ScenarioModel,
-                    SetpointModel, StrategiesModel, TrainingModel, default)
-from prlpid_fmi.schema.types import (ALGORITHMS, DISTURBANCE_TYPES, GAIN_MAPPINGS, GAIN_SCALES, LOOP_TARGETS, VEC_ENVS, Algorithm,
-                    AntiWindup, DisturbanceKind, DisturbanceType, GainMapping, GainScale, Smoothing, VecEnv)
+from prlpid_fmi.schema.model import (
+    AgentModel,
+    AnchorBandsModel,
+    BaselineModel,
+    ControllerModel,
+    DeployModel,
+    DisturbanceModel,
+    EvaluationModel,
+    GainsModel,
+    LoopModel,
+    PlantModel,
+    PriorModel,
+    RewardModel,
+    ScenarioModel,
+    SetpointModel,
+    StrategiesModel,
+    TrainingModel,
+    default,
+)
+from prlpid_fmi.schema.types import (
+    ALGORITHMS,
+    DISTURBANCE_TYPES,
+    GAIN_MAPPINGS,
+    GAIN_SCALES,
+    LOOP_TARGETS,
+    VEC_ENVS,
+    Algorithm,
+    AntiWindup,
+    DisturbanceKind,
+    DisturbanceType,
+    GainMapping,
+    GainScale,
+    Smoothing,
+    VecEnv,
+)
 
 SCHEMA_FILE_NAME = "scenario.schema.json"
 

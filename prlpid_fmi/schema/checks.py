@@ -122,7 +122,7 @@ def check_variable(desc, name: str, causalities: tuple[str, ...], role: str,
 # ---------------------------------------------------------------------------------------------
 # agent.extra against the Stable-Baselines3 constructor
 
-# constructor arguments the tool sets itself (prlpid_fmi.train.build_model); agent.<key> covers the rest
+# constructor arguments the tool sets itself (prlpid_fmi.tuning.agent.build_model); agent.<key> covers the rest
 _SET_BY_THE_TOOL = ("policy", "env", "seed", "device", "tensorboard_log", "verbose", "policy_kwargs", "_init_setup_model")
 
 

@@ -16,12 +16,12 @@ from pydantic import ValidationError
 
 from prlpid_fmi.schema.checks import did_you_mean
 
-_MISSING = object()
+MISSING = object()  # a key that is not written in the document
 
 
 def show(value: Any) -> str:
     """A value as YAML flow text (strings quoted), at most 80 characters."""
-    if value is _MISSING:
+    if value is MISSING:
         return "nothing"
     text = repr(value) if isinstance(value, str) else yaml.safe_dump(value, default_flow_style=True,
                                                                       width=10_000).strip()
@@ -47,21 +47,21 @@ def key_path(loc: tuple, doc: Any = None) -> str:
 
 def _child(node: Any, part: Any) -> Any:
     if isinstance(node, dict):
-        return node.get(part, _MISSING) if part in node else _MISSING
+        return node.get(part, MISSING) if part in node else MISSING
     if isinstance(node, list) and isinstance(part, int) and 0 <= part < len(node):
         return node[part]
-    return _MISSING
+    return MISSING
 
 
 def raw_value(doc: Any, loc: tuple) -> Any:
-    """The value at `loc` as written in the document; a dict key for a '[key]' location; _MISSING if absent."""
+    """The value at `loc` as written in the document; a dict key for a '[key]' location; MISSING if absent."""
     node = doc
     for i, part in enumerate(loc):
         if part == "[key]":
             return loc[i - 1]
         node = _child(node, part)
-        if node is _MISSING:
-            return _MISSING
+        if node is MISSING:
+            return MISSING
     return node
 
 
@@ -181,7 +181,7 @@ def describe(node: dict) -> str:
 # ---------------------------------------------------------------------------------------------
 # pydantic errors -> lines
 
-_PROBLEMS = {
+PROBLEMS = {  # pydantic error type -> the words of a message line
     "missing": "missing key",
     "extra_forbidden": "unknown key",
     "literal_error": "unknown value",
@@ -214,13 +214,13 @@ def error_line(file: str, doc: Any, err: dict) -> str:
     loc = tuple(err["loc"])
     kind = err["type"]
     ctx = err.get("ctx") or {}
-    parent = raw_value(doc, loc[:-1]) if loc else _MISSING
+    parent = raw_value(doc, loc[:-1]) if loc else MISSING
     if kind == "missing" and loc and isinstance(loc[-1], int) and isinstance(parent, list):
         loc, kind, ctx = loc[:-1], "too_short", {"actual_length": len(parent)}  # a too short [low, high] pair
     raw = raw_value(doc, loc)
     if "got" in ctx:
         got = ctx["got"]
-    elif raw is not _MISSING:
+    elif raw is not MISSING:
         got = show(raw)
     else:  # not in the file: a default was checked, or a required key is missing
         default = err.get("input")
@@ -252,7 +252,7 @@ def error_line(file: str, doc: Any, err: dict) -> str:
         problem_text = f"list of length {length}" if not isinstance(raw, dict) else f"{length} entries"
         expected = expected_at(loc)
     else:
-        problem_text = _PROBLEMS.get(kind, err.get("msg", "invalid").lower())
+        problem_text = PROBLEMS.get(kind, err.get("msg", "invalid").lower())
         expected = expected_at(loc)
     return f"{file}: {key_path(loc, doc)}: {problem_text} (got {got}; expected {expected})"
 

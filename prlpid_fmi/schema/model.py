@@ -14,17 +14,45 @@ from __future__ import annotations
 import math
 from typing import Annotated, Any, Literal, Optional
 
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 from pydantic_core import PydanticCustomError
-from pydantic import (AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field, ValidationInfo,
-                      field_validator, model_validator)
 
 from prlpid_fmi.control.reward import RewardWeights
 from prlpid_fmi.control.smoothing import DEFAULT_ALPHA, DEFAULT_WINDOW
 from prlpid_fmi.schema import checks
 from prlpid_fmi.schema.checks import check_variable, state_of
-from prlpid_fmi.schema.types import (LOOP_TARGETS, Algorithm, AntiWindup, Count, DisturbanceType, Finite, Flag, Fraction,
-                    GainMapping, GainScale, Isolation, Name, NonNegative, Positive, Seed, Smoothing, Steps, VecEnv,
-                    _number, number, problem)
+from prlpid_fmi.schema.types import (
+    LOOP_TARGETS,
+    Algorithm,
+    AntiWindup,
+    Count,
+    DisturbanceType,
+    Finite,
+    Flag,
+    Fraction,
+    GainMapping,
+    GainScale,
+    Isolation,
+    Name,
+    NonNegative,
+    Positive,
+    Seed,
+    Smoothing,
+    Steps,
+    VecEnv,
+    as_number,
+    number,
+    problem,
+)
 
 _REWARD = RewardWeights()
 
@@ -456,7 +484,7 @@ def _setpoint_value(value: Any, info: ValidationInfo) -> Any:
         if n is not None and len(value) != n:
             raise problem(f"{len(value)} setpoints for {n} loop(s)", f"a list of {n} numbers, one per loop")
         return value
-    value = _number(value)
+    value = as_number(value)
     if n is not None and n != 1:
         raise problem(f"a single setpoint for {n} loops", f"a list of {n} numbers, one per loop")
     return [value]
@@ -675,7 +703,7 @@ class BaselineModel(Section):
     popsize: Count = Field(8, description="population = popsize x number of gains searched")
 
 
-ScheduleBy = Literal["auto", "setpoint", "measurement", "error"]  # deploy.schedule_by (prlpid_fmi.transients)
+ScheduleBy = Literal["auto", "setpoint", "measurement", "error"]  # deploy.schedule_by (prlpid_fmi.tuning.schedule.trajectories)
 
 
 class DeployModel(Section):

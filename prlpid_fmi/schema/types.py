@@ -27,7 +27,7 @@ GainScale = Literal["log", "linear"]
 GainMapping = Literal["anchored", "absolute"]
 Algorithm = Literal["ppo", "sac", "td3"]
 VecEnv = Literal["dummy", "subproc"]
-Isolation = Literal["auto", "process", "none"]  # where the plant FMU runs (prlpid_fmi.isolation)
+Isolation = Literal["auto", "process", "none"]  # where the plant FMU runs (prlpid_fmi.loop.isolated)
 DisturbanceType = Literal["step", "pulse", "parameter_change"]
 DisturbanceKind = Literal["fmu", "actuator", "measurement"]  # config.Disturbance.kind
 LOOP_TARGETS = ("actuator", "measurement")  # disturbance targets that act on a loop, not on the FMU
@@ -53,7 +53,8 @@ def problem(text: str, expected: Optional[str] = None, got: Optional[str] = None
 _NUMBER_TEXT = re.compile(r"^[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
 
 
-def _number(value: Any) -> Any:
+def as_number(value: Any) -> Any:
+    """A scenario value as a number: numeric text becomes a float; NaN, bools and other types are refused."""
     if isinstance(value, str) and _NUMBER_TEXT.match(value.strip()):
         return float(value)
     if isinstance(value, bool) or not isinstance(value, (int, float)):
@@ -63,7 +64,8 @@ def _number(value: Any) -> Any:
     return value
 
 
-def _integer(value: Any) -> Any:
+def as_integer(value: Any) -> Any:
+    """A scenario value as an integer: a whole float (5e4) becomes an int; fractions, bools and other types are refused."""
     if isinstance(value, float) and value.is_integer():
         return int(value)
     if isinstance(value, bool) or not isinstance(value, int):
@@ -73,12 +75,12 @@ def _integer(value: Any) -> Any:
 
 def number(infinite: bool = False, **bounds: float) -> Any:
     """A float type with pydantic bounds (gt, ge, lt, le); finite unless `infinite`."""
-    return Annotated[float, Field(allow_inf_nan=infinite, **bounds), BeforeValidator(_number)]
+    return Annotated[float, Field(allow_inf_nan=infinite, **bounds), BeforeValidator(as_number)]
 
 
 def integer(**bounds: int) -> Any:
     """An int type with pydantic bounds; 200.0 is read as 200, true/false and 1.5 are refused."""
-    return Annotated[int, Field(**bounds), BeforeValidator(_integer)]
+    return Annotated[int, Field(**bounds), BeforeValidator(as_integer)]
 
 
 Finite = number()

@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Callable, Iterator, Optional
 
 from prlpid_fmi import rundir as rd
-from prlpid_fmi.errors import Interrupted, PrlPidError, RunError
+from prlpid_fmi.errors import ArgumentError, Interrupted, PrlPidError, RunError
 from prlpid_fmi.rundir import write_atomic, write_json
 from prlpid_fmi.sweep.spec import Sweep
 
@@ -249,14 +249,14 @@ def connect_ray(address: Optional[str]) -> bool:
     try:
         import ray
     except ImportError:
-        raise RunError("--ray: Ray is not installed (got no module 'ray'; expected `pip install "
-                       "\"prlpid-fmi[ray]\"` or `pip install \"ray[default]\"`)") from None
+        raise ArgumentError("{ray}: Ray is not installed (got no module 'ray'; expected `pip install "
+                            "\"prlpid-fmi[ray]\"` or `pip install \"ray[default]\"`)") from None
     if ray.is_initialized():
         return False
     expected = "expected the address of a running Ray cluster: host:6379, ray://host:10001 or auto"
     reason = _unreachable(address) if address else None
     if reason:
-        raise RunError(f"--ray {address}: cannot reach a Ray cluster there (got {reason}; {expected})")
+        raise ArgumentError(f"{{ray}} {address}: cannot reach a Ray cluster there (got {reason}; {expected})")
     import logging
 
     kwargs: dict = {"address": address, "log_to_driver": False, "logging_level": logging.WARNING}
@@ -265,7 +265,8 @@ def connect_ray(address: Optional[str]) -> bool:
     try:
         ray.init(**kwargs)
     except (ConnectionError, RuntimeError, ValueError) as exc:
-        raise RunError(f"--ray {address or ''}: cannot connect (got {' '.join(str(exc).split())}; {expected})") from None
+        raise ArgumentError(f"{{ray}} {address or ''}: cannot connect (got {' '.join(str(exc).split())}; "
+                            f"{expected})") from None
     return True
 
 
@@ -317,10 +318,10 @@ def run_sweep(path: str | Path, out: str | Path | None = None, workers: Optional
     from prlpid_fmi.sweep.summary import write_summary
 
     if workers is not None and workers < 1:
-        raise RunError(f"--workers: must be at least 1 (got {workers}; expected a number of processes >= 1)")
+        raise ArgumentError(f"{{workers}}: must be at least 1 (got {workers}; expected a number of processes >= 1)")
     if ray and workers is not None:
-        raise RunError(f"--workers: not used with --ray (got --workers {workers}; expected no --workers: Ray runs "
-                       "one trial per free CPU of the cluster)")
+        raise ArgumentError(f"{{workers}}: not used with {{ray}} (got {{workers}} {workers}; expected no {{workers}}: "
+                            "Ray runs one trial per free CPU of the cluster)")
     started, t0 = rd.now(), time.perf_counter()
     sweep = load_sweep(path)
     out = Path(out) if out is not None else default_out(sweep)

@@ -39,8 +39,8 @@ from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Fie
 from prlpid_fmi.errors import ScenarioError
 from prlpid_fmi.schema.checks import did_you_mean
 from prlpid_fmi.schema.document import parse_yaml, syntax_error_line
-from prlpid_fmi.schema.messages import _MISSING, _PROBLEMS, key_path, raw_value, schema_at, show
-from prlpid_fmi.schema.types import MAX_SEED, Count, Name, Seed, _integer, problem
+from prlpid_fmi.schema.messages import MISSING, PROBLEMS, key_path, raw_value, schema_at, show
+from prlpid_fmi.schema.types import MAX_SEED, Count, Name, Seed, as_integer, problem
 
 SWEEP_DIR_NAME = "sweeps"  # bundled sweep files: scenarios/sweeps/<name>.yaml
 BASE_VARIANT = "base"
@@ -105,7 +105,7 @@ def _seeds(value: Any) -> Any:
     """A count n means seeds 0 .. n-1."""
     if isinstance(value, list):
         return value
-    n = _integer(value)
+    n = as_integer(value)
     if not 1 <= n <= MAX_SEED_COUNT:
         raise problem("out of range", _EXPECTED["seeds"])
     return list(range(n))
@@ -154,7 +154,7 @@ def _error_line(file: str, doc: Any, err: dict) -> str:
     loc = tuple(err["loc"])
     kind, ctx = err["type"], err.get("ctx") or {}
     raw = raw_value(doc, loc)
-    got = ctx.get("got") or ("nothing" if raw is _MISSING else show(raw))
+    got = ctx.get("got") or ("nothing" if raw is MISSING else show(raw))
     expected = _EXPECTED.get(loc[0] if loc else "", "a valid value")
     if kind == "scenario":
         text, expected = ctx["problem"], ctx.get("expected") or expected
@@ -166,7 +166,7 @@ def _error_line(file: str, doc: Any, err: dict) -> str:
     elif kind == "too_short":
         text = "empty"
     else:
-        text = _PROBLEMS.get(kind, err.get("msg", "invalid").lower())
+        text = PROBLEMS.get(kind, err.get("msg", "invalid").lower())
         if loc and loc[0] == "seeds" and len(loc) > 1:
             expected = f"an integer in [0, {MAX_SEED}]"
     return f"{file}: {key_path(loc, doc)}: {text} (got {got}; expected {expected})"
@@ -183,7 +183,7 @@ class Variant:
 
     name: str
     overrides: tuple
-    scenario: Any  # prlpid_fmi.scenario.Scenario
+    scenario: Any  # prlpid_fmi.scenario.load.Scenario
 
 
 @dataclass(frozen=True)
@@ -245,7 +245,8 @@ def _merge(into: dict, key: str, value: Any) -> None:
 
 def _resolve_base(arg: str, sweep_dir: Path) -> Path:
     """The base scenario: a file (relative to the sweep file's folder) wins over a bundled scenario's name."""
-    from prlpid_fmi.scenario.presets import SCENARIO_DIR, bundled_scenario_names
+    from prlpid_fmi.bundled import SCENARIO_DIR
+    from prlpid_fmi.scenario.presets import bundled_scenario_names
 
     local = sweep_dir / Path(arg).expanduser()
     if local.is_file():
@@ -258,7 +259,7 @@ def _resolve_base(arg: str, sweep_dir: Path) -> Path:
 
 def resolve_sweep(arg: str | Path) -> Path:
     """A sweep argument as a file: an existing path, else a bundled sweep's name (scenarios/sweeps/<name>.yaml)."""
-    from prlpid_fmi.scenario.presets import SCENARIO_DIR
+    from prlpid_fmi.bundled import SCENARIO_DIR
 
     path = Path(arg)
     if path.exists():
@@ -283,7 +284,7 @@ def is_sweep_file(path: Path) -> bool:
 
 def bundled_sweep_names() -> list[str]:
     """Names of the bundled sweep files (scenarios/sweeps/<name>.yaml), sorted."""
-    from prlpid_fmi.scenario.presets import SCENARIO_DIR
+    from prlpid_fmi.bundled import SCENARIO_DIR
 
     return sorted(p.stem for p in (SCENARIO_DIR / SWEEP_DIR_NAME).glob("*.yaml"))
 

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from prlpid_fmi import rundir as rd
-from prlpid_fmi.deliver.rule import overall_metric
+from prlpid_fmi.metrics import overall_metric
 from prlpid_fmi.rundir import write_atomic
 
 CONTROLLERS = {"policy": "adaptive policy", "schedule": "replayed schedule", "fixed_pid": "fixed PID",
@@ -249,11 +249,9 @@ def curve_seeds(sweep, variant: str, finished: dict) -> tuple:
 
 def plot_learning_curves(sweep, out: Path, path: Path, finished: dict | None = None) -> Path:
     """finished: {variant: seeds of its finished trials} (see curve_seeds; None: every seed)."""
-    import matplotlib.pyplot as plt
+    from prlpid_fmi.report.plots import new_figure, save_figure
 
-    from prlpid_fmi.report.plots import _save
-
-    fig, ax = plt.subplots(figsize=(9, 5))
+    fig, ax = new_figure(figsize=(9, 5))
     drawn = 0
     for i, v in enumerate(sweep.variants):
         seeds = curve_seeds(sweep, v.name, finished or {})
@@ -275,19 +273,17 @@ def plot_learning_curves(sweep, out: Path, path: Path, finished: dict | None = N
     ax.set_title(f"{sweep.name}: learning curves, mean over seeds ± 1 standard deviation")
     ax.grid(True, alpha=0.3)
     fig.tight_layout()
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def plot_metrics(sweep, stats: list[dict], rows: list[dict], path: Path) -> Path:
     """Overall mean per variant and controller with 95 % intervals and each seed's value, one panel per metric."""
-    import matplotlib.pyplot as plt
-
-    from prlpid_fmi.report.plots import _save
+    from prlpid_fmi.report.plots import new_figure, save_figure
 
     index = {(s["variant"], s["controller"], s["metric"]): s for s in stats if s["interval"] == OVERALL}
     shown = [m for m in METRICS if any(s["metric"] == m and s["n_finite"] for s in index.values())] or ["ISE"]
     variants = [v.name for v in sweep.variants]
-    fig, axes = plt.subplots(len(shown), 1, figsize=(max(7, 1.4 * len(variants) + 3), 2.8 * len(shown)),
+    fig, axes = new_figure(len(shown), 1, figsize=(max(7, 1.4 * len(variants) + 3), 2.8 * len(shown)),
                              squeeze=False)
     width = 0.8 / len(CONTROLLERS)
     x = np.arange(len(variants))
@@ -315,7 +311,7 @@ def plot_metrics(sweep, stats: list[dict], rows: list[dict], path: Path) -> Path
     fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8, frameon=False)
     axes[0, 0].set_title(f"{sweep.name}: overall metrics, mean and 95 % interval over seeds (cut at 0)")
     fig.tight_layout(rect=(0, 0.35 / fig.get_figheight(), 1, 1))
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 # -- all of it -------------------------------------------------------------------------------------

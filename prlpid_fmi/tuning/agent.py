@@ -16,12 +16,12 @@ import gymnasium as gym
 import torch
 from torch import nn
 
-from prlpid_fmi import schema
+import prlpid_fmi.schema as schema
 from prlpid_fmi.config import AgentConfig, TuningConfig
-from prlpid_fmi.loop.core import resolve_fmu
-from prlpid_fmi.loop.env import PidTuningEnv, is_anchored
-from prlpid_fmi.fmu import describe_fmu
 from prlpid_fmi.errors import PrlPidError, RunError
+from prlpid_fmi.fmu import describe_fmu
+from prlpid_fmi.fmu.resolve import resolve_fmu
+from prlpid_fmi.loop.env import PidTuningEnv, is_anchored
 from prlpid_fmi.progress import training_progress
 from prlpid_fmi.rundir import write_atomic
 

@@ -12,7 +12,7 @@ with w_cv = reward.control_variation_weight, the same weight the agent's reward 
 does not buy ISE with a chattering actuator. A diverging episode costs DIVERGED_COST.
 
 Robustness: with `max_sensitivity` given, the result must have a peak sensitivity Ms (measured on the
-FMU at the middle of the setpoint range, prlpid_fmi.margins) at most that limit. The cheapest few
+FMU at the middle of the setpoint range, prlpid_fmi.robustness.margins) at most that limit. The cheapest few
 members of the final DE population are tried in order of cost; if none qualifies, the best one is
 detuned by the smallest lambda that meets the limit, in two ways: Kp / lambda with Ti * lambda (a uniformly
 slower loop: the integral gain Kp/Ti falls by lambda^2, so the last part of a step can creep in) and Kp /
@@ -21,17 +21,18 @@ lambda with Ti kept (the integral time stays); the one with the lower J is kept.
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import differential_evolution
 
-from prlpid_fmi.loop.actions import ActionMap, Gains, gains_from_values
 from prlpid_fmi.config import TuningConfig
+from prlpid_fmi.loop.actions import ActionMap
 from prlpid_fmi.loop.core import LoopCore
-from prlpid_fmi.loop.isolated import make_core
 from prlpid_fmi.loop.evaluation import Trajectory, gains_rollout
+from prlpid_fmi.loop.gains import Gains, gains_from_values
+from prlpid_fmi.loop.isolated import make_core
+from prlpid_fmi.robustness.margins import margins_of, operating_point
 
 DIVERGED_COST = 1e6
 
@@ -47,8 +48,7 @@ class FixedPid:
 
     def gains_values(self) -> tuple:
         """(Kp, Ti, Td, coupling) lists, what LoopCore.step takes."""
-        g = self.gains
-        return (g.Kp.tolist(), g.Ti.tolist(), g.Td.tolist(), None if g.coupling is None else g.coupling.tolist())
+        return self.gains.values()
 
 
 def episode_cost(traj: Trajectory, core: LoopCore) -> float:
@@ -76,24 +76,13 @@ DETUNE_SCAN = (1, 2, 4, 8, 16, 30)  # ... scanned at these k (lambda 1.15 to 66)
 DETUNE_BISECTIONS = 4
 
 
-def operating_point(config: TuningConfig, value: float | None = None) -> list[float]:
-    """Setpoints per loop at the middle of their ranges, loop 0's replaced by `value` when given."""
-    point = [0.5 * (l.setpoint_range[0] + l.setpoint_range[1]) for l in config.loops]
-    if value is not None:
-        point[0] = float(value)
-    return point
 
 
-def margins_of(config: TuningConfig, gains: tuple, point: list[float]):
-    """prlpid_fmi.margins.Margins of constant gains (Kp, Ti, Td, coupling) at an operating point (setpoints)."""
-    from prlpid_fmi.robustness.margins import loop_margins
-
-    return loop_margins(config, gains[0], gains[1], gains[2], point, coupling=gains[3])
 
 
 def _meets(config: TuningConfig, gains: tuple, point: list[float], limit: float) -> bool:
     """Ms <= limit at the point. The search is conservative: an unreliable estimate counts too (a loop
-    in a limit cycle at the Nyquist frequency gives one), unlike the deliverable (deliver.meets)."""
+    in a limit cycle at the Nyquist frequency gives one), unlike the deliverable (deliver.rule.meets)."""
     return margins_of(config, gains, point).Ms <= limit
 
 

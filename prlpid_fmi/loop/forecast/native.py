@@ -16,9 +16,9 @@ import ctypes
 import math
 from ctypes import c_double, c_int, c_uint, c_void_p
 
-from prlpid_fmi.loop.forecast.base import _Forecast
 from prlpid_fmi.control.pid import ANTI_WINDUP_MODES
 from prlpid_fmi.errors import PlantError
+from prlpid_fmi.loop.forecast.base import Forecast
 
 ABI_VERSION = 1
 MAX_LOOPS = 3
@@ -92,8 +92,8 @@ def native_unavailable(plant, prior) -> str | None:
     return None
 
 
-class NativeForecast(_Forecast):
-    """The forecast as one call into the FMU's binary; arguments as control.forecast._Forecast.
+class NativeForecast(Forecast):
+    """The forecast as one call into the FMU's binary; arguments as control.forecast.Forecast.
 
     After a call, `last_rewards` and `last_measurements` (built on access from the C buffers) describe
     the roll-out as in FmiForecast.
@@ -109,7 +109,7 @@ class NativeForecast(_Forecast):
         core = pid.pid if self.coupled else pid
         if core.sample_time_s != prior.sample_time_s:
             raise ValueError(f"PID sample time {core.sample_time_s} s differs from the prior's {prior.sample_time_s} s")
-        vr = prior._vr_by_name
+        vr = prior.value_reference
         s = self._setup = ForecastSetup()
         s.n_loops, s.horizon, s.coupled = n, N, int(self.coupled)
         s.anti_windup = ANTI_WINDUP_CODES[core.anti_windup]
@@ -119,8 +119,8 @@ class NativeForecast(_Forecast):
         s.has_Tt = int(Tt is not None)
         if Tt is not None:
             s.Tt[:n] = Tt.tolist()
-        s.input_vr[:n] = [vr[name] for name in prior.inputs]
-        s.output_vr[:n] = [vr[name] for name in prior.outputs]
+        s.input_vr[:n] = [vr(name) for name in prior.inputs]
+        s.output_vr[:n] = [vr(name) for name in prior.outputs]
         s.pid_sample_time, s.step_size = core.sample_time_s, prior.sample_time_s
         s.u_min[:n], s.u_max[:n] = core.u_min.tolist(), core.u_max.tolist()
         s.scale[:n], s.bound[:n], s.u_scale[:n] = self.scale, self.bound, self.u_scale
@@ -133,7 +133,7 @@ class NativeForecast(_Forecast):
         names = list(self.overrides)
         for name in names:
             prior.description.require(name, ("input", "parameter"), "an override")
-        self._override_vr = (c_uint * max(1, len(names)))(*[vr[name] for name in names])
+        self._override_vr = (c_uint * max(1, len(names)))(*[vr(name) for name in names])
         self._override_value = (c_double * max(1, len(names)))(*[self.overrides[name] for name in names])
         s.n_overrides = len(names)
         s.override_vr = ctypes.cast(self._override_vr, ctypes.POINTER(c_uint))

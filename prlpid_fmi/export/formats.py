@@ -1,0 +1,134 @@
+"""The code formats a gain table is exported as: a registry of CodeFormat entries over one intermediate form.
+
+Each format renders ``DeployedController`` (prlpid_fmi.export.controller, built from a GainSchedule by
+``from_schedule``) with jinja2 templates shipped in ``prlpid_fmi/export/templates/``:
+
+- ``st``: an IEC 61131-3 FUNCTION_BLOCK (``controller.st.j2``, body in ``st_body.j2``);
+- ``plcopen``: PLCopen TC6 XML 2.01 holding the same block (``plcopen.xml.j2``, the same body);
+- ``c``: a header and a source file, C99, no allocation, no libm (``controller.h.j2``, ``controller.c.j2``).
+
+A new format is one CodeFormat entry in ``CODE_FORMATS`` and its templates; the CLI's ``--format`` choices,
+the output file names and the report's export hint all read the registry.
+
+Every format computes exactly what ``prlpid_fmi.tuning.schedule.replay.replay_schedule`` runs (and
+docs/deploy.md describes), sample by sample:
+
+1. scheduling value x: the setpoint, measurement or error (setpoint - measurement, uncoupled) of one
+   loop, or an external input;
+2. gains: numpy.interp's rule per table column — x <= first breakpoint: first row; x >= last: last
+   row; x equal to a breakpoint: that row; else slope*(x - bp[j]) + T[j] with
+   slope = (T[j+1] - T[j])/(bp[j+1] - bp[j]) (held outside the table, never extrapolated);
+3. error e = setpoint - measurement, or the coupled error of eq. 27 summed left to right;
+4. first sample after a reset: e(-1) := e(0); when any clipped start output u0 is non-zero, the error
+   sum is preset to u0/(Kp/Ti) (bumpless start, as LoopCore does);
+5. the positional PID of eq. 2 with the configured derivative filter and anti-windup, operation by
+   operation as prlpid_fmi.control.pid.PID.step_values.
+
+Back-calculation's tracking time Tt = sqrt(Ti*Td) is computed every sample from the interpolated
+Ti and Td: ST calls the standard SQRT; C has its own correctly rounded square root without libm (x scaled
+by powers of 4 into [1, 4), Newton's method, then a move to the neighbouring double while an exact
+midpoint test says the root lies beyond it), so C reproduces Python's math.sqrt.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+
+from prlpid_fmi.errors import ArgumentError
+from prlpid_fmi.export.controller import DeployedController
+from prlpid_fmi.version import __version__
+
+# numpy, the schedule and the PID are imported where used: the CLI imports this module for FORMATS
+
+LREAL_MAX = "1.7976931348623157E308"  # ST has no infinity: an unbounded limit is the largest LREAL
+
+
+@dataclass(frozen=True)
+class CodeFormat:
+    """One code format: its `--format` name, what it is, and the files it writes as (suffix, template) pairs,
+    in writing order."""
+
+    name: str
+    description: str
+    files: tuple[tuple[str, str], ...]
+
+
+CODE_FORMATS = {f.name: f for f in (
+    CodeFormat("st", "IEC 61131-3 Structured Text", ((".st", "controller.st.j2"),)),
+    CodeFormat("plcopen", "PLCopen XML", ((".xml", "plcopen.xml.j2"),)),
+    CodeFormat("c", "C99", ((".h", "controller.h.j2"), (".c", "controller.c.j2"))),
+)}
+FORMATS = ("csv", *CODE_FORMATS)  # `export --format`: the gain table itself, or one of the code formats
+
+
+# -- literals ---------------------------------------------------------------------------------------
+
+def c_real(x: float) -> str:
+    """A C double literal that reads back as exactly `x` (shortest round trip); HUGE_VAL for infinities."""
+    x = float(x)
+    if math.isinf(x):
+        return "HUGE_VAL" if x > 0 else "(-HUGE_VAL)"
+    text = repr(x)
+    return text if any(ch in text for ch in ".en") else text + ".0"
+
+
+def st_real(x: float) -> str:
+    """An IEC 61131-3 LREAL literal that reads back as exactly `x`: LREAL#[-]<digits>.<digits>[E<exp>].
+
+    ST has no infinity; an infinite limit becomes the largest LREAL (clipping to it changes no finite u).
+    """
+    x = float(x)
+    if math.isinf(x):
+        return "LREAL#" + ("-" if x < 0 else "") + LREAL_MAX
+    mantissa, _, exponent = repr(abs(x)).partition("e")
+    if "." not in mantissa:
+        mantissa += ".0"
+    return "LREAL#" + ("-" if math.copysign(1.0, x) < 0 else "") + mantissa + (f"E{int(exponent)}" if exponent else "")
+
+
+def st_comment(text: str) -> str:
+    """Text safe inside an ST/Pascal comment (* ... *)."""
+    return text.replace("(*", "( *").replace("*)", "* )")
+
+
+# -- rendering --------------------------------------------------------------------------------------
+
+def _environment():
+    import jinja2
+
+    env = jinja2.Environment(loader=jinja2.PackageLoader("prlpid_fmi.export", "templates"),
+                             undefined=jinja2.StrictUndefined, keep_trailing_newline=True,
+                             trim_blocks=True, lstrip_blocks=True, autoescape=False)
+    env.filters.update(c=c_real, st=st_real, st_comment=st_comment)
+    return env
+
+
+def render(controller: DeployedController, fmt: str, basename: str | None = None,
+           created: datetime | None = None) -> dict[str, str]:
+    """The files of code format `fmt` (a CODE_FORMATS name): {file name: text}, in writing order.
+
+    Names: <basename>.st; <basename>.xml; <basename>.h and <basename>.c (basename: default the
+    controller's name). created: the PLCopen file header's time (default now, UTC).
+    """
+    env = _environment()
+    base = basename or controller.name
+    ctx = {"ctl": controller, "version": __version__, "P": controller.name.upper(), "p": controller.name,
+           "fb": f"FB_{controller.name}", "header": f"{base}.h",
+           "created": (created or datetime.now(timezone.utc)).strftime("%Y-%m-%dT%H:%M:%S")}
+    if fmt not in CODE_FORMATS:
+        raise ArgumentError(f"{{fmt}} {fmt!r}: no code for it (expected one of {', '.join(CODE_FORMATS)})")
+    return {f"{base}{suffix}": env.get_template(template).render(ctx) for suffix, template in CODE_FORMATS[fmt].files}
+
+
+def output_paths(output: Path, fmt: str) -> list[Path]:
+    """The files `export --format fmt -o output` writes: output itself for a one-file format; for a format of
+    several files (C: .h and .c), <stem><suffix> of each beside it (a suffix of the format's on output is
+    dropped first)."""
+    files = CODE_FORMATS[fmt].files
+    if len(files) == 1:
+        return [output]
+    suffixes = [suffix for suffix, _ in files]
+    base = output.with_suffix("") if output.suffix in suffixes else output
+    return [base.with_name(base.name + suffix) for suffix in suffixes]

@@ -1,0 +1,109 @@
+"""Evaluate a run's controllers on its scenario's evaluation (or another scenario's): metrics, gains.csv,
+plots and the evaluation part of report.md; `evaluate RUN` writes them into a new evaluations/<n>/."""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+from prlpid_fmi import rundir as rd
+from prlpid_fmi.config import TuningConfig
+from prlpid_fmi.deliver.rule import Deployed
+from prlpid_fmi.report.markdown import deployed_section, loop_units, render_report
+from prlpid_fmi.run.gains_csv import trajectory_csv
+from prlpid_fmi.run.trained import anchor_gains, deployed_controller, load_policy, load_trained, on_other_evaluation
+from prlpid_fmi.rundir import write_atomic, write_json
+from prlpid_fmi.scenario.load import Scenario, scenario_to_yaml
+
+
+@dataclass
+class Evaluation:
+    """The controllers of a run on one evaluation schedule: compute_metrics dicts and Trajectories.
+
+    fixed / schedule (and their trajectories) are None when the run has no fixed PID or no gain table.
+    """
+
+    config: TuningConfig
+    policy: dict
+    policy_traj: object
+    fixed: dict | None = None
+    fixed_traj: object = None
+    schedule: dict | None = None
+    schedule_traj: object = None
+
+
+def evaluate_controllers(scenario: Scenario, policy, fixed: dict | None, anchor=None, schedule=None) -> Evaluation:
+    """Run the policy, the fixed PID (fixed_pid.json's content) and the gain table (a GainSchedule, replayed as a
+    plain PID) on the scenario's evaluation, with its seed and intervals."""
+    from prlpid_fmi.loop.evaluation import constant_gains, evaluate, evaluate_gains
+    from prlpid_fmi.tuning.schedule.replay import replay_schedule
+
+    config = scenario.evaluation_config()
+    intervals = list(scenario.evaluation.intervals) or None
+    seed = scenario.evaluation.seed
+    policy_m, traj = evaluate(policy, config, seed=seed, intervals=intervals, anchor=anchor)
+    result = Evaluation(config, policy_m, traj)
+    if fixed is not None:
+        g = fixed["gains"]
+        result.fixed, result.fixed_traj = evaluate_gains(constant_gains(g["Kp"], g["Ti"], g["Td"], g.get("coupling")),
+                                                         config, seed=seed, intervals=intervals)
+    if schedule is not None:
+        result.schedule, result.schedule_traj = replay_schedule(schedule, config, seed=seed, intervals=intervals)
+    return result
+
+
+def write_evaluation_files(out_dir: Path, scenario: Scenario, ev: Evaluation, fixed: dict | None) -> None:
+    """gains.csv (the policy's trajectory) and the response, control-signal and gains plots."""
+    from prlpid_fmi.report import plots
+
+    config = ev.config
+    loop_names = [l.output for l in config.loops]
+    write_atomic(out_dir / rd.GAINS, trajectory_csv(ev.policy_traj, loop_names, config.sample_time_s))
+    plots.plot_response(ev.policy_traj, config, out_dir / rd.RESPONSE_PLOT, title=f"{scenario.name}: response",
+                        baseline_traj=ev.fixed_traj, schedule_traj=ev.schedule_traj)
+    plots.plot_control_signal(ev.policy_traj, config, out_dir / rd.CONTROL_SIGNAL_PLOT, baseline_traj=ev.fixed_traj,
+                              schedule_traj=ev.schedule_traj, title=f"{scenario.name}: control signal")
+    plots.plot_gains(ev.policy_traj, config, out_dir / rd.GAINS_PLOT, baseline_gains=fixed["gains"] if fixed else None,
+                     schedule_traj=ev.schedule_traj, title=f"{scenario.name}: PID gains set by the adaptive policy")
+
+
+def evaluation_metrics(ev: Evaluation, fixed: dict | None) -> dict:
+    """metrics.json's evaluation part: the policy's metrics and the fixed PID's gains and metrics."""
+    return {"policy": ev.policy, "fixed_pid": {"gains": fixed["gains"], "metrics": ev.fixed} if fixed else None}
+
+
+def evaluation_report(scenario: Scenario, ev: Evaluation, fixed: dict | None, source: Path | None,
+                      learning_curve: bool, opening: tuple[str, ...] = ()) -> str:
+    """report.md of this evaluation, with `opening` sections between its title and the metric table."""
+    return render_report(scenario, ev.policy, ev.fixed, fixed["gains"] if fixed else None, source,
+                         loop_units(ev.config), learning_curve=learning_curve, opening=opening)
+
+
+def evaluate_run(run_dir: str | Path, scenario_path: str | Path | None = None) -> Path:
+    """Re-evaluate a trained run (optionally on another scenario's evaluation) into a new evaluations/<n>/:
+    the policy, the fixed PID and the controller the run deployed, side by side."""
+    run_dir = Path(run_dir)
+    trained = load_trained(run_dir)
+    scenario = trained if scenario_path is None else on_other_evaluation(trained, scenario_path)
+    policy = load_policy(run_dir, trained.agent.algorithm)
+    base = run_dir / rd.EVALUATIONS
+    base.mkdir(exist_ok=True)
+    n = 1 + max((int(p.name) for p in base.iterdir() if p.name.isdigit()), default=0)
+    out_dir = base / str(n)
+    out_dir.mkdir()
+    fixed = json.loads((run_dir / rd.FIXED_PID).read_text()) if (run_dir / rd.FIXED_PID).is_file() else None
+    deployed, schedule = deployed_controller(run_dir)
+    write_atomic(out_dir / rd.SCENARIO, scenario_to_yaml(scenario))
+    source = Path(scenario_path) if scenario_path is not None else run_dir / rd.SCENARIO
+    ev = evaluate_controllers(scenario, policy, fixed, anchor=anchor_gains(trained, fixed), schedule=schedule)
+    write_evaluation_files(out_dir, scenario, ev, fixed)
+    metrics = evaluation_metrics(ev, fixed)
+    opening = ()
+    if deployed is not None:
+        metrics["deployed"] = deployed
+        metrics["deployed_schedule"] = ev.schedule if deployed == Deployed.SCHEDULE else None
+        opening = (deployed_section(deployed, ev.schedule, ev.fixed, loop_units(ev.config)),)
+    write_json(out_dir / rd.METRICS, metrics)
+    write_atomic(out_dir / rd.REPORT, evaluation_report(scenario, ev, fixed, source, learning_curve=False,
+                                                        opening=opening))
+    return out_dir

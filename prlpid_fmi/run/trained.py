@@ -1,0 +1,97 @@
+"""A finished run directory read back: its scenario, trained policy, fixed PID and deployed controller."""
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+from prlpid_fmi import rundir as rd
+from prlpid_fmi.deliver.rule import Deployed
+from prlpid_fmi.errors import RunError
+from prlpid_fmi.loop.gains import gains_from_dict
+from prlpid_fmi.scenario.load import Scenario, load_scenario
+
+
+def one_line(exc: BaseException) -> str:
+    """An exception's message with its whitespace (newlines included) collapsed."""
+    return " ".join(str(exc).split())
+
+
+def load_policy(run_dir: Path, algorithm: str):
+    """The run's trained policy (model.zip, with vecnormalize.pkl's observation statistics when present) as a
+    Policy: observation (n_obs,) -> action (n_params,). RunError for a damaged or foreign file."""
+    from prlpid_fmi.loop.evaluation import model_policy
+    from prlpid_fmi.tuning.agent import load_model
+
+    path = run_dir / rd.MODEL
+    try:
+        model = load_model(path, algorithm)
+    except Exception as exc:  # a damaged file can fail in zipfile, pickle or torch: all mean the same here
+        raise RunError(f"{path}: cannot load the trained policy ({type(exc).__name__}: {one_line(exc)}; "
+                       f"expected a {algorithm.upper()} model.zip written by `tune`)") from None
+    vecnorm = None
+    if (run_dir / rd.VECNORMALIZE).is_file():
+        import pickle
+
+        try:
+            with open(run_dir / rd.VECNORMALIZE, "rb") as f:
+                vecnorm = pickle.load(f)
+        except (pickle.UnpicklingError, EOFError, AttributeError, ValueError) as exc:
+            raise RunError(f"{run_dir / rd.VECNORMALIZE}: cannot load the observation statistics "
+                           f"({type(exc).__name__}: {one_line(exc)}; expected the file written by `tune`)") from None
+        vecnorm.training = False
+    return model_policy(model, vecnorm)
+
+
+def with_isolation(scenario: Scenario, isolation: str) -> Scenario:
+    """The scenario with plant.isolation `isolation` where it is "auto"."""
+    if scenario.tuning.isolation != "auto" or isolation == "auto":
+        return scenario
+    return dataclasses.replace(scenario, tuning=dataclasses.replace(scenario.tuning, isolation=isolation))
+
+
+def anchor_gains(scenario: Scenario, fixed: dict | None):
+    """The fixed PID's Gains when the scenario's gain map is anchored (None: absolute map)."""
+    if fixed is None or scenario.tuning.gain_mapping != "anchored":
+        return None
+    return gains_from_dict(fixed["gains"])
+
+
+def load_trained(run_dir: Path) -> Scenario:
+    """The scenario of a finished run (its scenario.yaml), with the plant isolation its run.json recorded."""
+    if not (run_dir / rd.SCENARIO).is_file() or not (run_dir / rd.MODEL).is_file():
+        raise RunError(f"{run_dir}: not a finished run directory (expected {rd.SCENARIO} and {rd.MODEL} from `tune`)")
+    scenario = load_scenario(run_dir / rd.SCENARIO)
+    try:  # a run whose plant crashed the tool once keeps its plant in a worker process
+        isolation = json.loads((run_dir / rd.RUN_INFO).read_text()).get("isolation", "auto")
+    except (OSError, ValueError, AttributeError):
+        isolation = "auto"
+    return with_isolation(scenario, isolation)
+
+
+def on_other_evaluation(trained: Scenario, scenario_path: str | Path) -> Scenario:
+    """Another scenario's evaluation (setpoints, disturbances, ...) around the trained run's loops."""
+    other = load_scenario(scenario_path)
+    if [(l.input, l.output) for l in other.tuning.loops] != [(l.input, l.output) for l in trained.tuning.loops] \
+            or other.tuning.coupled != trained.tuning.coupled:
+        raise RunError(f"{scenario_path}: plant.loops differ from the trained run's "
+                       f"(got {[l.output for l in other.tuning.loops]}; expected the same loops and coupling)")
+    return with_isolation(dataclasses.replace(other, tuning=dataclasses.replace(
+        other.tuning, loops=trained.tuning.loops, coupled=trained.tuning.coupled,
+        coupling_range=trained.tuning.coupling_range)), trained.tuning.isolation)
+
+
+def deployed_controller(run_dir: Path):
+    """(what the run deployed: a Deployed, its schedule.csv as a GainSchedule when that is the adaptive
+    schedule); (None, None) for a run whose choice was not made (no metrics.json entry, e.g. an absolute map
+    without baseline)."""
+    from prlpid_fmi.tuning.schedule.csv_file import read_schedule_csv
+
+    try:
+        deployed = Deployed.read(json.loads((run_dir / rd.METRICS).read_text()).get("deployed"))
+    except (OSError, ValueError, AttributeError):
+        return None, None
+    if deployed == Deployed.SCHEDULE:
+        return (deployed, read_schedule_csv(run_dir / rd.SCHEDULE)) if (run_dir / rd.SCHEDULE).is_file() \
+            else (None, None)
+    return deployed, None

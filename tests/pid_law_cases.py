@@ -1,0 +1,508 @@
+"""The PID law of paper eq. 2 as data: hand-checked cases every implementation must reproduce.
+
+One specification, four implementations: the Python PID (prlpid_fmi/control/pid.py), the C reward
+forecast of the bundled plants (plant_sources/common/forecast.c), the exported C controller and the
+exported IEC 61131-3 Structured Text (prlpid_fmi/export/templates/). tests/test_pid_law_spec.py runs
+the cases through each of them (skipping, with the reason, a case an implementation cannot be given).
+Changing the law means changing this file: the equations below,
+`exact_u` (the same equations in exact rational arithmetic) and the literal numbers of the cases;
+the tests then say which implementation still follows the old law.
+
+The law, per loop i and sample k (dt = sample time [s]; e, I, D in error units, error units * s and
+error units / s; all gains are those of sample k)::
+
+    e(k)     = r(k) - y(k)
+    D(k)     = (e(k) - e(k-1)) / dt               backward difference
+    Ki(k)    = Kp(k) / Ti(k)                      Ti = inf: Ki = 0, no integral action
+    I_try    = I(k-1) + e(k) * dt                 the error sum includes the current error
+    u_try    = Kp(k) * (e(k) + Td(k) * D(k)) + Ki(k) * I_try
+             ( = Kp*(e + I_try/Ti + Td*D), eq. 2 )
+    u(k)     = clip(u_try, u_min, u_max)          the output (u_try exactly at a limit is not saturated)
+    I(k)     = I_try, except while saturated (u(k) != u_try):
+               clamping:          I(k) = I(k-1) when (u_try - u(k)) * Kp*e(k) > 0, i.e. when e(k)
+                                  pushes further into the limit (otherwise I_try is kept);
+               back_calculation:  I(k) = I_try + g * (u(k) - u_try) / Ki,  g = dt / (Tt + dt),
+                                  no correction when Ki = 0;
+               none:              I(k) = I_try.
+
+- First sample (k = 0, after a reset): e(-1) := e(0), so D(0) = 0 (no derivative kick); I(-1) = 0.
+- Bumpless start from u_start (the output the actuator holds): I(-1) = u_start / Ki(0), so that
+  the first output is u_start when e(0) = 0 (I(-1) = 0 when Ki(0) = 0, or when u_start = 0).
+- Derivative filter with N: Tf = Td/N, Df(-1) = 0 and, by backward Euler,
+  Df(k) = (Tf * Df(k-1) + dt * D(k)) / (Tf + dt); Df replaces D in u_try (and is the state).
+  Without N the derivative is D itself.
+- Tracking time of back-calculation: Tt as given, else sqrt(Ti*Td), or Ti when Td = 0 (recomputed
+  every sample from that sample's gains).
+- Loops are independent (no coupling here: eq. 26-27's coupled error is not part of these cases).
+
+Case conventions: the controller's inputs r and y are given (open loop); gains may change from one
+sample to the next. The expected u are literal numbers: the exact rational value computed by
+`exact_u`, correctly rounded to a double, so they are exact wherever the case's numbers are dyadic
+(all cases but one: dt, gains and signals are multiples of powers of two, and the floating-point
+implementations make no rounding error); the comment above each case gives the arithmetic step by
+step, to check by hand. Non-dyadic inputs (0.1, 0.3) mean their decimal value. A case with
+`static_gain` g set is also a closed loop: y(k+1) = g * u(k) for a static plant (y = g*u, no
+dynamics), with constant r and gains, so a forecast rolling that plant out from y(0) must predict
+y(1..n) = g * u(0..n-1) (tests/plants/StaticValve with Kv = g).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from fractions import Fraction
+
+INF = math.inf
+
+
+@dataclass(frozen=True)
+class Loop:
+    """One loop of a case: per sample the setpoint, measurement, gains (Kp, Ti, Td) and expected u."""
+
+    r: tuple
+    y: tuple
+    gains: tuple          # per sample: (Kp, Ti [s], Td [s])
+    u: tuple              # expected saturated output per sample
+    u_min: float = -INF
+    u_max: float = INF
+    u_start: float = 0.0  # bumpless start value (0: a cold start)
+    Tt: float | None = None  # back-calculation tracking time [s]; None: the default rule
+
+    def __post_init__(self):
+        n = len(self.r)
+        assert len(self.y) == len(self.gains) == len(self.u) == n, "one r, y, gain triple and u per sample"
+
+
+@dataclass(frozen=True)
+class Case:
+    """One hand-checked sequence: the PID's settings and its loops (independent of each other)."""
+
+    name: str
+    what: str             # what the case pins down
+    dt: float
+    anti_windup: str      # "clamping" | "back_calculation" | "none"
+    loops: tuple
+    N: float | None = None          # derivative filter: Tf = Td/N; None: unfiltered
+    static_gain: float | None = None  # see the module docstring (closed loop through y = g*u)
+
+    @property
+    def steps(self) -> int:
+        return len(self.loops[0].r)
+
+    @property
+    def n_loops(self) -> int:
+        return len(self.loops)
+
+    @property
+    def constant_gains(self) -> bool:
+        return all(len(set(loop.gains)) == 1 for loop in self.loops)
+
+
+def constant(gains: tuple, steps: int) -> tuple:
+    """The same (Kp, Ti, Td) at every sample."""
+    return (tuple(float(g) for g in gains),) * steps
+
+
+# -- the law in exact arithmetic ----------------------------------------------------------------
+
+MUTATIONS = ("derivative_kick", "sum_without_current_error", "integrate_while_saturated",
+             "hold_sum_whenever_saturated", "no_tracking", "tracking_time_is_ti",
+             "tracking_time_sqrt_without_td", "unfiltered",
+             "cold_start", "first_gains_held")
+
+
+def _q(x) -> Fraction:
+    """A case's number as meant: a double that is a dyadic fraction with a small denominator (<= 2^32,
+    e.g. 0.375 or -29/4096) is itself; any other is the decimal it is written as (0.1 is 1/10, not
+    the nearest double)."""
+    exact = Fraction(float(x))
+    return exact if exact.denominator <= 2 ** 32 else Fraction(repr(float(x)))
+
+
+def _sqrt(x: Fraction) -> Fraction:
+    """Exact square root of a rational square (the cases choose Ti*Td so; anything else is a case error)."""
+    a, b = math.isqrt(x.numerator), math.isqrt(x.denominator)
+    if a * a != x.numerator or b * b != x.denominator:
+        raise ValueError(f"sqrt({x}) is not rational: choose Ti*Td as the square of a rational")
+    return Fraction(a, b)
+
+
+def exact_u(case: Case, mutation: str | None = None) -> list[list[Fraction]]:
+    """u[loop][k] of the law above, in exact rational arithmetic (independent of prlpid_fmi).
+
+    mutation: one of MUTATIONS, a deliberately wrong law, to show that the cases tell it apart:
+    derivative_kick (e(-1) := 0), sum_without_current_error (I_try = I(k-1) + e(k-1)*dt),
+    integrate_while_saturated (clamping never holds the sum), hold_sum_whenever_saturated (clamping
+    holds it also when e pulls out of the limit), no_tracking (back-calculation without correction),
+    tracking_time_is_ti (Tt = Ti always), tracking_time_sqrt_without_td (Tt = sqrt(Ti*Td) also when
+    Td = 0, i.e. Tt = 0), unfiltered (N ignored), cold_start (u_start ignored),
+    first_gains_held (the gains of sample 0 throughout).
+    """
+    if mutation is not None and mutation not in MUTATIONS:
+        raise ValueError(mutation)
+    dt = _q(case.dt)
+    out = []
+    for loop in case.loops:
+        u_out = []
+        integral, last_error, derivative = Fraction(0), None, Fraction(0)
+        previous_e = Fraction(0)
+        for k in range(case.steps):
+            kp, ti, td = loop.gains[0 if mutation == "first_gains_held" else k]
+            kp, td = _q(kp), _q(td)
+            ki = Fraction(0) if ti == INF else kp / _q(ti)
+            e = _q(loop.r[k]) - _q(loop.y[k])
+            if k == 0:
+                last_error = Fraction(0) if mutation == "derivative_kick" else e
+                if loop.u_start != 0 and ki != 0 and mutation != "cold_start":
+                    integral = _q(loop.u_start) / ki
+                previous_e = e
+            d = (e - last_error) / dt
+            if case.N is not None and mutation != "unfiltered":
+                tf = td / _q(case.N)
+                d = (tf * derivative + dt * d) / (tf + dt)
+            summed = previous_e if mutation == "sum_without_current_error" else e
+            i_try = integral + summed * dt
+            u_try = kp * (e + td * d) + ki * i_try
+            u = u_try
+            if loop.u_min != -INF and u_try < _q(loop.u_min):
+                u = _q(loop.u_min)
+            elif loop.u_max != INF and u_try > _q(loop.u_max):
+                u = _q(loop.u_max)
+            new_integral = i_try
+            if u != u_try:  # saturated
+                if case.anti_windup == "clamping":
+                    hold = (u_try - u) * (kp * e) > 0  # e pushes further into the limit
+                    if mutation == "hold_sum_whenever_saturated":
+                        hold = True
+                    elif mutation == "integrate_while_saturated":
+                        hold = False
+                    if hold:
+                        new_integral = integral
+                elif case.anti_windup == "back_calculation" and ki != 0 and mutation != "no_tracking":
+                    if mutation == "tracking_time_is_ti":
+                        tt = _q(ti)
+                    elif loop.Tt is not None:
+                        tt = _q(loop.Tt)
+                    elif mutation == "tracking_time_sqrt_without_td":
+                        tt = _sqrt(_q(ti) * td)
+                    else:
+                        tt = _sqrt(_q(ti) * td) if td > 0 else _q(ti)
+                    new_integral = i_try + dt / (tt + dt) * (u - u_try) / ki
+            integral, last_error, derivative, previous_e = new_integral, e, d, e
+            u_out.append(u)
+        out.append(u_out)
+    return out
+
+
+# -- the cases ------------------------------------------------------------------------------------
+# Above each case: its arithmetic, sample by sample (the numbers as exact decimals or fractions).
+# Closed-loop cases (static_gain = 1) have y(k+1) = u(k).
+
+# k=0: [Kp 0.5, Ti inf, Td 0] e = 1 - 4 = -3; D = 0 (e(-1) := e(0));
+#      I_try = 0 + (-3)*0.5 = -1.5; u_try = 0.5*(-3 + 0*0) + 0*(-1.5) = -1.5; u = -1; saturated: I = I_try = -1.5
+# k=1: e = 1 - (-1) = 2; D = (2 - (-3))/0.5 = 10;
+#      I_try = -1.5 + 2*0.5 = -0.5; u_try = 0.5*(2 + 0*10) + 0*(-0.5) = 1; u = 1; I = -0.5
+# k=2: e = 1 - 1 = 0; D = (0 - 2)/0.5 = -4;
+#      I_try = -0.5 + 0*0.5 = -0.5; u_try = 0.5*(0 + 0*(-4)) + 0*(-0.5) = 0; u = 0; I = -0.5
+# k=3: e = 1 - 0 = 1; D = (1 - 0)/0.5 = 2;
+#      I_try = -0.5 + 1*0.5 = 0; u_try = 0.5*(1 + 0*2) + 0*0 = 0.5; u = 0.5; I = 0
+# k=4: e = 1 - 0.5 = 0.5; D = (0.5 - 1)/0.5 = -1;
+#      I_try = 0 + 0.5*0.5 = 0.25; u_try = 0.5*(0.5 + 0*(-1)) + 0*0.25 = 0.25; u = 0.25; I = 0.25
+# k=5: e = 1 - 0.25 = 0.75; D = (0.75 - 0.5)/0.5 = 0.5;
+#      I_try = 0.25 + 0.75*0.5 = 0.625; u_try = 0.5*(0.75 + 0*0.5) + 0*0.625 = 0.375; u = 0.375; I = 0.625
+P_ONLY = Case(
+    name='p_only',
+    what='P only (Ti = inf, Td = 0): u = clip(Kp*e), saturating low then high',
+    dt=0.5, anti_windup='none', static_gain=1.0,
+    loops=(
+        Loop(r=(1.0, 1.0, 1.0, 1.0, 1.0, 1.0),
+             y=(4.0, -1.0, 1.0, 0.0, 0.5, 0.25),
+             gains=constant((0.5, INF, 0.0), 6),
+             u=(-1.0, 1.0, 0.0, 0.5, 0.25, 0.375), u_min=-1.0, u_max=1.0),
+    ))
+
+# k=0: [Kp 1, Ti 2, Td 0, Ki 0.5] e = 2 - 0 = 2; D = 0 (e(-1) := e(0));
+#      I_try = 0 + 2*0.5 = 1; u_try = 1*(2 + 0*0) + 0.5*1 = 2.5; u = 1.5; saturated, e pushes further: I = 0 (held)
+# k=1: e = 2 - 1.5 = 0.5; D = (0.5 - 2)/0.5 = -3;
+#      I_try = 0 + 0.5*0.5 = 0.25; u_try = 1*(0.5 + 0*(-3)) + 0.5*0.25 = 0.625; u = 0.625; I = 0.25
+# k=2: e = 2 - 0.625 = 1.375; D = (1.375 - 0.5)/0.5 = 1.75;
+#      I_try = 0.25 + 1.375*0.5 = 0.9375; u_try = 1*(1.375 + 0*1.75) + 0.5*0.9375 = 1.84375; u = 1.5;
+#      saturated, e pushes further: I = 0.25 (held)
+# k=3: e = 2 - 1.5 = 0.5; D = (0.5 - 1.375)/0.5 = -1.75;
+#      I_try = 0.25 + 0.5*0.5 = 0.5; u_try = 1*(0.5 + 0*(-1.75)) + 0.5*0.5 = 0.75; u = 0.75; I = 0.5
+# k=4: e = 2 - 0.75 = 1.25; D = (1.25 - 0.5)/0.5 = 1.5;
+#      I_try = 0.5 + 1.25*0.5 = 1.125; u_try = 1*(1.25 + 0*1.5) + 0.5*1.125 = 1.8125; u = 1.5;
+#      saturated, e pushes further: I = 0.5 (held)
+# k=5: e = 2 - 1.5 = 0.5; D = (0.5 - 1.25)/0.5 = -1.5;
+#      I_try = 0.5 + 0.5*0.5 = 0.75; u_try = 1*(0.5 + 0*(-1.5)) + 0.5*0.75 = 0.875; u = 0.875; I = 0.75
+# k=6: e = 2 - 0.875 = 1.125; D = (1.125 - 0.5)/0.5 = 1.25;
+#      I_try = 0.75 + 1.125*0.5 = 1.3125; u_try = 1*(1.125 + 0*1.25) + 0.5*1.3125 = 1.78125; u = 1.5;
+#      saturated, e pushes further: I = 0.75 (held)
+# k=7: e = 2 - 1.5 = 0.5; D = (0.5 - 1.125)/0.5 = -1.25;
+#      I_try = 0.75 + 0.5*0.5 = 1; u_try = 1*(0.5 + 0*(-1.25)) + 0.5*1 = 1; u = 1; I = 1
+PI_CLAMPING = Case(
+    name='pi_clamping',
+    what='PI with clamping: saturated with e > 0, the error sum stops (I held), then resumes',
+    dt=0.5, anti_windup='clamping', static_gain=1.0,
+    loops=(
+        Loop(r=(2.0, 2.0, 2.0, 2.0, 2.0, 2.0, 2.0, 2.0),
+             y=(0.0, 1.5, 0.625, 1.5, 0.75, 1.5, 0.875, 1.5),
+             gains=constant((1.0, 2.0, 0.0), 8),
+             u=(1.5, 0.625, 1.5, 0.75, 1.5, 0.875, 1.5, 1.0), u_min=0.0, u_max=1.5),
+    ))
+
+# k=0: [Kp 1, Ti 1, Td 0.25, Ki 1] e = 2 - 0 = 2; D = 0 (e(-1) := e(0));
+#      I_try = 0 + 2*0.5 = 1; u_try = 1*(2 + 0.25*0) + 1*1 = 3; u = 1.5;
+#      saturated, Tt 0.5, g 0.5: I = 1 + 0.5*(1.5 - 3)/1 = 0.25
+# k=1: e = 2 - 1.5 = 0.5; D = (0.5 - 2)/0.5 = -3;
+#      I_try = 0.25 + 0.5*0.5 = 0.5; u_try = 1*(0.5 + 0.25*(-3)) + 1*0.5 = 0.25; u = 0.25; I = 0.5
+# k=2: e = 2 - 0.25 = 1.75; D = (1.75 - 0.5)/0.5 = 2.5;
+#      I_try = 0.5 + 1.75*0.5 = 1.375; u_try = 1*(1.75 + 0.25*2.5) + 1*1.375 = 3.75; u = 1.5;
+#      saturated, Tt 0.5, g 0.5: I = 1.375 + 0.5*(1.5 - 3.75)/1 = 0.25
+# k=3: e = 2 - 1.5 = 0.5; D = (0.5 - 1.75)/0.5 = -2.5;
+#      I_try = 0.25 + 0.5*0.5 = 0.5; u_try = 1*(0.5 + 0.25*(-2.5)) + 1*0.5 = 0.375; u = 0.375; I = 0.5
+# k=4: e = 2 - 0.375 = 1.625; D = (1.625 - 0.5)/0.5 = 2.25;
+#      I_try = 0.5 + 1.625*0.5 = 1.3125; u_try = 1*(1.625 + 0.25*2.25) + 1*1.3125 = 3.5; u = 1.5;
+#      saturated, Tt 0.5, g 0.5: I = 1.3125 + 0.5*(1.5 - 3.5)/1 = 0.3125
+# k=5: e = 2 - 1.5 = 0.5; D = (0.5 - 1.625)/0.5 = -2.25;
+#      I_try = 0.3125 + 0.5*0.5 = 0.5625; u_try = 1*(0.5 + 0.25*(-2.25)) + 1*0.5625 = 0.5; u = 0.5; I = 0.5625
+# k=6: e = 2 - 0.5 = 1.5; D = (1.5 - 0.5)/0.5 = 2;
+#      I_try = 0.5625 + 1.5*0.5 = 1.3125; u_try = 1*(1.5 + 0.25*2) + 1*1.3125 = 3.3125; u = 1.5;
+#      saturated, Tt 0.5, g 0.5: I = 1.3125 + 0.5*(1.5 - 3.3125)/1 = 0.40625
+PID_BACK_CALCULATION = Case(
+    name='pid_back_calculation',
+    what='PID, back-calculation with the default Tt = sqrt(Ti*Td) = 0.5 s, saturated every other sample',
+    dt=0.5, anti_windup='back_calculation', static_gain=1.0,
+    loops=(
+        Loop(r=(2.0, 2.0, 2.0, 2.0, 2.0, 2.0, 2.0),
+             y=(0.0, 1.5, 0.25, 1.5, 0.375, 1.5, 0.5),
+             gains=constant((1.0, 1.0, 0.25), 7),
+             u=(1.5, 0.25, 1.5, 0.375, 1.5, 0.5, 1.5), u_min=-1.5, u_max=1.5),
+    ))
+
+# k=0: [Kp 1, Ti 1, Td 0, Ki 1] e = 2 - 0 = 2; D = 0 (e(-1) := e(0));
+#      I_try = 0 + 2*0.5 = 1; u_try = 1*(2 + 0*0) + 1*1 = 3; u = 1.5;
+#      saturated, Tt 1.5, g 0.25: I = 1 + 0.25*(1.5 - 3)/1 = 0.625
+# k=1: e = 2 - 1.5 = 0.5; D = (0.5 - 2)/0.5 = -3;
+#      I_try = 0.625 + 0.5*0.5 = 0.875; u_try = 1*(0.5 + 0*(-3)) + 1*0.875 = 1.375; u = 1.375; I = 0.875
+# k=2: e = 2 - 1.375 = 0.625; D = (0.625 - 0.5)/0.5 = 0.25;
+#      I_try = 0.875 + 0.625*0.5 = 1.1875; u_try = 1*(0.625 + 0*0.25) + 1*1.1875 = 1.8125; u = 1.5;
+#      saturated, Tt 1.5, g 0.25: I = 1.1875 + 0.25*(1.5 - 1.8125)/1 = 1.109375
+# k=3: e = 2 - 1.5 = 0.5; D = (0.5 - 0.625)/0.5 = -0.25;
+#      I_try = 1.109375 + 0.5*0.5 = 1.359375; u_try = 1*(0.5 + 0*(-0.25)) + 1*1.359375 = 1.859375; u = 1.5;
+#      saturated, Tt 1.5, g 0.25: I = 1.359375 + 0.25*(1.5 - 1.859375)/1 = 1.26953125
+# k=4: e = 2 - 1.5 = 0.5; D = (0.5 - 0.5)/0.5 = 0;
+#      I_try = 1.26953125 + 0.5*0.5 = 1.51953125; u_try = 1*(0.5 + 0*0) + 1*1.51953125 = 2.01953125; u = 1.5;
+#      saturated, Tt 1.5, g 0.25: I = 1.51953125 + 0.25*(1.5 - 2.01953125)/1 = 1.3896484375
+# k=5: e = 2 - 1.5 = 0.5; D = (0.5 - 0.5)/0.5 = 0;
+#      I_try = 1.3896484375 + 0.5*0.5 = 1.6396484375; u_try = 1*(0.5 + 0*0) + 1*1.6396484375 = 2.1396484375; u = 1.5;
+#      saturated, Tt 1.5, g 0.25: I = 1.6396484375 + 0.25*(1.5 - 2.1396484375)/1 = 1.479736328125
+# k=6: e = 2 - 1.5 = 0.5; D = (0.5 - 0.5)/0.5 = 0;
+#      I_try = 1.479736328125 + 0.5*0.5 = 1.729736328125; u_try = 1*(0.5 + 0*0) + 1*1.729736328125 = 2.229736328125;
+#      u = 1.5; saturated, Tt 1.5, g 0.25: I = 1.729736328125 + 0.25*(1.5 - 2.229736328125)/1 = 25351/16384
+PI_BACK_CALCULATION_GIVEN_TT = Case(
+    name='pi_back_calculation_given_tt',
+    what='PI, back-calculation with a given Tt = 1.5 s (the default would be Ti = 1 s)',
+    dt=0.5, anti_windup='back_calculation', static_gain=1.0,
+    loops=(
+        Loop(r=(2.0, 2.0, 2.0, 2.0, 2.0, 2.0, 2.0),
+             y=(0.0, 1.5, 1.375, 1.5, 1.5, 1.5, 1.5),
+             gains=constant((1.0, 1.0, 0.0), 7),
+             u=(1.5, 1.375, 1.5, 1.5, 1.5, 1.5, 1.5), u_min=-1.5, u_max=1.5, Tt=1.5),
+    ))
+
+# k=0: [Kp 0.5, Ti 1, Td 0.25, Ki 0.5] e = 1 - 0 = 1; D = 0 (e(-1) := e(0));
+#      I_try = 0 + 1*0.5 = 0.5; u_try = 0.5*(1 + 0.25*0) + 0.5*0.5 = 0.75; u = 0.75; I = 0.5
+# k=1: e = 1 - 0.75 = 0.25; D = (0.25 - 1)/0.5 = -1.5;
+#      I_try = 0.5 + 0.25*0.5 = 0.625; u_try = 0.5*(0.25 + 0.25*(-1.5)) + 0.5*0.625 = 0.25; u = 0.25; I = 0.625
+# k=2: e = 1 - 0.25 = 0.75; D = (0.75 - 0.25)/0.5 = 1;
+#      I_try = 0.625 + 0.75*0.5 = 1; u_try = 0.5*(0.75 + 0.25*1) + 0.5*1 = 1; u = 1; I = 1
+# k=3: e = 1 - 1 = 0; D = (0 - 0.75)/0.5 = -1.5;
+#      I_try = 1 + 0*0.5 = 1; u_try = 0.5*(0 + 0.25*(-1.5)) + 0.5*1 = 0.3125; u = 0.3125; I = 1
+# k=4: e = 1 - 0.3125 = 0.6875; D = (0.6875 - 0)/0.5 = 1.375;
+#      I_try = 1 + 0.6875*0.5 = 1.34375; u_try = 0.5*(0.6875 + 0.25*1.375) + 0.5*1.34375 = 1.1875; u = 1.1875;
+#      I = 1.34375
+# k=5: e = 1 - 1.1875 = -0.1875; D = (-0.1875 - 0.6875)/0.5 = -1.75;
+#      I_try = 1.34375 + (-0.1875)*0.5 = 1.25; u_try = 0.5*(-0.1875 + 0.25*(-1.75)) + 0.5*1.25 = 0.3125; u = 0.3125;
+#      I = 1.25
+PID_FIRST_SAMPLE = Case(
+    name='pid_first_sample',
+    what='PID without limits: D(0) = 0 by e(-1) := e(0), then the derivative of a changing error',
+    dt=0.5, anti_windup='none', static_gain=1.0,
+    loops=(
+        Loop(r=(1.0, 1.0, 1.0, 1.0, 1.0, 1.0),
+             y=(0.0, 0.75, 0.25, 1.0, 0.3125, 1.1875),
+             gains=constant((0.5, 1.0, 0.25), 6),
+             u=(0.75, 0.25, 1.0, 0.3125, 1.1875, 0.3125)),
+    ))
+
+# k=0: [Kp 0.5, Ti 1, Td 0.5, Ki 0.5] e = 1 - 0 = 1; D = 0 (e(-1) := e(0)), Df = (0.25*0 + 0.25*D)/0.5 = 0;
+#      I_try = 0 + 1*0.25 = 0.25; u_try = 0.5*(1 + 0.5*0) + 0.5*0.25 = 0.625; u = 0.625; I = 0.25
+# k=1: e = 1 - 0.625 = 0.375; D = (0.375 - 1)/0.25 = -2.5, Df = (0.25*0 + 0.25*D)/0.5 = -1.25;
+#      I_try = 0.25 + 0.375*0.25 = 0.34375; u_try = 0.5*(0.375 + 0.5*(-1.25)) + 0.5*0.34375 = 0.046875; u = 0.046875;
+#      I = 0.34375
+# k=2: e = 1 - 0.046875 = 0.953125; D = (0.953125 - 0.375)/0.25 = 2.3125, Df = (0.25*(-1.25) + 0.25*D)/0.5 = 0.53125;
+#      I_try = 0.34375 + 0.953125*0.25 = 0.58203125;
+#      u_try = 0.5*(0.953125 + 0.5*0.53125) + 0.5*0.58203125 = 0.900390625; u = 0.900390625; I = 0.58203125
+# k=3: e = 1 - 0.900390625 = 0.099609375; D = (0.099609375 - 0.953125)/0.25 = -3.4140625;
+#      Df = (0.25*0.53125 + 0.25*D)/0.5 = -1.44140625;
+#      I_try = 0.58203125 + 0.099609375*0.25 = 0.60693359375;
+#      u_try = 0.5*(0.099609375 + 0.5*(-1.44140625)) + 0.5*0.60693359375 = -29/4096; u = -29/4096; I = 0.60693359375
+# k=4: e = 1 - (-29/4096) = 1.007080078125; D = (1.007080078125 - 0.099609375)/0.25 = 3.6298828125;
+#      Df = (0.25*(-1.44140625) + 0.25*D)/0.5 = 1.09423828125;
+#      I_try = 0.60693359375 + 1.007080078125*0.25 = 14069/16384;
+#      u_try = 0.5*(1.007080078125 + 0.5*1.09423828125) + 0.5*(14069/16384) = 39533/32768; u = 39533/32768;
+#      I = 14069/16384
+# k=5: e = 1 - (39533/32768) = -6765/32768; D = (-6765/32768 - 1.007080078125)/0.25 = -39765/8192;
+#      Df = (0.25*1.09423828125 + 0.25*D)/0.5 = -30801/16384;
+#      I_try = 14069/16384 + (-6765/32768)*0.25 = 105787/131072;
+#      u_try = 0.5*(-6765/32768 + 0.5*(-30801/16384)) + 0.5*(105787/131072) = -44477/262144; u = -44477/262144;
+#      I = 105787/131072
+PID_DERIVATIVE_FILTER = Case(
+    name='pid_derivative_filter',
+    what='PID with the derivative filter N = 2 (Tf = Td/N = dt, so Df = (Df(k-1) + D)/2), clamping',
+    dt=0.25, anti_windup='clamping', N=2.0, static_gain=1.0,
+    loops=(
+        Loop(r=(1.0, 1.0, 1.0, 1.0, 1.0, 1.0),
+             y=(0.0, 0.625, 0.046875, 0.900390625, -0.007080078125, 1.206451416015625),
+             gains=constant((0.5, 1.0, 0.5), 6),
+             u=(0.625, 0.046875, 0.900390625, -0.007080078125, 1.206451416015625, -0.16966629028320312),
+             u_min=-2.0, u_max=2.0),
+    ))
+
+# k=0: [Kp 1, Ti inf, Td 0.5] e = 1 - 0 = 1; D = 0 (e(-1) := e(0));
+#      I_try = 0 + 1*0.5 = 0.5; u_try = 1*(1 + 0.5*0) + 0*0.5 = 1; u = 1; I = 0.5
+# k=1: e = 1 - 1 = 0; D = (0 - 1)/0.5 = -2;
+#      I_try = 0.5 + 0*0.5 = 0.5; u_try = 1*(0 + 0.5*(-2)) + 0*0.5 = -1; u = -1; I = 0.5
+# k=2: e = 1 - (-1) = 2; D = (2 - 0)/0.5 = 4;
+#      I_try = 0.5 + 2*0.5 = 1.5; u_try = 1*(2 + 0.5*4) + 0*1.5 = 4; u = 1; saturated, Ki = 0: I = I_try = 1.5
+# k=3: e = 1 - 1 = 0; D = (0 - 2)/0.5 = -4;
+#      I_try = 1.5 + 0*0.5 = 1.5; u_try = 1*(0 + 0.5*(-4)) + 0*1.5 = -2; u = -1; saturated, Ki = 0: I = I_try = 1.5
+# k=4: e = 1 - (-1) = 2; D = (2 - 0)/0.5 = 4;
+#      I_try = 1.5 + 2*0.5 = 2.5; u_try = 1*(2 + 0.5*4) + 0*2.5 = 4; u = 1; saturated, Ki = 0: I = I_try = 2.5
+# k=5: e = 1 - 1 = 0; D = (0 - 2)/0.5 = -4;
+#      I_try = 2.5 + 0*0.5 = 2.5; u_try = 1*(0 + 0.5*(-4)) + 0*2.5 = -2; u = -1; saturated, Ki = 0: I = I_try = 2.5
+PD_WITHOUT_INTEGRAL = Case(
+    name='pd_without_integral',
+    what='PD with Ti = inf under back-calculation: saturated, but Ki = 0 so no correction (and no division by Ki)',
+    dt=0.5, anti_windup='back_calculation', static_gain=1.0,
+    loops=(
+        Loop(r=(1.0, 1.0, 1.0, 1.0, 1.0, 1.0),
+             y=(0.0, 1.0, -1.0, 1.0, -1.0, 1.0),
+             gains=constant((1.0, INF, 0.5), 6),
+             u=(1.0, -1.0, 1.0, -1.0, 1.0, -1.0), u_min=-1.0, u_max=1.0),
+    ))
+
+# k=0: [Kp 1, Ti 0.5, Td 0, Ki 2] I(-1) = u_start/Ki = 1.5/2 = 0.75
+#      e = 0.5 - 0.5 = 0; D = 0 (e(-1) := e(0));
+#      I_try = 0.75 + 0*0.5 = 0.75; u_try = 1*(0 + 0*0) + 2*0.75 = 1.5; u = 1.5; I = 0.75
+# k=1: e = 0.5 - 1.5 = -1; D = (-1 - 0)/0.5 = -2;
+#      I_try = 0.75 + (-1)*0.5 = 0.25; u_try = 1*(-1 + 0*(-2)) + 2*0.25 = -0.5; u = 0;
+#      saturated, Tt 0.5, g 0.5: I = 0.25 + 0.5*(0 - (-0.5))/2 = 0.375
+# k=2: e = 0.5 - 0 = 0.5; D = (0.5 - (-1))/0.5 = 3;
+#      I_try = 0.375 + 0.5*0.5 = 0.625; u_try = 1*(0.5 + 0*3) + 2*0.625 = 1.75; u = 1.75; I = 0.625
+# k=3: e = 0.5 - 1.75 = -1.25; D = (-1.25 - 0.5)/0.5 = -3.5;
+#      I_try = 0.625 + (-1.25)*0.5 = 0; u_try = 1*(-1.25 + 0*(-3.5)) + 2*0 = -1.25; u = 0;
+#      saturated, Tt 0.5, g 0.5: I = 0 + 0.5*(0 - (-1.25))/2 = 0.3125
+# k=4: e = 0.5 - 0 = 0.5; D = (0.5 - (-1.25))/0.5 = 3.5;
+#      I_try = 0.3125 + 0.5*0.5 = 0.5625; u_try = 1*(0.5 + 0*3.5) + 2*0.5625 = 1.625; u = 1.625; I = 0.5625
+# k=5: e = 0.5 - 1.625 = -1.125; D = (-1.125 - 0.5)/0.5 = -3.25;
+#      I_try = 0.5625 + (-1.125)*0.5 = 0; u_try = 1*(-1.125 + 0*(-3.25)) + 2*0 = -1.125; u = 0;
+#      saturated, Tt 0.5, g 0.5: I = 0 + 0.5*(0 - (-1.125))/2 = 0.28125
+# k=6: e = 0.5 - 0 = 0.5; D = (0.5 - (-1.125))/0.5 = 3.25;
+#      I_try = 0.28125 + 0.5*0.5 = 0.53125; u_try = 1*(0.5 + 0*3.25) + 2*0.53125 = 1.5625; u = 1.5625; I = 0.53125
+# k=7: e = 0.5 - 1.5625 = -1.0625; D = (-1.0625 - 0.5)/0.5 = -3.125;
+#      I_try = 0.53125 + (-1.0625)*0.5 = 0; u_try = 1*(-1.0625 + 0*(-3.125)) + 2*0 = -1.0625; u = 0;
+#      saturated, Tt 0.5, g 0.5: I = 0 + 0.5*(0 - (-1.0625))/2 = 0.265625
+BUMPLESS_START = Case(
+    name='bumpless_start',
+    what='bumpless start u_start = 1.5 with e(0) = 0: u(0) = u_start; then back-calculation with Tt = Ti (Td = 0)',
+    dt=0.5, anti_windup='back_calculation', static_gain=1.0,
+    loops=(
+        Loop(r=(0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5, 0.5),
+             y=(0.5, 1.5, 0.0, 1.75, 0.0, 1.625, 0.0, 1.5625),
+             gains=constant((1.0, 0.5, 0.0), 8),
+             u=(1.5, 0.0, 1.75, 0.0, 1.625, 0.0, 1.5625, 0.0), u_min=0.0, u_max=2.0, u_start=1.5),
+    ))
+
+# k=0: [Kp 1, Ti 1, Td 0.25, Ki 1] e = 1 - 0 = 1; D = 0 (e(-1) := e(0));
+#      I_try = 0 + 1*0.5 = 0.5; u_try = 1*(1 + 0.25*0) + 1*0.5 = 1.5; u = 1;
+#      saturated, Tt 0.5, g 0.5: I = 0.5 + 0.5*(1 - 1.5)/1 = 0.25
+# k=1: e = 1 - 0.5 = 0.5; D = (0.5 - 1)/0.5 = -1;
+#      I_try = 0.25 + 0.5*0.5 = 0.5; u_try = 1*(0.5 + 0.25*(-1)) + 1*0.5 = 0.75; u = 0.75; I = 0.5
+# k=2: e = 1 - 1.5 = -0.5; D = (-0.5 - 0.5)/0.5 = -2;
+#      I_try = 0.5 + (-0.5)*0.5 = 0.25; u_try = 1*(-0.5 + 0.25*(-2)) + 1*0.25 = -0.75; u = -0.75; I = 0.25
+# k=3: e = 1 - 1 = 0; D = (0 - (-0.5))/0.5 = 1;
+#      I_try = 0.25 + 0*0.5 = 0.25; u_try = 1*(0 + 0.25*1) + 1*0.25 = 0.5; u = 0.5; I = 0.25
+# k=4: [Kp 2, Ti 0.5, Td 0, Ki 4] e = 2 - 1 = 1; D = (1 - 0)/0.5 = 2;
+#      I_try = 0.25 + 1*0.5 = 0.75; u_try = 2*(1 + 0*2) + 4*0.75 = 5; u = 1;
+#      saturated, Tt 0.5, g 0.5: I = 0.75 + 0.5*(1 - 5)/4 = 0.25
+# k=5: e = 2 - 3 = -1; D = (-1 - 1)/0.5 = -4;
+#      I_try = 0.25 + (-1)*0.5 = -0.25; u_try = 2*(-1 + 0*(-4)) + 4*(-0.25) = -3; u = -1;
+#      saturated, Tt 0.5, g 0.5: I = -0.25 + 0.5*(-1 - (-3))/4 = 0
+# k=6: e = 2 - 2.5 = -0.5; D = (-0.5 - (-1))/0.5 = 1;
+#      I_try = 0 + (-0.5)*0.5 = -0.25; u_try = 2*(-0.5 + 0*1) + 4*(-0.25) = -2; u = -1;
+#      saturated, Tt 0.5, g 0.5: I = -0.25 + 0.5*(-1 - (-2))/4 = -0.125
+# k=7: e = 2 - 1.5 = 0.5; D = (0.5 - (-0.5))/0.5 = 2;
+#      I_try = -0.125 + 0.5*0.5 = 0.125; u_try = 2*(0.5 + 0*2) + 4*0.125 = 1.5; u = 1;
+#      saturated, Tt 0.5, g 0.5: I = 0.125 + 0.5*(1 - 1.5)/4 = 0.0625
+GAIN_CHANGE = Case(
+    name='gain_change',
+    what=('gains change between samples 3 and 4 (Kp 1 -> 2, Ti 1 -> 0.5, Td 0.25 -> 0) with the setpoint; '
+          'back-calculation with Tt = sqrt(Ti*Td), then Tt = Ti'),
+    dt=0.5, anti_windup='back_calculation',
+    loops=(
+        Loop(r=(1.0, 1.0, 1.0, 1.0, 2.0, 2.0, 2.0, 2.0),
+             y=(0.0, 0.5, 1.5, 1.0, 1.0, 3.0, 2.5, 1.5),
+             gains=constant((1.0, 1.0, 0.25), 4) + constant((2.0, 0.5, 0.0), 4),
+             u=(1.0, 0.75, -0.75, 0.5, 1.0, -1.0, -1.0, 1.0), u_min=-1.0, u_max=1.0),
+    ))
+
+# loop 1:
+# k=0: [Kp 2, Ti 0.3, Td 0.05, Ki 20/3] e = 1 - 0 = 1; D = 0 (e(-1) := e(0));
+#      I_try = 0 + 1*0.1 = 0.1; u_try = 2*(1 + 0.05*0) + (20/3)*0.1 = 8/3; u = 1;
+#      saturated, e pushes further: I = 0 (held)
+# k=1: e = 1 - 0.2 = 0.8; D = (0.8 - 1)/0.1 = -2;
+#      I_try = 0 + 0.8*0.1 = 0.08; u_try = 2*(0.8 + 0.05*(-2)) + (20/3)*0.08 = 29/15; u = 1;
+#      saturated, e pushes further: I = 0 (held)
+# k=2: e = 1 - 0.5 = 0.5; D = (0.5 - 0.8)/0.1 = -3;
+#      I_try = 0 + 0.5*0.1 = 0.05; u_try = 2*(0.5 + 0.05*(-3)) + (20/3)*0.05 = 31/30; u = 1;
+#      saturated, e pushes further: I = 0 (held)
+# k=3: e = 1 - 0.9 = 0.1; D = (0.1 - 0.5)/0.1 = -4;
+#      I_try = 0 + 0.1*0.1 = 0.01; u_try = 2*(0.1 + 0.05*(-4)) + (20/3)*0.01 = -2/15; u = -2/15; I = 0.01
+# k=4: e = 1 - 1.1 = -0.1; D = (-0.1 - 0.1)/0.1 = -2;
+#      I_try = 0.01 + (-0.1)*0.1 = 0; u_try = 2*(-0.1 + 0.05*(-2)) + (20/3)*0 = -0.4; u = -0.4; I = 0
+# k=5: e = 1 - 1 = 0; D = (0 - (-0.1))/0.1 = 1;
+#      I_try = 0 + 0*0.1 = 0; u_try = 2*(0 + 0.05*1) + (20/3)*0 = 0.1; u = 0.1; I = 0
+# loop 2:
+# k=0: [Kp 1, Ti 0.5, Td 0.1, Ki 2] e = 0 - 2 = -2; D = 0 (e(-1) := e(0));
+#      I_try = 0 + (-2)*0.1 = -0.2; u_try = 1*(-2 + 0.1*0) + 2*(-0.2) = -2.4; u = -0.5;
+#      saturated, e pushes further: I = 0 (held)
+# k=1: e = 0 - 0.5 = -0.5; D = (-0.5 - (-2))/0.1 = 15;
+#      I_try = 0 + (-0.5)*0.1 = -0.05; u_try = 1*(-0.5 + 0.1*15) + 2*(-0.05) = 0.9; u = 0.5;
+#      saturated, e pulls back: I = I_try = -0.05
+# k=2: e = 0 - 0.3 = -0.3; D = (-0.3 - (-0.5))/0.1 = 2;
+#      I_try = -0.05 + (-0.3)*0.1 = -0.08; u_try = 1*(-0.3 + 0.1*2) + 2*(-0.08) = -0.26; u = -0.26; I = -0.08
+# k=3: e = 0 - 0.1 = -0.1; D = (-0.1 - (-0.3))/0.1 = 2;
+#      I_try = -0.08 + (-0.1)*0.1 = -0.09; u_try = 1*(-0.1 + 0.1*2) + 2*(-0.09) = -0.08; u = -0.08; I = -0.09
+# k=4: e = 0 - (-0.1) = 0.1; D = (0.1 - (-0.1))/0.1 = 2;
+#      I_try = -0.09 + 0.1*0.1 = -0.08; u_try = 1*(0.1 + 0.1*2) + 2*(-0.08) = 0.14; u = 0.14; I = -0.08
+# k=5: e = 0 - 0 = 0; D = (0 - 0.1)/0.1 = -1;
+#      I_try = -0.08 + 0*0.1 = -0.08; u_try = 1*(0 + 0.1*(-1)) + 2*(-0.08) = -0.26; u = -0.26; I = -0.08
+TWO_LOOPS = Case(
+    name='two_loops',
+    what=('two independent loops, dt = 0.1 s (not dyadic: the expected values are rounded decimals), clamping; '
+          'loop 2 saturates high while e < 0, so its sum keeps integrating'),
+    dt=0.1, anti_windup='clamping',
+    loops=(
+        Loop(r=(1.0, 1.0, 1.0, 1.0, 1.0, 1.0),
+             y=(0.0, 0.2, 0.5, 0.9, 1.1, 1.0),
+             gains=constant((2.0, 0.3, 0.05), 6),
+             u=(1.0, 1.0, 1.0, -0.13333333333333333, -0.4, 0.1), u_min=-1.0, u_max=1.0),
+        Loop(r=(0.0, 0.0, 0.0, 0.0, 0.0, 0.0),
+             y=(2.0, 0.5, 0.3, 0.1, -0.1, 0.0),
+             gains=constant((1.0, 0.5, 0.1), 6),
+             u=(-0.5, 0.5, -0.26, -0.08, 0.14, -0.26), u_min=-0.5, u_max=0.5),
+    ))
+
+CASES = (P_ONLY, PI_CLAMPING, PID_BACK_CALCULATION, PI_BACK_CALCULATION_GIVEN_TT, PID_FIRST_SAMPLE,
+         PID_DERIVATIVE_FILTER, PD_WITHOUT_INTEGRAL, BUMPLESS_START, GAIN_CHANGE, TWO_LOOPS)
