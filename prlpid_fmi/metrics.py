@@ -101,7 +101,7 @@ _REL_TOL = 1e-9
 CHATTER_THRESHOLD = 0.01  # a move counts towards Chatter when it exceeds this fraction of the actuator range
 
 __all__ = ["compute_metrics", "chatter_fraction", "metric_key", "METRIC_NAMES", "INTEGRAL_METRICS",
-           "CONTROL_METRICS", "STEP_METRICS", "MIN_SEGMENT_STEPS"]
+           "CONTROL_METRICS", "STEP_METRICS", "MIN_SEGMENT_STEPS", "overall_metric"]
 
 
 def metric_key(name: str, loop: str, n_loops: int) -> str:
@@ -382,11 +382,11 @@ def compute_metrics(time_s, setpoint, measurement, control_signal, sample_time_s
 
 
 def overall_metric(overall: dict, key: str) -> float:
-    """`key` from compute_metrics' overall dict: plain for one loop; "key[loop]" summed (integral
-    metrics) or maximised (step metrics) over loops for several."""
+    """`key` from compute_metrics' overall dict: plain for one loop; "key[loop]" summed (INTEGRAL_METRICS) or
+    maximised (the others: the worst loop) over loops for several; NaN when the dict has no such key."""
     if key in overall:
         return float(overall[key])
     values = [float(v) for k, v in overall.items() if k.startswith(key + "[")]
     if not values:
         return math.nan
-    return sum(values) if key in ("ISE", "IAE", "ITAE", "ControlEffort", "TotalVariation") else max(values)
+    return sum(values) if key in INTEGRAL_METRICS else max(values)

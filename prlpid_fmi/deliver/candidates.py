@@ -23,6 +23,8 @@ from prlpid_fmi.tuning.schedule.extraction import extract
 from prlpid_fmi.tuning.schedule.replay import SELECTION_EPISODES, training_ise
 from prlpid_fmi.tuning.schedule.table import GainSchedule
 
+AUTO_CANDIDATES = ("setpoint", "error")  # what auto compares
+
 
 def robust_schedule(schedule: GainSchedule, config, limit: float) -> tuple[GainSchedule, list[str]]:
     """The schedule with every row whose Ms exceeds `limit` detuned (tuning.fixed_pid.detune) until it meets it.
@@ -60,13 +62,6 @@ def robust_schedule(schedule: GainSchedule, config, limit: float) -> tuple[GainS
             notes.append(f"row {b:g}: Ms {first:.2f} > {limit:g}, detuned to Kp {np.round(Kp[j], 4).tolist()}, "
                          f"Ti {np.round(Ti[j], 4).tolist()}")
     return dataclasses.replace(schedule, Kp=Kp, Ti=Ti), notes
-
-
-
-
-
-
-AUTO_CANDIDATES = ("setpoint", "error")  # what auto compares
 
 
 def deliverable_schedule(policy: Policy, scenario, seed: int, anchor: Gains | None = None

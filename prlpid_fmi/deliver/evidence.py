@@ -14,12 +14,15 @@ import dataclasses
 import math
 import warnings
 
-from prlpid_fmi.deliver.rule import Candidate, Decision, choose
+from prlpid_fmi.deliver.rule import Candidate, Decision, Deployed, choose
 from prlpid_fmi.loop.evaluation import constant_gains, evaluate_gains
 from prlpid_fmi.loop.gains import Gains
 from prlpid_fmi.robustness.margins import margins_of, operating_point
-from prlpid_fmi.tuning.schedule.replay import replay_schedule
+from prlpid_fmi.tuning.schedule.replay import replay_schedule, training_ise
 from prlpid_fmi.tuning.schedule.table import LOOP_VARIABLE, GainSchedule, fixed_schedule
+
+HOLDOUT_EPISODES = 8  # further episodes the deliverable rule compares the schedule and the fixed PID on
+HOLDOUT_SEED_OFFSET = 30_000
 
 
 def _margins_at(config, gains, points: list[list[float]]) -> list:
@@ -51,7 +54,7 @@ def assess_fixed(scenario, gains: Gains) -> Candidate:
     mc = [evaluate_gains(fn, c, seed=s)[0] for c, s in _monte_carlo(scenario)]
     point = operating_point(config)
     margins = _margins_at(scenario.tuning, lambda p: fn(None), [point])
-    return Candidate("fixed PID", metrics, mc, margins, [point[0]])
+    return Candidate(Deployed.FIXED_PID.value, metrics, mc, margins, [point[0]])
 
 
 def assess_schedule(scenario, schedule: GainSchedule) -> Candidate:
@@ -73,10 +76,10 @@ def assess_schedule(scenario, schedule: GainSchedule) -> Candidate:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             margins = [margins_of(scenario.tuning, row, point) for row, point in pairs]
-        return Candidate("gain schedule", metrics, mc, margins, [point[loop] for _, point in pairs])
+        return Candidate(Deployed.SCHEDULE.value, metrics, mc, margins, [point[loop] for _, point in pairs])
     points = [operating_point(config, b) for b in schedule.breakpoints] \
         if schedule.variable.startswith("setpoint") else [operating_point(config)]
-    return Candidate("gain schedule", metrics, mc, _margins_at(scenario.tuning, gains, points),
+    return Candidate(Deployed.SCHEDULE.value, metrics, mc, _margins_at(scenario.tuning, gains, points),
                      [p[0] for p in points])
 
 
@@ -108,9 +111,6 @@ def holdout_ise(scenario, schedule: GainSchedule, seed: int) -> float:
     """ISE summed over HOLDOUT_EPISODES seeded episodes of the training distribution (scenario.tuning: its random
     setpoints, noise, disturbances, randomisation), replayed as a plain PID; infinity when one diverges. The
     seeds are disjoint from those the table was built and chosen on, and from the evaluation's."""
-    from prlpid_fmi.deliver.evidence import HOLDOUT_EPISODES, HOLDOUT_SEED_OFFSET
-    from prlpid_fmi.tuning.schedule.replay import training_ise
-
     return training_ise(schedule, scenario.tuning, seed, episodes=HOLDOUT_EPISODES, offset=HOLDOUT_SEED_OFFSET)
 
 
@@ -143,9 +143,3 @@ def candidate_summary(c: Candidate) -> dict:
             "worst_Ms": c.worst_Ms if math.isfinite(c.worst_Ms) else None,
             "holdout_ise": None if math.isnan(c.holdout_ise) else c.holdout_ise if math.isfinite(c.holdout_ise)
             else "inf"}
-
-
-HOLDOUT_EPISODES = 8  # further episodes the deliverable rule compares the schedule and the fixed PID on
-
-
-HOLDOUT_SEED_OFFSET = 30_000

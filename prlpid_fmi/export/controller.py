@@ -9,6 +9,11 @@ from typing import TYPE_CHECKING, Optional
 from prlpid_fmi.errors import ArgumentError, PrlPidError
 from prlpid_fmi.version import __version__
 
+_IDENTIFIER = re.compile(r"^[A-Za-z][A-Za-z0-9]*(_[A-Za-z0-9]+)*$")  # C and IEC 61131-3 (no '__', no trailing '_')
+_C_KEYWORDS = frozenset("""auto break case char const continue default do double else enum extern float for goto if
+inline int long register restrict return short signed sizeof static struct switch typedef union unsigned void
+volatile while""".split())
+
 if TYPE_CHECKING:  # numpy and the schedule are imported where used: the CLI imports the export formats
     from prlpid_fmi.tuning.schedule.table import GainSchedule
 
@@ -163,11 +168,3 @@ def from_schedule(schedule: "GainSchedule", name: str, source: str = "a gain sch
         derivative_filter_N=None if s.derivative_filter_N is None else float(s.derivative_filter_N),
         u_min=tuple(float(v) for v in s.u_min), u_max=tuple(float(v) for v in s.u_max),
         schedule_variable=s.variable, schedule_unit=s.unit, schedule_kind=kind, schedule_loop=loop)
-
-
-_IDENTIFIER = re.compile(r"^[A-Za-z][A-Za-z0-9]*(_[A-Za-z0-9]+)*$")  # C and IEC 61131-3 (no '__', no trailing '_')
-
-
-_C_KEYWORDS = frozenset("""auto break case char const continue default do double else enum extern float for goto if
-inline int long register restrict return short signed sizeof static struct switch typedef union unsigned void
-volatile while""".split())

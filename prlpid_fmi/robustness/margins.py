@@ -53,6 +53,8 @@ MIN_RESOLUTION_BIN = 32      # a peak or crossover below this bin gets a longer 
 REFINE_POINTS = 24           # bins added around each peak or crossover, at most
 CROSSING_RANGE = 20.0        # phase crossings with 1/20 < |L| < 20 count as points of interest
 DC_PEAK_GAP = 0.003          # an |S| peak at the lowest grid point may sit this far (relative) below |S(0)|
+MEASURED_LIMIT = 512         # margins_of keeps this many measurements per process
+_MEASURED: dict = {}         # margins_of's measurements: (config, FMU file, gains, point) -> Margins
 DISTORTION_LIMIT = 0.02      # relative response at non-excited bins above which the estimate is flagged
 
 
@@ -392,8 +394,22 @@ def operating_point(config: TuningConfig, value: float | None = None) -> list[fl
     return point
 
 
-def margins_of(config: TuningConfig, gains: tuple, point: list[float]):
-    """prlpid_fmi.robustness.margins.Margins of constant gains (Kp, Ti, Td, coupling) at an operating point (setpoints)."""
-    from prlpid_fmi.robustness.margins import loop_margins
+def margins_of(config: TuningConfig, gains: tuple, point: list[float]) -> Margins:
+    """Margins of constant gains (Kp, Ti, Td, coupling lists) at an operating point (setpoints per loop).
 
-    return loop_margins(config, gains[0], gains[1], gains[2], point, coupling=gains[3])
+    The experiment is deterministic (identification: no noise, no disturbances), so each measurement is kept
+    for the life of the process, keyed by the config, the FMU file's size and time, the gains and the point:
+    a table row measured while it is projected onto the Ms limit and again as evidence is measured once.
+    """
+    from prlpid_fmi.fmu.resolve import resolve_fmu
+
+    fmu = resolve_fmu(config.fmu, config.fmi_version).stat()
+    key = (repr(config), fmu.st_size, fmu.st_mtime_ns, tuple(None if g is None else tuple(float(v) for v in g)
+                                                              for g in gains), tuple(float(v) for v in point))
+    found = _MEASURED.get(key)
+    if found is None:
+        found = loop_margins(config, gains[0], gains[1], gains[2], point, coupling=gains[3])
+        if len(_MEASURED) >= MEASURED_LIMIT:
+            _MEASURED.pop(next(iter(_MEASURED)))  # the oldest
+        _MEASURED[key] = found
+    return found

@@ -309,5 +309,5 @@ def schema_uri() -> str:
 
 
 __all__ = ["Scenario", "EvaluationConfig", "load_scenario", "validate_scenario", "validate", "build_scenario",
-           "scenario_model", "scenario_to_dict", "scenario_to_yaml", "init_scenario", "schema_uri",
+           "scenario_model", "scenario_to_dict", "scenario_to_yaml", "schema_uri",
            "DISTURBANCE_TYPES", "GAIN_SCALES", "ALGORITHMS"]

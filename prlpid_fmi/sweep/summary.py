@@ -9,7 +9,7 @@ Controllers, from each trial's metrics.json:
 
 Metrics: ISE, IAE, overshoot [%], settling time [s], and for regulation segments (no setpoint step)
 peak deviation and recovery time; overall (summed over loops for ISE / IAE, worst loop otherwise:
-deliver.overall_metric) and per evaluation interval. For each (variant, controller, interval, metric):
+metrics.overall_metric) and per evaluation interval. For each (variant, controller, interval, metric):
 n = seeds where the metric is defined (not NaN: e.g. no overshoot without a setpoint step, no segment
 starting in the interval), n_finite = those with a finite value (a loop that never settles has an infinite
 settling time), mean and the Student-t 95 % interval mean ± t(0.975, n_finite - 1) · s / sqrt(n_finite)
@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from prlpid_fmi import rundir as rd
+from prlpid_fmi.deliver.rule import Deployed
 from prlpid_fmi.metrics import overall_metric
 from prlpid_fmi.rundir import write_atomic
 
@@ -52,8 +53,8 @@ def controller_metrics(metrics: dict) -> dict:
 
     out = {"policy": metrics.get("policy"), "schedule": inner(metrics.get("schedule_replay")),
            "fixed_pid": inner(metrics.get("fixed_pid"))}
-    out["deployed"] = {"gain schedule": out["schedule"],
-                       "fixed PID": inner(metrics.get("fixed_pid_assessment"))}.get(metrics.get("deployed"))
+    out["deployed"] = {Deployed.SCHEDULE: out["schedule"],
+                       Deployed.FIXED_PID: inner(metrics.get("fixed_pid_assessment"))}.get(Deployed.read(metrics.get("deployed")))
     return out
 
 
@@ -143,7 +144,7 @@ def _cell(stat: dict | None) -> str:
 
 
 def _deployed_counts(choices: list[str]) -> str:
-    names = {"gain schedule": "schedule", "fixed PID": "fixed PID", "none": "none"}
+    names = {Deployed.SCHEDULE: "schedule", Deployed.FIXED_PID: "fixed PID", Deployed.NONE: "none"}
     return ", ".join(f"{names.get(c, c)} {choices.count(c)}" for c in dict.fromkeys(choices)) or "—"
 
 

@@ -23,6 +23,7 @@ from prlpid_fmi.fmu import describe_fmu
 from prlpid_fmi.fmu.resolve import resolve_fmu
 from prlpid_fmi.loop.env import PidTuningEnv, is_anchored
 from prlpid_fmi.progress import training_progress
+from prlpid_fmi import rundir as rd
 from prlpid_fmi.rundir import write_atomic
 
 ALGORITHMS = schema.ALGORITHMS  # ppo | sac | td3: the scenario schema's choices
@@ -137,10 +138,10 @@ def _timed_checkpoints(run_dir: Path, agent: AgentConfig):
 def save_checkpoint(model, run_dir: Path, normalize: bool) -> Path:
     """checkpoints/model_<timesteps>_steps.zip (+ the VecNormalize statistics) atomically; returns its path."""
     steps = int(model.num_timesteps)
-    path = write_atomic(Path(run_dir) / "checkpoints" / f"model_{steps}_steps.zip", lambda tmp: model.save(str(tmp)))
+    path = write_atomic(Path(run_dir) / rd.CHECKPOINTS / f"model_{steps}_steps.zip", lambda tmp: model.save(str(tmp)))
     if normalize and model.get_vec_normalize_env() is not None:
         stats = model.get_vec_normalize_env()
-        write_atomic(Path(run_dir) / "checkpoints" / f"model_vecnormalize_{steps}_steps.pkl",
+        write_atomic(Path(run_dir) / rd.CHECKPOINTS / f"model_vecnormalize_{steps}_steps.pkl",
                      lambda tmp: stats.save(str(tmp)))
     return path
 
@@ -151,10 +152,10 @@ def normalize_stats(run_dir: Path, model_file: Path) -> Path | None:
     absent. A checkpoint is paired with its own statistics: run_dir/vecnormalize.pkl may be older or newer."""
     model_file = Path(model_file)
     parts = model_file.stem.split("_")
-    if model_file.parent.name == "checkpoints" and len(parts) == 3 and parts[0] == "model" and parts[2] == "steps":
+    if model_file.parent.name == rd.CHECKPOINTS and len(parts) == 3 and parts[0] == "model" and parts[2] == "steps":
         paired = model_file.parent / f"model_vecnormalize_{parts[1]}_steps.pkl"
     else:
-        paired = Path(run_dir) / "vecnormalize.pkl"
+        paired = Path(run_dir) / rd.VECNORMALIZE
     return paired if paired.is_file() else None
 
 
@@ -188,7 +189,7 @@ def train(config: TuningConfig, agent: AgentConfig, run_dir: Path, progress_bar:
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(torch_threads(agent.torch_threads))
-    env = make_vec_env(config, agent, run_dir / "monitor", anchor, append=resume_from is not None)
+    env = make_vec_env(config, agent, run_dir / rd.MONITOR, anchor, append=resume_from is not None)
     if agent.normalize:
         stats = normalize_stats(run_dir, resume_from) if resume_from is not None else None
         env = VecNormalize.load(str(stats), env) if stats is not None else VecNormalize(env, gamma=agent.gamma)
@@ -200,10 +201,10 @@ def train(config: TuningConfig, agent: AgentConfig, run_dir: Path, progress_bar:
             raise RunError(f"{resume_from}: cannot resume from this checkpoint ({type(exc).__name__}: "
                            f"{' '.join(str(exc).split())}; expected a {agent.algorithm.upper()} model written by "
                            "`tune`; delete it to resume from an earlier one)") from None
-        model.tensorboard_log = str(run_dir / "tensorboard")
+        model.tensorboard_log = str(run_dir / rd.TENSORBOARD)
     else:
         try:
-            model = build_model(agent, env, run_dir / "tensorboard", anchored=is_anchored(config, anchor))
+            model = build_model(agent, env, run_dir / rd.TENSORBOARD, anchored=is_anchored(config, anchor))
         except (MemoryError, RuntimeError) as exc:  # torch: RuntimeError "can't allocate memory"; numpy: MemoryError
             if isinstance(exc, RuntimeError) and "allocate" not in str(exc):
                 raise
@@ -215,7 +216,7 @@ def train(config: TuningConfig, agent: AgentConfig, run_dir: Path, progress_bar:
                            + (" or replay buffer)" if agent.algorithm != "ppo" else ")")) from None
     steps = total_timesteps if total_timesteps is not None else agent.total_timesteps
     checkpoint = CheckpointCallback(save_freq=max(agent.checkpoint_every // agent.envs, 1),
-                                    save_path=str(run_dir / "checkpoints"), name_prefix="model",
+                                    save_path=str(run_dir / rd.CHECKPOINTS), name_prefix="model",
                                     save_vecnormalize=agent.normalize)
     callbacks = [checkpoint, _timed_checkpoints(run_dir, agent)] + ([training_progress()] if progress_bar else [])
     try:
@@ -226,8 +227,8 @@ def train(config: TuningConfig, agent: AgentConfig, run_dir: Path, progress_bar:
             save_checkpoint(model, run_dir, agent.normalize)
         raise
     finally:
-        write_atomic(run_dir / "model.zip", lambda tmp: model.save(str(tmp)))
+        write_atomic(run_dir / rd.MODEL, lambda tmp: model.save(str(tmp)))
         if agent.normalize:
-            write_atomic(run_dir / "vecnormalize.pkl", lambda tmp: env.save(str(tmp)))
+            write_atomic(run_dir / rd.VECNORMALIZE, lambda tmp: env.save(str(tmp)))
         env.close()
     return model

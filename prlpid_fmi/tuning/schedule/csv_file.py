@@ -13,6 +13,13 @@ from prlpid_fmi.rundir import write_atomic
 from prlpid_fmi.tuning.schedule.table import INTERPOLATION, PID_EQUATION, GainSchedule
 from prlpid_fmi.version import __version__
 
+_ANTI_WINDUP_TEXT = {
+    "clamping": "clamping (conditional integration: e*Ts is not added to sum(e) while u is saturated "
+                "and Kp*e pushes further into the limit)",
+    "back_calculation": "back_calculation (tracking time constant Tt = sqrt(Ti*Td), or Ti when Td = 0)",
+    "none": "none",
+}
+
 
 def _f(x) -> str:
     return repr(float(x))
@@ -119,11 +126,3 @@ def read_schedule_csv(path) -> GainSchedule:
         raise PrlPidError(f"{path}: the Ki/Kd columns disagree with Kp/Ti/Td (Ki = Kp/Ti, Kd = Kp*Td); "
                           "edit Kp, Ti, Td and recompute Ki, Kd")
     return s
-
-
-_ANTI_WINDUP_TEXT = {
-    "clamping": "clamping (conditional integration: e*Ts is not added to sum(e) while u is saturated "
-                "and Kp*e pushes further into the limit)",
-    "back_calculation": "back_calculation (tracking time constant Tt = sqrt(Ti*Td), or Ti when Td = 0)",
-    "none": "none",
-}

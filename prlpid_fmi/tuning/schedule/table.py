@@ -41,8 +41,8 @@ INTERPOLATION = "linear between breakpoints, held constant outside"
 LOOP_SIGNALS = ("setpoint", "measurement", "error")  # scheduling variables read from a loop, not the FMU
 LOOP_VARIABLE = re.compile(r"^(setpoint|measurement|error)\[(.+)\]$")  # <signal>[<loop output>]
 
-__all__ = ["GainSchedule", "extract_schedule", "write_schedule_csv", "read_schedule_csv", "replay_schedule",
-           "PID_EQUATION", "INTERPOLATION"]
+__all__ = ["GainSchedule", "schedule_from_rows", "fixed_schedule", "table_meta", "exact_mean", "LOOP_SIGNALS",
+           "LOOP_VARIABLE", "PID_EQUATION", "INTERPOLATION"]
 
 
 @dataclass

@@ -37,7 +37,7 @@ TRAJECTORY_EPISODES = 8  # training-distribution episodes the trajectory table i
 EXTRACTION_SEED_OFFSET = 10_000
 RESOLUTION = 1e-3  # bins whose medians lie closer than this fraction of the visited span become one row
 
-__all__ = ["trajectory_schedule", "bin_rows", "training_ise", "deliverable_schedule", "extract"]
+__all__ = ["trajectory_schedule", "trajectory_samples", "bin_rows"]
 
 
 def bin_rows(values: np.ndarray, gains: dict[str, np.ndarray], points: int) -> list[tuple[float, dict]]:
