@@ -4,17 +4,26 @@ from __future__ import annotations
 from pathlib import Path
 
 from prlpid_fmi.errors import PlantError
-from prlpid_fmi.fmu import bundled_fmu, bundled_plant_names
-from prlpid_fmi.fmu.description import describe_fmu
+from prlpid_fmi.fmu.build import bundled_fmu, bundled_plant_names
+from prlpid_fmi.fmu.description import describe_fmu, missing_fmu_text
 
 
-def resolve_fmu(fmu: str, fmi_version: int = 2) -> Path:
-    """A bundled plant's name -> its (freshly built if needed) FMU; otherwise the path itself."""
+def fmu_file(fmu: str, base_dir: Path | None = None) -> Path:
+    """The file a plant.fmu that is not a bundled plant's name points to: ~ expanded, relative to base_dir (a
+    scenario's folder) when given and the path is relative."""
+    path = Path(fmu).expanduser()
+    if base_dir is not None and not path.is_absolute():
+        path = (base_dir / path).resolve()
+    return path
+
+
+def resolve_fmu(fmu: str, fmi_version: int = 2, base_dir: Path | None = None) -> Path:
+    """A bundled plant's name -> its FMU (built on demand for this FMI version); otherwise fmu_file(fmu,
+    base_dir), which must be a file. Raises PlantError (a bundled plant that cannot be built, a missing file)."""
     if fmu in bundled_plant_names():
         return bundled_fmu(fmu, fmi_version)
-    path = Path(fmu)
+    path = fmu_file(fmu, base_dir)
     if not path.is_file():
-        from prlpid_fmi.fmu.description import missing_fmu_text
         raise PlantError(f"{fmu}: {missing_fmu_text(path)} (and not a bundled plant: "
                          f"{', '.join(bundled_plant_names())})")
     return path

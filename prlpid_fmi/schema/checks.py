@@ -59,25 +59,25 @@ def did_you_mean(word: str, choices) -> str:
 # ---------------------------------------------------------------------------------------------
 # FMU files
 
-def resolve_fmu(value: str, state: State) -> tuple[str, Path]:
-    """(value for the config: a bundled name, or an absolute path; the .fmu file). Raises problem()."""
-    from prlpid_fmi.fmu import bundled_fmu, bundled_plant_names
+def scenario_fmu(value: str, state: State) -> tuple[str, Path]:
+    """plant.fmu / prior.fmu resolved (prlpid_fmi.fmu.resolve.resolve_fmu, relative to the scenario's folder):
+    (value for the config: a bundled name, or an absolute path; the .fmu file). Raises problem()."""
+    from prlpid_fmi.fmu.build import bundled_plant_names
+    from prlpid_fmi.fmu.resolve import fmu_file, resolve_fmu
 
     names = bundled_plant_names()
-    if value in names:
-        try:
-            return value, bundled_fmu(value, state.fmi_version)
-        except PlantError as exc:
+    try:
+        path = resolve_fmu(value, state.fmi_version, base_dir=state.base_dir)
+    except PlantError as exc:
+        if value in names:
             raise problem(f"cannot build the bundled plant: {exc}".splitlines()[0], "a buildable bundled plant")
-    path = Path(value).expanduser()
-    if not path.is_absolute():
-        path = (state.base_dir / path).resolve()
-    if not path.is_file():
         from prlpid_fmi.fmu.description import missing_fmu_text
-        raise problem(f"{missing_fmu_text(path)}: {path}",
+
+        missing = fmu_file(value, state.base_dir)
+        raise problem(f"{missing_fmu_text(missing)}: {missing}",
                       "a path to a .fmu file (relative to the scenario's folder) or a bundled plant: "
                       + (", ".join(names) or "none found"))
-    return str(path), path
+    return (value if value in names else str(path)), path
 
 
 def describe(path: Path):

@@ -263,7 +263,7 @@ class PlantModel(Section):
         state = state_of(info)
         if state is None:
             return value
-        resolved, path = checks.resolve_fmu(value, state)
+        resolved, path = checks.scenario_fmu(value, state)
         desc = checks.describe(path)
         if not (desc.co_simulation or desc.model_exchange):
             raise problem("the FMU has neither a co-simulation nor a model-exchange interface",
@@ -303,7 +303,7 @@ class PriorModel(Section):
         state = state_of(info)
         if state is None or value is None:
             return value
-        resolved, path = checks.resolve_fmu(value, state)
+        resolved, path = checks.scenario_fmu(value, state)
         desc = checks.describe(path)
         for i, (u, y) in enumerate(zip(state.loop_inputs, state.outputs)):
             try:
