@@ -284,82 +284,26 @@ def compute_metrics(time_s, setpoint, measurement, control_signal, sample_time_s
     10 % of a segment (fractions of the step size / segment length).
     Returns a dict of plain Python floats/ints/strings/lists, serialisable with json.dumps.
     """
-    t = np.asarray(time_s, dtype=float)
-    if t.ndim != 1 or t.size == 0:
-        raise ValueError(f"time_s must be a non-empty 1-D array, got shape {np.shape(time_s)}")
-    n = t.size
-    if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
-        raise ValueError("time_s must be finite and strictly increasing")
+    t, r, y, u, cmd, names = _signals(time_s, setpoint, measurement, control_signal, command, loop_names)
+    n, n_loops = t.size, r.shape[1]
     ts = float(sample_time_s)
     if not (math.isfinite(ts) and ts > 0):
         raise ValueError(f"sample_time_s must be a positive finite number, got {sample_time_s!r}")
-    r = _as_2d(setpoint, n, "setpoint")
-    y = _as_2d(measurement, n, "measurement")
-    u = _as_2d(control_signal, n, "control_signal")
-    n_loops = r.shape[1]
-    if y.shape[1] != n_loops or u.shape[1] != n_loops:
-        raise ValueError(f"setpoint, measurement and control_signal must have the same number of loops, "
-                         f"got {r.shape[1]}, {y.shape[1]}, {u.shape[1]}")
-    if not np.all(np.isfinite(r)):
-        raise ValueError("setpoint must be finite")
-    if loop_names is None:
-        names = [str(i) for i in range(n_loops)]
-    else:
-        names = [str(x) for x in loop_names]
-        if len(names) != n_loops or len(set(names)) != n_loops:
-            raise ValueError(f"loop_names must be {n_loops} distinct names, got {list(loop_names)!r}")
     if not (0.0 <= settling_threshold and 0.0 <= rise_time_limits[0] < rise_time_limits[1] <= 1.0
             and 0.0 < steady_state_fraction <= 1.0):
         raise ValueError("settling_threshold >= 0, 0 <= rise_time_limits[0] < [1] <= 1 and "
                          "0 < steady_state_fraction <= 1 are required")
-    windows = []
-    for iv in intervals or []:
-        try:
-            a, b = (int(v) for v in iv)
-        except (TypeError, ValueError):
-            raise ValueError(f"an interval must be a pair (start_step, end_step), got {iv!r}") from None
-        if not 0 <= a < b <= n:
-            raise ValueError(f"interval {iv!r} must satisfy 0 <= start_step < end_step <= {n}")
-        windows.append((a, b))
-
-    if u_range is None:
-        ranges = [None] * n_loops
-    else:
-        ranges = [float(v) for v in np.broadcast_to(np.asarray(u_range, dtype=float), (n_loops,))]
-        if any(math.isnan(v) or v <= 0 for v in ranges):
-            raise ValueError(f"u_range must be > 0 (or inf) per loop, got {ranges}")
-    if noise_std is None:
-        noise_stds = [None] * n_loops
-    else:
-        noise_stds = [float(v) for v in np.broadcast_to(np.asarray(noise_std, dtype=float), (n_loops,))]
-        if not all(math.isfinite(v) and v >= 0 for v in noise_stds):
-            raise ValueError(f"noise_std must be finite and >= 0 per loop, got {noise_stds}")
-    cmd = u if command is None else _as_2d(command, n, "command")
-    if cmd.shape[1] != n_loops:
-        raise ValueError(f"command must have {n_loops} loop(s), got {cmd.shape[1]}")
+    windows = _windows(intervals, n)
+    ranges = _per_loop(u_range, n_loops, lambda v: not (math.isnan(v) or v <= 0),
+                       "u_range must be > 0 (or inf) per loop, got {}")
+    noise_stds = _per_loop(noise_std, n_loops, lambda v: math.isfinite(v) and v >= 0,
+                           "noise_std must be finite and >= 0 per loop, got {}")
     chatter_thresholds = [_chatter_threshold(cmd[:, i], ranges[i]) for i in range(n_loops)]
 
     e = r - y
-    segments = []
-    per_loop_segments = []
-    for i, name in enumerate(names):
-        ri = r[:, i]
-        tol = _REL_TOL * np.maximum(1.0, np.maximum(np.abs(ri[1:]), np.abs(ri[:-1])))
-        changes = [int(k) + 1 for k in np.flatnonzero(np.abs(np.diff(ri)) > tol)]
-        event_starts = sorted({int(k) for k in (events or ()) if 0 < int(k) < n} - set(changes))
-        starts = sorted({0, *changes, *event_starts})
-        ends = starts[1:] + [n]
-        loop_segments = []
-        for s, end in zip(starts, ends):
-            base = y[0, i] if s == 0 else r[s - 1, i]
-            m = _segment_metrics(t[s:end], float(r[s, i]), float(base), y[s:end, i], settling_threshold,
-                                 tuple(rise_time_limits), steady_state_fraction, regulation=s in event_starts,
-                                 first=s == 0, noise_std=noise_stds[i])
-            seg = {"loop": name, "start_step": int(s), "end_step": int(end), "start_time_s": float(t[s]),
-                   "StepSize": float(r[s, i] - base) if math.isfinite(base) else math.nan, **m}
-            loop_segments.append(seg)
-        per_loop_segments.append(loop_segments)
-        segments.extend(loop_segments)
+    per_loop_segments = [_loop_segments(t, r[:, i], y[:, i], name, events, settling_threshold, rise_time_limits,
+                                        steady_state_fraction, noise_stds[i]) for i, name in enumerate(names)]
+    segments = [s for loop_segments in per_loop_segments for s in loop_segments]
 
     def window(a: int, b: int) -> dict:
         out = {}
@@ -390,3 +334,77 @@ def overall_metric(overall: dict, key: str) -> float:
     if not values:
         return math.nan
     return sum(values) if key in INTEGRAL_METRICS else max(values)
+
+
+def _signals(time_s, setpoint, measurement, control_signal, command, loop_names):
+    """The checked inputs of compute_metrics: t (n,); r, y, u, cmd (n, n_loops); the loop names."""
+    t = np.asarray(time_s, dtype=float)
+    if t.ndim != 1 or t.size == 0:
+        raise ValueError(f"time_s must be a non-empty 1-D array, got shape {np.shape(time_s)}")
+    n = t.size
+    if not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
+        raise ValueError("time_s must be finite and strictly increasing")
+    r = _as_2d(setpoint, n, "setpoint")
+    y = _as_2d(measurement, n, "measurement")
+    u = _as_2d(control_signal, n, "control_signal")
+    n_loops = r.shape[1]
+    if y.shape[1] != n_loops or u.shape[1] != n_loops:
+        raise ValueError(f"setpoint, measurement and control_signal must have the same number of loops, "
+                         f"got {r.shape[1]}, {y.shape[1]}, {u.shape[1]}")
+    if not np.all(np.isfinite(r)):
+        raise ValueError("setpoint must be finite")
+    if loop_names is None:
+        names = [str(i) for i in range(n_loops)]
+    else:
+        names = [str(x) for x in loop_names]
+        if len(names) != n_loops or len(set(names)) != n_loops:
+            raise ValueError(f"loop_names must be {n_loops} distinct names, got {list(loop_names)!r}")
+    cmd = u if command is None else _as_2d(command, n, "command")
+    if cmd.shape[1] != n_loops:
+        raise ValueError(f"command must have {n_loops} loop(s), got {cmd.shape[1]}")
+    return t, r, y, u, cmd, names
+
+
+def _windows(intervals, n: int) -> list[tuple[int, int]]:
+    """The (start_step, end_step) intervals as int pairs with 0 <= start < end <= n."""
+    windows = []
+    for iv in intervals or []:
+        try:
+            a, b = (int(v) for v in iv)
+        except (TypeError, ValueError):
+            raise ValueError(f"an interval must be a pair (start_step, end_step), got {iv!r}") from None
+        if not 0 <= a < b <= n:
+            raise ValueError(f"interval {iv!r} must satisfy 0 <= start_step < end_step <= {n}")
+        windows.append((a, b))
+    return windows
+
+
+def _per_loop(value, n_loops: int, valid, message: str) -> list:
+    """A scalar or (n_loops,) value as n_loops floats checked by `valid` (ValueError: message.format(values));
+    None: n_loops Nones."""
+    if value is None:
+        return [None] * n_loops
+    values = [float(v) for v in np.broadcast_to(np.asarray(value, dtype=float), (n_loops,))]
+    if not all(valid(v) for v in values):
+        raise ValueError(message.format(values))
+    return values
+
+
+def _loop_segments(t: np.ndarray, r: np.ndarray, y: np.ndarray, name: str, events, settling_threshold: float,
+                   rise_time_limits, steady_state_fraction: float, noise_std: float | None) -> list[dict]:
+    """One loop's segments (module docstring): split at setpoint changes and disturbance events, each measured
+    by _segment_metrics. r, y: (n,) of this loop."""
+    n = t.size
+    tol = _REL_TOL * np.maximum(1.0, np.maximum(np.abs(r[1:]), np.abs(r[:-1])))
+    changes = [int(k) + 1 for k in np.flatnonzero(np.abs(np.diff(r)) > tol)]
+    event_starts = sorted({int(k) for k in (events or ()) if 0 < int(k) < n} - set(changes))
+    starts = sorted({0, *changes, *event_starts})
+    out = []
+    for s, end in zip(starts, starts[1:] + [n]):
+        base = y[0] if s == 0 else r[s - 1]
+        m = _segment_metrics(t[s:end], float(r[s]), float(base), y[s:end], settling_threshold,
+                             tuple(rise_time_limits), steady_state_fraction, regulation=s in event_starts,
+                             first=s == 0, noise_std=noise_std)
+        out.append({"loop": name, "start_step": int(s), "end_step": int(end), "start_time_s": float(t[s]),
+                    "StepSize": float(r[s] - base) if math.isfinite(base) else math.nan, **m})
+    return out

@@ -68,16 +68,36 @@ def choose_input(result: ProbeResult) -> tuple[StepResponse, str]:
 
 
 def propose_loop(result: ProbeResult) -> LoopProposal:
-    """u_limits, setpoint range, sample time and gain ranges for the chosen input (see `why`)."""
+    """u_limits, setpoint range, sample time and gain ranges for the chosen input (each with its reason in `why`)."""
     from prlpid_fmi.fmu import describe_fmu
 
     d = describe_fmu(result.fmu)
     r, reason = choose_input(result)
     v, out = d.variable(r.input), d.variable(result.output)
     why = {"input": reason}
+    u_trim = _trim_input(r)
+    u_limits = _u_limits(r, v, u_trim, result, why)
+    sp = _setpoint_range(r, out, u_trim, u_limits, result, why)
+    scale = _round(max((sp[1] - sp[0]) / 2, 1e-12))
+    ts, kc, ti, td_max, sign = _sample_time_and_gains(r, u_trim, u_limits, sp, result, why)
+    if sign > 0:
+        kp = (_round(kc / 10), _round(kc * 10), "log")
+    else:
+        kp = (_round(-kc * 10), _round(-kc / 10), "linear")
+        why["gains"] += "; negative gain: a negative linear Kp range"
+    gains = {"Kp": kp, "Ti": (_round(ti / 10), _round(ti * 10), "log"), "Td": (0.0, _round(td_max), "linear")}
+    others = tuple(
+        f"{o.input}: {'looks like a disturbance; ' if o.disturbance_like else ''}"
+        + (f"moves {result.output} by {o.output_change_per_unit:.4g} per unit ({o.kind})" if o.kind != "none"
+           else f"does not move {result.output}")
+        for o in result.responses if o.input != r.input)
+    return LoopProposal(r.input, result.output, (float(u_limits[0]), float(u_limits[1])), sp, scale, ts, gains, why,
+                        others, u_trim)
+
+
+def _trim_input(r: StepResponse) -> float:
+    """The input that holds the output at its start value, from the trim run's drift and the fitted model."""
     s0 = _initial_slope(r)
-    y0 = result.y0
-    # the input that holds y0, from the trim run's drift and the fitted model
     if r.kind == "stable":
         u_trim = r.u0 - s0 * r.time_constant_s / r.gain
     elif r.kind == "unstable":
@@ -87,23 +107,29 @@ def propose_loop(result: ProbeResult) -> LoopProposal:
         u_trim = r.u0                              # y0 was read at u0, and nothing drifts
     else:
         u_trim = r.u0 - s0 / r.rate
-    u_trim = _round(u_trim, 4)
-    # u_limits: declared, else around the trim input
+    return _round(u_trim, 4)
+
+
+def _u_limits(r: StepResponse, v, u_trim: float, result: ProbeResult, why: dict) -> tuple[float, float]:
+    """u_limits: the input's declared min and max, else a reach around the trim input (why["u_limits"])."""
     if v.min is not None and v.max is not None:
-        u_limits = (v.min, v.max)
         why["u_limits"] = f"{r.input}'s declared min and max"
-    else:
-        nominal = abs(v.nominal) if v.nominal is not None else 0.0
-        reach = max(2 * abs(u_trim - r.u0), nominal, abs(r.u0), 10 * abs(r.du))
-        lo, hi = u_trim - reach, u_trim + reach
-        if v.min is not None:
-            lo = max(lo, v.min)
-        if v.max is not None:
-            hi = min(hi, v.max)
-        u_limits = (_round(lo), _round(hi))
-        why["u_limits"] = (f"ADJUST to the actuator: ±{_round(reach)} around the trim input {u_trim:g} that holds "
-                           f"{result.output} = {y0:.4g} (probe)")
-    # setpoint range the actuator can hold at steady state
+        return (v.min, v.max)
+    nominal = abs(v.nominal) if v.nominal is not None else 0.0
+    reach = max(2 * abs(u_trim - r.u0), nominal, abs(r.u0), 10 * abs(r.du))
+    lo, hi = u_trim - reach, u_trim + reach
+    if v.min is not None:
+        lo = max(lo, v.min)
+    if v.max is not None:
+        hi = min(hi, v.max)
+    why["u_limits"] = (f"ADJUST to the actuator: ±{_round(reach)} around the trim input {u_trim:g} that holds "
+                       f"{result.output} = {result.y0:.4g} (probe)")
+    return (_round(lo), _round(hi))
+
+
+def _setpoint_range(r: StepResponse, out, u_trim: float, u_limits, result: ProbeResult, why: dict) -> tuple:
+    """The setpoint range the actuator can hold at steady state, inside the output's declared range."""
+    y0 = result.y0
     if r.kind in ("stable", "unstable", "static"):
         held = sorted(y0 + r.gain * (u - u_trim) for u in u_limits)
         shrink = 0.25 if r.kind == "unstable" else 0.1
@@ -120,9 +146,11 @@ def propose_loop(result: ProbeResult) -> LoopProposal:
         sp[0] = max(sp[0], out.min)
     if out.max is not None:
         sp[1] = min(sp[1], out.max)
-    sp = (_round(sp[0]), _round(sp[1]))
-    scale = _round(max((sp[1] - sp[0]) / 2, 1e-12))
-    # sample time and gains
+    return (_round(sp[0]), _round(sp[1]))
+
+
+def _sample_time_and_gains(r: StepResponse, u_trim: float, u_limits, sp, result: ProbeResult, why: dict) -> tuple:
+    """(sample time [s], Kp, Ti [s], Td upper bound [s], sign of Kp) from the identified model of each kind."""
     sign = 1.0
     if r.kind == "stable":
         T, K, L = r.time_constant_s, r.gain, r.dead_time_s
@@ -164,16 +192,4 @@ def propose_loop(result: ProbeResult) -> LoopProposal:
         kc, ti, td_max = 1 / (abs(r.rate) * tau_c), 4 * tau_c, tau_c
         sign = math.copysign(1.0, r.rate)
         why["gains"] = f"around SIMC for an integrator with rate {r.rate:.4g} (Kp {kc:.3g}, Ti {ti:.3g} s)"
-    if sign > 0:
-        kp = (_round(kc / 10), _round(kc * 10), "log")
-    else:
-        kp = (_round(-kc * 10), _round(-kc / 10), "linear")
-        why["gains"] += "; negative gain: a negative linear Kp range"
-    gains = {"Kp": kp, "Ti": (_round(ti / 10), _round(ti * 10), "log"), "Td": (0.0, _round(td_max), "linear")}
-    others = tuple(
-        f"{o.input}: {'looks like a disturbance; ' if o.disturbance_like else ''}"
-        + (f"moves {result.output} by {o.output_change_per_unit:.4g} per unit ({o.kind})" if o.kind != "none"
-           else f"does not move {result.output}")
-        for o in result.responses if o.input != r.input)
-    return LoopProposal(r.input, result.output, (float(u_limits[0]), float(u_limits[1])), sp, scale, ts, gains, why,
-                        others, u_trim)
+    return ts, kc, ti, td_max, sign

@@ -15,6 +15,27 @@ from prlpid_fmi.schema import ALGORITHMS, default
 from prlpid_fmi.schema import model as m
 
 
+def _probed_loop(fmu_path: str | Path, output: Optional[str], start_values: dict):
+    """(the FMU's description, the loop its step and trim test proposes); ScenarioError with one line when the FMU
+    cannot be read, cannot be a plant, or cannot be probed."""
+    from prlpid_fmi.fmu import describe_fmu
+    from prlpid_fmi.probe.proposal import propose_loop
+    from prlpid_fmi.probe.step_test import probe
+
+    try:
+        d = describe_fmu(Path(fmu_path))
+    except PlantError as exc:  # its message already names the file
+        raise ScenarioError(str(exc)) from None
+    problems = d.plant_problems()
+    if problems:
+        raise ScenarioError(f"{fmu_path}: cannot be a plant: {'; '.join(problems)} "
+                            f"(got {d.model_name!r}; expected an FMU with scalar real inputs and outputs)")
+    try:
+        return d, propose_loop(probe(Path(fmu_path), output=output, start_values=start_values))
+    except PlantError as exc:
+        raise ScenarioError(f"{fmu_path}: the step and trim test failed: {exc}") from None
+
+
 def init_scenario(fmu_path: str | Path, output: Optional[str] = None,
                   start_values: Optional[dict] = None) -> str:
     """YAML text of a ready-to-edit scenario for an FMU, from a step and trim test (prlpid_fmi.probe).
@@ -26,24 +47,9 @@ def init_scenario(fmu_path: str | Path, output: Optional[str] = None,
     (parameters are written to plant.parameters). Raises ScenarioError with one line when the FMU cannot
     be read or probed.
     """
-    from prlpid_fmi.fmu import describe_fmu
-    from prlpid_fmi.probe.proposal import propose_loop
-    from prlpid_fmi.probe.step_test import probe
-
     p = Path(fmu_path)
-    try:
-        d = describe_fmu(p)
-    except PlantError as exc:  # its message already names the file
-        raise ScenarioError(str(exc)) from None
-    problems = d.plant_problems()
-    if problems:
-        raise ScenarioError(f"{fmu_path}: cannot be a plant: {'; '.join(problems)} "
-                            f"(got {d.model_name!r}; expected an FMU with scalar real inputs and outputs)")
     start_values = dict(start_values or {})
-    try:
-        loop = propose_loop(probe(p, output=output, start_values=start_values))
-    except PlantError as exc:
-        raise ScenarioError(f"{fmu_path}: the step and trim test failed: {exc}") from None
+    d, loop = _probed_loop(fmu_path, output, start_values)
     tunable = [v for v in d.parameters if v.variability == "tunable" and v.scalar_real]
 
     def unit(name):

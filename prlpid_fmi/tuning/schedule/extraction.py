@@ -57,15 +57,7 @@ def extract_schedule(policy: Policy, config: TuningConfig, schedule_by: str = "s
                           "or an FMU variable; error tables come from policy trajectories, "
                           "prlpid_fmi.tuning.schedule.trajectories.trajectory_schedule)")
     loop = names.index(m.group(2)) if m else 0
-    lo, hi = config.loops[loop].setpoint_range
-    if isinstance(points, (int, np.integer)):
-        if points < 1:
-            raise PrlPidError(f"points must be >= 1, got {points}")
-        setpoints = [0.5 * (lo + hi)] if points == 1 else list(np.linspace(lo, hi, int(points)))
-    else:
-        setpoints = [float(v) for v in points]
-        if not setpoints:
-            raise PrlPidError("points: no operating points given")
+    setpoints = operating_setpoints(config.loops[loop].setpoint_range, points)
     steps = int(settle_steps if settle_steps is not None else config.episode_steps)
     if steps < 1:
         raise PrlPidError(f"settle_steps must be >= 1, got {steps}")
@@ -86,23 +78,12 @@ def extract_schedule(policy: Policy, config: TuningConfig, schedule_by: str = "s
         for sp in setpoints:
             hold = list(others)
             hold[loop] = float(sp)
-            obs, _ = env.reset(seed=seed, options={"setpoint_schedule": ((0, tuple(hold)),)})
-            values, gains = [], []
-            for k in range(steps):
-                values.append(probe())
-                obs, _, terminated, _, _ = env.step(policy(obs))
-                if terminated:
-                    break
-                gains.append(env.gains)
-            if terminated:  # no safe gains exist there: leave the point out of the table
+            row, why = _settled_row(env, probe, policy, hold, seed, steps, tail)
+            if row is None:  # no safe gains exist there: leave the point out of the table
                 excluded.append(float(sp))
-                why = env.core.termination.message if env.core.termination else f"diverged at step {k + 1}"
                 failures.setdefault(why, []).append(float(sp))
-                continue
-            g = {name: np.array([x[i] for x in gains[-tail:]], float) for i, name in enumerate(GAIN_NAMES)
-                 if gains[0][i] is not None}
-            rows.append((float(exact_mean(np.array(values[-tail:]))),
-                         {key: exact_mean(v) for key, v in g.items()}))
+            else:
+                rows.append(row)
     finally:
         env.close()
 
@@ -117,6 +98,37 @@ def extract_schedule(policy: Policy, config: TuningConfig, schedule_by: str = "s
                           f"({', '.join(f'{v:g}' for v in excluded)}): no gains can be scheduled; "
                           "train longer or narrow the operating range")
     return schedule_from_rows(config, variable, unit, rows, meta, excluded=tuple(excluded))
+
+
+def operating_setpoints(setpoint_range: tuple[float, float], points: int | Sequence[float]) -> list[float]:
+    """The setpoints a table is read at: an int K evenly spaced over setpoint_range (K = 1: its middle), or the
+    given values. PrlPidError for K < 1 or no values."""
+    lo, hi = setpoint_range
+    if isinstance(points, (int, np.integer)):
+        if points < 1:
+            raise PrlPidError(f"points must be >= 1, got {points}")
+        return [0.5 * (lo + hi)] if points == 1 else list(np.linspace(lo, hi, int(points)))
+    setpoints = [float(v) for v in points]
+    if not setpoints:
+        raise PrlPidError("points: no operating points given")
+    return setpoints
+
+
+def _settled_row(env, probe: SchedulingVariable, policy: Policy, hold: list[float], seed: int, steps: int,
+                 tail: int) -> tuple[tuple | None, str]:
+    """One hold of `steps` samples at setpoints `hold`: (row, "") with the means of the scheduling variable and of
+    the applied gains over the last `tail` samples, or (None, why) when the closed loop ended early."""
+    obs, _ = env.reset(seed=seed, options={"setpoint_schedule": ((0, tuple(hold)),)})
+    values, gains = [], []
+    for k in range(steps):
+        values.append(probe())
+        obs, _, terminated, _, _ = env.step(policy(obs))
+        if terminated:
+            return None, env.core.termination.message if env.core.termination else f"diverged at step {k + 1}"
+        gains.append(env.gains)
+    g = {name: np.array([x[i] for x in gains[-tail:]], float) for i, name in enumerate(GAIN_NAMES)
+         if gains[0][i] is not None}
+    return (float(exact_mean(np.array(values[-tail:]))), {key: exact_mean(v) for key, v in g.items()}), ""
 
 
 def extract(policy: Policy, config: TuningConfig, schedule_by: str, points: int, seed: int,
