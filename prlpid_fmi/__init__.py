@@ -22,6 +22,7 @@ _API = {
     "Scenario": "prlpid_fmi.scenario.load",
     "init_scenario": "prlpid_fmi.scenario.draft",
     "preset": "prlpid_fmi.scenario.presets",
+    "scenario_path": "prlpid_fmi.scenario.presets",
     "make_env": "prlpid_fmi.scenario.presets",
     "TuningConfig": "prlpid_fmi.config",
     "PidTuningEnv": "prlpid_fmi.loop.env",
