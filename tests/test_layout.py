@@ -101,6 +101,12 @@ def test_the_package_root_holds_few_modules():
     assert len(modules) <= MAX_ROOT_MODULES, modules
 
 
+def test_every_module_opens_with_a_docstring_that_says_its_job():
+    missing = [str(p.relative_to(REPO)) for p in sorted(PACKAGE.rglob("*.py"))
+               if not ast.get_docstring(ast.parse(p.read_text(encoding="utf-8")))]
+    assert missing == []
+
+
 def test_import_prlpid_fmi_is_light_and_its_api_resolves():
     code = ("import sys, prlpid_fmi; assert 'torch' not in sys.modules and 'stable_baselines3' not in sys.modules; "
             "names = [n for n in prlpid_fmi.__all__ if getattr(prlpid_fmi, n) is None]; print(names)")

@@ -1,1 +1,2 @@
-"""Which controller is deployed and why: the evidence (replays, Monte-Carlo set, margins), the candidate tables, and the rule."""
+"""Which controller is deployed and why: the evidence (replays, Monte-Carlo set, margins), the candidate tables, and
+the rule."""

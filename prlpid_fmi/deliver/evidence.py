@@ -103,10 +103,6 @@ def range_points(config, loop: int) -> list[list[float]]:
     return points
 
 
-
-
-
-
 def holdout_ise(scenario, schedule: GainSchedule, seed: int) -> float:
     """ISE summed over HOLDOUT_EPISODES seeded episodes of the training distribution (scenario.tuning: its random
     setpoints, noise, disturbances, randomisation), replayed as a plain PID; infinity when one diverges. The

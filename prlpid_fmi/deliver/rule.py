@@ -159,13 +159,5 @@ def choose(schedule: Candidate | None, fixed: Candidate, max_sensitivity: float)
     return Decision(Deployed.NONE, tuple(reasons))
 
 
-
-
 def _total_variation(c: Candidate) -> float:
     return c.overall("TotalVariation")
-
-
-
-
-
-

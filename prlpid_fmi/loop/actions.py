@@ -28,12 +28,6 @@ from prlpid_fmi.loop.gains import Gains, gains_from_values, split_values
 PID_PARAMETERS = ("Kp", "Ti", "Td")
 
 
-
-
-
-
-
-
 class ActionMap:
     """Turns a (smoothed) action vector into Gains for the configured loops."""
 

@@ -54,8 +54,6 @@ class Termination:
         return self.kind != "diverged"
 
 
-
-
 def control_scales(config: TuningConfig) -> list[float]:
     """Per loop, the control-signal span that normalises |u_k - u_{k-1}| in the reward [input units]:
     loop.control_scale, else u_max - u_min when both are finite, else Kp.high * measurement_scale."""

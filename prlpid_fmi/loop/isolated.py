@@ -32,8 +32,6 @@ _SNAPSHOT = ("k", "setpoint", "measurement", "previous_error", "applied_setpoint
 _warned: set[str] = set()
 
 
-
-
 def runs_isolated(config: TuningConfig) -> bool:
     """Whether `config` puts the plant in a worker process (isolation "process")."""
     return config.isolation == "process"
@@ -44,18 +42,6 @@ def make_core(config: TuningConfig, forecast_path: str = "auto"):
     if runs_isolated(config):
         return IsolatedCore(config, forecast_path)
     return LoopCore(config, forecast_path)
-
-
-
-
-
-
-
-
-
-
-
-
 
 
 # -- the worker ------------------------------------------------------------------------------------

@@ -349,12 +349,3 @@ def _model_response(r: StepResponse) -> Optional[np.ndarray]:
 
 # ---------------------------------------------------------------------------------------------
 # what init proposes from a probe
-
-
-
-
-
-
-
-
-

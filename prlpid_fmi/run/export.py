@@ -1,4 +1,5 @@
-"""Export a run's controller: the gain table as CSV (from the policy, optionally replayed) or as code (ST, PLCopen XML, C)."""
+"""Export a run's controller: the gain table as CSV (from the policy, optionally replayed) or as code (ST, PLCopen
+XML, C)."""
 from __future__ import annotations
 
 import json

@@ -306,8 +306,6 @@ def schema_uri() -> str:
     return (SCENARIO_DIR / SCHEMA_FILE_NAME).resolve().as_uri()
 
 
-
-
 __all__ = ["Scenario", "EvaluationConfig", "load_scenario", "validate_scenario", "validate", "build_scenario",
            "scenario_model", "scenario_to_dict", "scenario_to_yaml", "schema_uri",
            "DISTURBANCE_TYPES", "GAIN_SCALES", "ALGORITHMS"]

@@ -147,8 +147,6 @@ class SweepModel(BaseModel):
         default_factory=dict, description=_EXPECTED["variants"])
 
 
-
-
 def _error_line(file: str, doc: Any, err: dict) -> str:
     """One pydantic error of the sweep file as `<file>: <key>: <problem> (got …; expected …)`."""
     loc = tuple(err["loc"])

@@ -76,10 +76,6 @@ DETUNE_SCAN = (1, 2, 4, 8, 16, 30)  # ... scanned at these k (lambda 1.15 to 66)
 DETUNE_BISECTIONS = 4
 
 
-
-
-
-
 def _meets(config: TuningConfig, gains: tuple, point: list[float], limit: float) -> bool:
     """Ms <= limit at the point. The search is conservative: an unreliable estimate counts too (a loop
     in a limit cycle at the Nyquist frequency gives one), unlike the deliverable (deliver.rule.meets)."""

@@ -1,7 +1,9 @@
+"""Reward forecast (paper eq. 12-14): roll the prior model N steps ahead with the current gains, through FMI
+calls (fmi.py) or one C call (native.py); base.py holds what both share. make_forecast picks one."""
+from __future__ import annotations
+
 from prlpid_fmi.control.reward import RewardWeights
 from prlpid_fmi.loop.forecast.fmi import FmiForecast
-
-"""Reward forecast (paper eq. 12-14): roll the prior model N steps ahead with the current gains, through FMI calls (fmi.py) or one C call (native.py)."""
 
 
 def make_forecast(plant, prior, pid, *, horizon: int, scale, bound, penalty: float, weights: RewardWeights, u_scale,

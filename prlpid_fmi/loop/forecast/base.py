@@ -68,7 +68,3 @@ class Forecast:
         self.weights = weights
         self.overrides = {name: float(value) for name, value in (overrides or {}).items()}
         self.coupled = hasattr(pid, "pid")  # CoupledPID wraps a PID
-
-
-
-

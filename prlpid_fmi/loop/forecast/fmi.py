@@ -1,4 +1,5 @@
-"""The reward forecast through FMI calls: any FMU that can serialize its state, a re-initialised prior (state_map), or a single-instance rollback."""
+"""The reward forecast through FMI calls: any FMU that can serialize its state, a re-initialised prior (state_map),
+or a single-instance rollback."""
 from __future__ import annotations
 
 from prlpid_fmi.control.reward import RewardWeights, mean_loop_reward

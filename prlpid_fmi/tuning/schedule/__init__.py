@@ -1,1 +1,2 @@
-"""Gain schedules: the table, extraction from a policy (settled holds and trajectories), replay as a plain PID, and the CSV file."""
+"""Gain schedules: the table, extraction from a policy (settled holds and trajectories), replay as a plain PID, and
+the CSV file."""

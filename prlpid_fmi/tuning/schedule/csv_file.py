@@ -1,4 +1,5 @@
-"""The gain table as a CSV file: metadata comment lines, one row per breakpoint; written atomically, read back exactly."""
+"""The gain table as a CSV file: metadata comment lines, one row per breakpoint; written atomically, read back
+exactly."""
 from __future__ import annotations
 
 import csv

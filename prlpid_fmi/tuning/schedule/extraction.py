@@ -1,4 +1,5 @@
-"""Gain tables from a trained policy: settled setpoint holds (extract_schedule) or trajectories (error tables), dispatched by extract."""
+"""Gain tables from a trained policy: settled setpoint holds (extract_schedule) or trajectories (error tables),
+dispatched by extract."""
 from __future__ import annotations
 
 import dataclasses
@@ -17,8 +18,6 @@ from prlpid_fmi.tuning.schedule.trajectories import trajectory_schedule
 from prlpid_fmi.tuning.schedule.variable import SchedulingVariable, variable_name
 
 SETTLED_FRACTION = 0.2  # gains and breakpoint: mean over the last 20 % of each hold
-
-
 
 
 def _nominal(config: TuningConfig) -> TuningConfig:

@@ -145,20 +145,11 @@ def _group(unit: str) -> str:
 # -- extraction -------------------------------------------------------------------------------------
 
 
-
-
-
 def table_meta(core, config: TuningConfig) -> dict:
     """The loops' input names and units as GainSchedule fields (loop_inputs, output_units, input_units)."""
     return dict(loop_inputs=tuple(l.input for l in config.loops),
                 output_units=tuple(core.plant.description.unit_of(l.output) for l in config.loops),
                 input_units=tuple(core.plant.description.unit_of(l.input) for l in config.loops))
-
-
-
-
-
-
 
 
 def schedule_from_rows(config: TuningConfig, variable: str, unit: str, rows: list, meta: dict,

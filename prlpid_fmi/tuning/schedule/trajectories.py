@@ -108,9 +108,3 @@ def trajectory_samples(policy: Policy, config: TuningConfig, variable: str, epis
     gains = {name: np.array([g[i] for g in applied], float) for i, name in enumerate(GAIN_NAMES)
              if applied and applied[0][i] is not None}
     return np.array(values, float), gains, unit, meta
-
-
-
-
-
-
