@@ -20,7 +20,8 @@ PROG = "prlpid-fmi"
 # a library parameter -> the option that sets it (ArgumentError messages are shown with these)
 OPTIONS = {"timesteps": "--timesteps", "seed": "--seed", "points": "--points", "schedule_by": "--schedule-by",
            "scenario_path": "--scenario", "replay": "--replay", "name": "--name", "fmt": "--format",
-           "fmi_version": "--fmi-version", "ray": "--ray", "workers": "--workers", "resume": "--resume", "out": "--out"}
+           "fmi_version": "--fmi-version", "ray": "--ray", "workers": "--workers", "resume": "--resume", "out": "--out",
+           "force": "--force"}
 
 
 def _say(args: argparse.Namespace, text: str) -> None:

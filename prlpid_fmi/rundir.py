@@ -155,15 +155,15 @@ def prepare_run_dir(out: str | Path | None, name: str, resume: bool) -> tuple[Pa
         out = Path("runs") / f"{name}-{stamp}"
     run_dir = Path(out)
     if run_dir.exists() and not run_dir.is_dir():
-        raise RunError(f"{run_dir}: is a file, not a directory (got --out {run_dir}; "
-                       "expected a new directory for the run)")
+        raise ArgumentError(f"{run_dir}: is a file, not a directory (got {{out}} {run_dir}; "
+                            "expected a new directory for the run)")
     if resume:
         if not (run_dir / SCENARIO).is_file():
             raise RunError(f"{run_dir}: nothing to resume (no {SCENARIO}; expected a run directory from `tune`)")
         return run_dir, None
     if run_dir.exists() and any(run_dir.iterdir()):
-        raise RunError(f"{run_dir}: run directory exists and is not empty (got --out {run_dir}; "
-                       "expected a new directory, or --resume to continue that run)")
+        raise ArgumentError(f"{run_dir}: run directory exists and is not empty (got {{out}} {run_dir}; "
+                            "expected a new directory, or {resume} to continue that run)")
     created = _first_missing(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     return run_dir, created

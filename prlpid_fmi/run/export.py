@@ -24,7 +24,7 @@ def check_output(run_dir: Path, output: Path, force: bool = False) -> None:
         raise RunError(f"{output}: belongs to the run directory {run_dir} (its {owned}; expected a file outside "
                        f"the run's own files, e.g. {run_dir.name}_schedule.csv)")
     if output.exists() and not force:
-        raise RunError(f"{output}: exists (expected a new file name, or --force to replace it)")
+        raise ArgumentError(f"{output}: exists (expected a new file name, or {{force}} to replace it)")
 
 
 def _check_schedule_options(trained: Scenario, schedule_by: str, points: int) -> None:
@@ -34,14 +34,15 @@ def _check_schedule_options(trained: Scenario, schedule_by: str, points: int) ->
     from prlpid_fmi.tuning.schedule.table import LOOP_SIGNALS, LOOP_VARIABLE
 
     if points < 1:
-        raise ArgumentError(f"{{points}}: must be at least 1 (got {points}; expected a number of operating points >= 1)")
+        raise ArgumentError(f"{{points}}: must be at least 1 (got {points}; expected a number of operating points "
+                            ">= 1)")
     if schedule_by in LOOP_SIGNALS:
         return
     m, loops = LOOP_VARIABLE.match(schedule_by), [loop.output for loop in trained.tuning.loops]
     if m:
         if m.group(2) not in loops:
             raise ArgumentError(f"{{schedule_by}}: no loop measures {m.group(2)!r} (got {schedule_by!r}; expected "
-                           f"{m.group(1)}[<loop>] with one of the loops: {', '.join(loops)})")
+                                f"{m.group(1)}[<loop>] with one of the loops: {', '.join(loops)})")
         return
     fmu = resolve_fmu(trained.tuning.fmu, trained.tuning.fmi_version)
     desc = describe_fmu(fmu)
@@ -49,8 +50,9 @@ def _check_schedule_options(trained: Scenario, schedule_by: str, points: int) ->
     if v is None or not v.scalar_real:
         names = [x.name for x in desc.variables if x.scalar_real]
         shown = ", ".join(names[:12]) + (", ..." if len(names) > 12 else "")
-        raise ArgumentError(f"{{schedule_by}}: the plant {fmu.name} has no scalar real variable {schedule_by!r} (got "
-                       f"{schedule_by!r}; expected {', '.join(LOOP_SIGNALS)}, <signal>[<loop>], or one of: {shown})")
+        raise ArgumentError(f"{{schedule_by}}: the plant {fmu.name} has no scalar real variable {schedule_by!r} "
+                            f"(got {schedule_by!r}; expected {', '.join(LOOP_SIGNALS)}, <signal>[<loop>], or one of: "
+                            f"{shown})")
 
 
 def export_schedule(run_dir: str | Path, output: str | Path, schedule_by: str = "setpoint", points: int = 9,
@@ -105,7 +107,7 @@ def export_controller(run_dir: str | Path, output: str | Path, fmt: str, fixed: 
     run_dir, output = Path(run_dir), Path(output)
     table = run_dir / (rd.FIXED_PID_CSV if fixed else rd.SCHEDULE)
     if not table.is_file():
-        what = "the tuned fixed PID (written by `tune` unless --no-baseline)" if fixed else \
+        what = "the tuned fixed PID (written by `tune` when it searched one)" if fixed else \
             "the deployed controller (written by `tune` when a controller is deployable)"
         raise RunError(f"{table}: missing (expected {what})")
     paths = output_paths(output, fmt)

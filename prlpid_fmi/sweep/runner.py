@@ -131,7 +131,7 @@ def check_existing(sweep: Sweep, trials: list[Trial]) -> list[str]:
         if diff:
             key, got, want = diff
             lines.append(f"{file}: {key}: differs from the sweep's variant {t.variant} (got {show(got)}; expected "
-                         f"{show(want)}: the sweep file changed since this trial ran; use another --out)")
+                         f"{show(want)}: the sweep file changed since this trial ran; use another {{out}})")
     return lines
 
 
@@ -326,11 +326,11 @@ def run_sweep(path: str | Path, out: str | Path | None = None, workers: Optional
     sweep = load_sweep(path)
     out = Path(out) if out is not None else default_out(sweep)
     if out.exists() and not out.is_dir():
-        raise RunError(f"{out}: is a file, not a folder (got --out {out}; expected a folder for the sweep)")
+        raise ArgumentError(f"{out}: is a file, not a folder (got {{out}} {out}; expected a folder for the sweep)")
     trials = plan(sweep, out)
     mismatched = check_existing(sweep, trials)
     if mismatched:
-        raise RunError("\n".join(mismatched))
+        raise ArgumentError("\n".join(mismatched))
 
     status = {t: trial_status(t.run_dir) for t in trials}
     todo = [t for t in trials if status[t] != FINISHED]
