@@ -33,3 +33,32 @@ def test_detuned_gains_meet_the_limit_by_a_small_margin(keep_ti):
     less = lam / DETUNE_STEP ** 0.5
     fewer = ([AGGRESSIVE[0][0] / less], [AGGRESSIVE[1][0] * (1.0 if keep_ti else less)], AGGRESSIVE[2], None)
     assert exact_ms(fewer) > 2.0
+
+
+def test_range_points_are_the_ends_and_middle_of_every_loops_range():
+    from prlpid_fmi.robustness.margins import setpoint_range_points
+
+    assert setpoint_range_points(CONFIG) == [[-1.0], [0.0], [1.0]]  # first_order: setpoint_range [-1, 1]
+    quadrotor = preset("quadrotor")  # three loops: they move together, low end to high end
+    ranges = [l.setpoint_range for l in quadrotor.loops]
+    assert len(ranges) == 3
+    assert setpoint_range_points(quadrotor) == [[lo for lo, _ in ranges], [0.5 * (lo + hi) for lo, hi in ranges],
+                                                 [hi for _, hi in ranges]]
+
+
+def test_a_fixed_pid_is_detuned_until_it_meets_the_limit_at_every_operating_point(monkeypatch):
+    """A plant whose Ms grows towards the high end of the range (Ms = Kp * (1 + setpoint) / 4, a stand-in for
+    margins_of): meeting the limit at mid-range (setpoint 0) is not enough; the worst point decides."""
+    import types
+
+    import prlpid_fmi.tuning.fixed_pid as fixed_pid
+
+    monkeypatch.setattr(fixed_pid, "margins_of", lambda config, g, p: types.SimpleNamespace(Ms=g[0][0] * (1 + p[0]) / 4))
+    points = [[-1.0], [0.0], [1.0]]
+    start = ([8.0], [1.0], [0.0], None)  # Ms 0, 2, 4 at the three points
+    at_mid = fixed_pid.detune(CONFIG, start, [0.0], 2.0)
+    assert at_mid[0][0] * 2 / 4 > 2.0  # detuned at mid-range only, it still fails at the high end
+    everywhere = fixed_pid.detune_over(CONFIG, start, points, 2.0)
+    assert all(everywhere[0][0] * (1 + p[0]) / 4 <= 2.0 for p in points)
+    assert everywhere[0][0] == pytest.approx(4.0, rel=0.1)  # just enough: Kp * 2/4 <= 2 at the high end
+    assert fixed_pid.detune_over(CONFIG, start, [[0.0]], 2.0) == start  # already meets a mid-range-only limit

@@ -17,7 +17,7 @@ import warnings
 from prlpid_fmi.deliver.rule import Candidate, Decision, Deployed, choose
 from prlpid_fmi.loop.evaluation import constant_gains, evaluate_gains
 from prlpid_fmi.loop.gains import Gains
-from prlpid_fmi.robustness.margins import margins_of, operating_point
+from prlpid_fmi.robustness.margins import margins_of, operating_point, setpoint_range_points
 from prlpid_fmi.tuning.schedule.replay import replay_schedule, training_ise
 from prlpid_fmi.tuning.schedule.table import LOOP_VARIABLE, GainSchedule, fixed_schedule
 
@@ -45,16 +45,17 @@ def _monte_carlo(scenario) -> list:
 
 
 def assess_fixed(scenario, gains: Gains) -> Candidate:
-    """The fixed PID's evidence: evaluation, Monte-Carlo set, margins at mid-range."""
+    """The fixed PID's evidence: evaluation, Monte-Carlo set, margins at the low end, middle and high end of the
+    setpoint range (robustness.margins.setpoint_range_points)."""
     config = scenario.evaluation_config()
     intervals = list(scenario.evaluation.intervals) or None
     fn = constant_gains(gains.Kp, gains.Ti, gains.Td, gains.coupling)
     plain = dataclasses.replace(config, randomize={}) if config.randomize else config
     metrics, _ = evaluate_gains(fn, plain, seed=scenario.evaluation.seed, intervals=intervals)
     mc = [evaluate_gains(fn, c, seed=s)[0] for c, s in _monte_carlo(scenario)]
-    point = operating_point(config)
-    margins = _margins_at(scenario.tuning, lambda p: fn(None), [point])
-    return Candidate(Deployed.FIXED_PID.value, metrics, mc, margins, [point[0]])
+    points = setpoint_range_points(scenario.tuning)
+    margins = _margins_at(scenario.tuning, lambda p: fn(None), points)
+    return Candidate(Deployed.FIXED_PID.value, metrics, mc, margins, [p[0] for p in points])
 
 
 def assess_schedule(scenario, schedule: GainSchedule) -> Candidate:
@@ -66,8 +67,7 @@ def assess_schedule(scenario, schedule: GainSchedule) -> Candidate:
     mc = [replay_schedule(schedule, c, seed=s)[0] for c, s in _monte_carlo(scenario)]
 
     def gains(point):
-        g = schedule.gains_at(point[0])
-        return tuple(x.tolist() for x in g) + ((None,) if schedule.coupling is None else ())
+        return schedule.gains_object(point[0]).values()
 
     loop = error_loop(schedule)
     if loop is not None:  # every row, and the steady-state gains (error 0), at every operating point

@@ -394,6 +394,18 @@ def operating_point(config: TuningConfig, value: float | None = None) -> list[fl
     return point
 
 
+def setpoint_range_points(config: TuningConfig) -> list[list[float]]:
+    """The operating points a fixed PID must be robust at: every loop's setpoint at the low end, the middle and
+    the high end of its setpoint_range (the loops together; duplicates dropped). A fixed PID is used at every
+    setpoint, and a nonlinear plant's margins change over the range."""
+    points = []
+    for f in (0.0, 0.5, 1.0):
+        point = [float(l.setpoint_range[0] + f * (l.setpoint_range[1] - l.setpoint_range[0])) for l in config.loops]
+        if point not in points:
+            points.append(point)
+    return points
+
+
 def margins_of(config: TuningConfig, gains: tuple, point: list[float]) -> Margins:
     """Margins of constant gains (Kp, Ti, Td, coupling lists) at an operating point (setpoints per loop).
 

@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Callable, Iterator, Optional
 
 from prlpid_fmi import rundir as rd
-from prlpid_fmi.errors import ArgumentError, Interrupted, PrlPidError, RunError
+from prlpid_fmi.errors import ArgumentError, Interrupted, PrlPidError
 from prlpid_fmi.rundir import write_atomic, write_json
 from prlpid_fmi.sweep.spec import Sweep
 

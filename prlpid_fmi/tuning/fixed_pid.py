@@ -12,9 +12,11 @@ with w_cv = reward.control_variation_weight, the same weight the agent's reward 
 does not buy ISE with a chattering actuator. A diverging episode costs DIVERGED_COST.
 
 Robustness: with `max_sensitivity` given, the result must have a peak sensitivity Ms (measured on the
-FMU at the middle of the setpoint range, prlpid_fmi.robustness.margins) at most that limit. The cheapest few
-members of the final DE population are tried in order of cost; if none qualifies, the best one is
-detuned by the smallest lambda that meets the limit, in two ways: Kp / lambda with Ti * lambda (a uniformly
+FMU, prlpid_fmi.robustness.margins) at most that limit at every operating point of the setpoint range: the
+low end, the middle and the high end (margins.setpoint_range_points; a fixed PID is used at every setpoint,
+and a nonlinear plant's Ms changes over the range). The cheapest few members of the final DE population are
+tried in order of cost; if none qualifies, the best one is detuned, at its worst failing point until every
+point meets the limit, by the smallest lambda there, in two ways: Kp / lambda with Ti * lambda (a uniformly
 slower loop: the integral gain Kp/Ti falls by lambda^2, so the last part of a step can creep in) and Kp /
 lambda with Ti kept (the integral time stays); the one with the lower J is kept.
 """
@@ -32,7 +34,7 @@ from prlpid_fmi.loop.core import LoopCore
 from prlpid_fmi.loop.evaluation import Trajectory, gains_rollout
 from prlpid_fmi.loop.gains import Gains, gains_from_values
 from prlpid_fmi.loop.isolated import make_core
-from prlpid_fmi.robustness.margins import margins_of, operating_point
+from prlpid_fmi.robustness.margins import margins_of, setpoint_range_points
 
 DIVERGED_COST = 1e6
 
@@ -111,21 +113,37 @@ def detune(config: TuningConfig, gains: tuple, point: list[float], limit: float,
     return None
 
 
+def detune_over(config: TuningConfig, gains: tuple, points: list[list[float]], limit: float,
+                keep_ti: bool = False) -> tuple | None:
+    """`gains` detuned (`detune`) until Ms <= limit at every operating point: each pass detunes at the worst
+    failing point, which usually settles the others too. None when a point cannot be met."""
+    for _ in points:
+        failing = [(margins_of(config, gains, p).Ms, p) for p in points if not _meets(config, gains, p, limit)]
+        if not failing:
+            return gains
+        gains = detune(config, gains, max(failing, key=lambda x: x[0])[1], limit, keep_ti=keep_ti)
+        if gains is None:
+            return None
+    return gains if all(_meets(config, gains, p, limit) for p in points) else None
+
+
 def _robust(config: TuningConfig, gain_map: ActionMap, population, energies, limit: float,
             core: LoopCore, seeds: list[int]):
     """(vector, gains tuple) of the cheapest of the ROBUST_CANDIDATES cheapest population members with
-    Ms <= limit; else the best member detuned both ways (`detune`, with and without keep_ti; a loop in a
-    limit cycle has Ms inf and a slower loop cures it), the one with the lower J on `seeds`; else the best
-    member as it is (the deliverable then reports its Ms)."""
-    point = operating_point(config)
+    Ms <= limit at every operating point of the setpoint range (setpoint_range_points); else the best member
+    detuned both ways (`detune_over`, with and without keep_ti; a loop in a limit cycle has Ms inf and a slower loop
+    cures it), the one with the lower J on `seeds`; else the best member as it is (the deliverable then
+    reports its Ms)."""
+    points = setpoint_range_points(config)
     order = np.argsort(energies)
     for i in order[:ROBUST_CANDIDATES]:
         g = gain_map.values(population[i].tolist())
-        if _meets(config, g, point, limit):
+        if all(_meets(config, g, p, limit) for p in points):
             return population[i], g
     best = population[order[0]]
     g = gain_map.values(best.tolist())
-    repairs = [r for r in (detune(config, g, point, limit), detune(config, g, point, limit, keep_ti=True)) if r]
+    repairs = [r for r in (detune_over(config, g, points, limit), detune_over(config, g, points, limit, keep_ti=True))
+               if r]
     return best, min(repairs, key=lambda r: _cost_of(r, core, seeds)) if repairs else g
 
 
