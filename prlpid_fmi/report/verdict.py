@@ -10,6 +10,12 @@ def _ms(c: Candidate) -> str:
     return "not verified" if math.isnan(c.worst_Ms) else f"{c.worst_Ms:.2f}"
 
 
+def _points(c: Candidate) -> str:
+    """Where a candidate's margins were measured, in words."""
+    n = len(c.margins)
+    return "its operating point" if n == 1 else f"{n} operating points of the setpoint range"
+
+
 def _ratio(a: float, b: float) -> str:
     return f"{a / b:.2f}x" if b and math.isfinite(a) and math.isfinite(b) else "n/a"
 
@@ -32,7 +38,8 @@ def verdict(decision: Decision, schedule: Candidate | None, fixed: Candidate, ma
                      f"{max_sensitivity:g}). Ratios are gain schedule ÷ fixed PID; lower is better.")
     elif decision.deploy == Deployed.FIXED_PID:
         lines.append(f"**Deploy the fixed PID** (schedule.csv holds it as a one-row table; also fixed_pid.csv). "
-                     f"Its worst Ms is {_ms(fixed)} (limit {max_sensitivity:g}).")
+                     f"Its worst Ms is {_ms(fixed)} (limit {max_sensitivity:g}) over "
+                     f"{_points(fixed)}.")
         if schedule is not None:
             the_map = ("wider controller.anchor_bands" if gain_mapping == "anchored" else
                        "the anchored gain map (controller.gain_mapping: anchored, which starts training at the fixed "
