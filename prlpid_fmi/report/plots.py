@@ -226,6 +226,12 @@ def response_figure(traj, config: TuningConfig, title: str = "Closed-loop respon
                     lw=1.5 if t is traj else 1.2, label=name)
         ax.set_ylabel(_label(loop.output, y_units[i]))
         ax.grid(True, alpha=0.3)
+    return _finish(fig, axes, config, traj, pairs, title)
+
+
+def _finish(fig, axes, config: TuningConfig, traj, pairs, title: str):
+    """A time-series figure's common end: disturbances and early ends marked, legends, the time axis, the
+    title (with any early end said), tight layout. Returns fig."""
     _mark_disturbances(axes, config, float(traj.time_s[-1]))
     for name, t in pairs:
         _mark_end(axes, t, name)
@@ -258,15 +264,7 @@ def control_signal_figure(traj, config: TuningConfig, title: str = "Control sign
             ax.axhline(limit, color="gray", ls=":", lw=1, label="actuator limits" if k == 0 else None)
         ax.set_ylabel(_label(loop.input, u_units[i]))
         ax.grid(True, alpha=0.3)
-    _mark_disturbances(axes, config, float(traj.time_s[-1]))
-    for name, t in pairs:
-        _mark_end(axes, t, name)
-    for ax in axes:
-        _legend(ax)
-    axes[-1].set_xlabel("time [s]")
-    axes[0].set_title(title + _ended_note(pairs), fontsize=11)
-    fig.tight_layout()
-    return fig
+    return _finish(fig, axes, config, traj, pairs, title)
 
 
 def plot_gains(traj, config: TuningConfig, path, title: str = "PID parameters set by the adaptive policy",
