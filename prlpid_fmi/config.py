@@ -123,6 +123,13 @@ class TuningConfig:
     # controller
     anti_windup: AntiWindup = _d(_m.ControllerModel, "anti_windup")
     derivative_filter_N: Optional[float] = _d(_m.ControllerModel, "derivative_filter_N")
+    setpoint_weight: object = _d(_m.ControllerModel, "setpoint_weight")  # b in [0, 1] or "tuned"
+    derivative_weight: float = _d(_m.ControllerModel, "derivative_weight")  # c in [0, 1]
+    measurement_filter: object = _d(_m.ControllerModel, "measurement_filter")  # Tf [s] >= 0 or "tuned"
+    measurement_filter_order: int = _d(_m.ControllerModel, "measurement_filter_order")  # 1 | 2
+    # the (b, c, Tf) per loop in force once tuned (tuning.fixed_pid); None: from the three fields above, with
+    # "tuned" read as b = 1 and Tf = 0 (loop.core.pid_structure)
+    tuned_structure: Optional[tuple[tuple[float, float, float], ...]] = None
     coupled: bool = _d(_m.ControllerModel, "coupled")  # cross-axis coupled PID (paper eq. 26-27), needs 3 loops
     coupling_range: float = _d(_m.ControllerModel, "coupling_range")  # coupling coefficients in [-c, c]
     gain_mapping: GainMapping = _d(_m.ControllerModel, "gain_mapping")  # anchored (action 0 = tuned fixed PID) | absolute
@@ -142,6 +149,7 @@ class TuningConfig:
     measurement_noise_std: float = _d(_m.TrainingModel, "measurement_noise_std")  # plant units, Gaussian
     actuator_noise_std: float = _d(_m.TrainingModel, "actuator_noise_std")  # control-signal units, Gaussian
     randomize: dict = field(default_factory=dict)  # {FMU parameter: (low, high)} drawn uniformly per episode
+    load_disturbance: float = _d(_m.TrainingModel, "load_disturbance")  # fraction of the control span; 0 = none
 
     @property
     def n_loops(self) -> int:
@@ -196,6 +204,10 @@ class BaselineConfig:
     episodes: int = _d(_m.BaselineModel, "episodes")  # seeded training episodes per cost evaluation
     maxiter: int = _d(_m.BaselineModel, "maxiter")  # generations
     popsize: int = _d(_m.BaselineModel, "popsize")  # population = popsize x number of parameters
+    objective: str = _d(_m.BaselineModel, "objective")  # load | setpoint
+    load_step: float = _d(_m.BaselineModel, "load_step")  # fraction of the control span
+    load_tolerance: float = _d(_m.BaselineModel, "load_tolerance")  # factor on the load optimum (step 4)
+    widen_ranges: float = _d(_m.BaselineModel, "widen_ranges")  # factor on log ranges (and Td's high end)
 
 
 @dataclass(frozen=True)
@@ -203,5 +215,7 @@ class DeployConfig:
     """When a tuned controller may be deployed: its peak sensitivity Ms = max |S(jw)| stays <= max_sensitivity."""
 
     max_sensitivity: float = _d(_m.DeployModel, "max_sensitivity")
+    max_overshoot: float = _d(_m.DeployModel, "max_overshoot")  # fraction of the setpoint step
+    max_noise_gain: float = _d(_m.DeployModel, "max_noise_gain")  # std(u) from measurement noise / control span
     schedule_points: int = _d(_m.DeployModel, "schedule_points")
     schedule_by: str = _d(_m.DeployModel, "schedule_by")  # auto | setpoint | measurement | error

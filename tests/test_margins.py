@@ -222,9 +222,14 @@ def test_time_varying_plant_is_flagged_after_one_experiment(monkeypatch):
 
 
 def test_format_margins_one_line():
-    empty = np.zeros(0)
-    m = Margins(1.4249, 3.0, 10 ** (8.3 / 20), 12.1, 52.2, 3.4, empty, empty, empty, 0.4, True, "", "y")
-    assert format_margins(m) == "Ms 1.42, GM 8.3 dB at 12.1 rad/s, PM 52° at 3.4 rad/s"
+    # L = C * P on three frequencies: 1, -0.5 and 2, so T = L / (1 + L) is 0.5, -1 and 2/3: Mt = 1 by hand;
+    # the delay margin is PM / w_gc = 52.2 deg = 0.91106 rad over 3.4 rad/s = 0.26796 s
+    w, ones = np.array([1.0, 2.0, 3.0]), np.ones(3, complex)
+    m = Margins(1.4249, 3.0, 10 ** (8.3 / 20), 12.1, 52.2, 3.4, w, np.array([1.0, -0.5, 2.0], complex), ones, 0.4,
+                True, "", "y")
+    assert m.Mt == 1.0
+    assert m.delay_margin_s == pytest.approx(52.2 * math.pi / 180 / 3.4, rel=1e-12)
+    assert format_margins(m) == "Ms 1.42, Mt 1.00, GM 8.3 dB at 12.1 rad/s, PM 52° at 3.4 rad/s, DM 0.268 s"
     flagged = dataclasses.replace(m, reliable=False, note="the control signal reached a limit")
     assert format_margins(flagged).endswith("(unreliable: the control signal reached a limit)")
 

@@ -1,24 +1,37 @@
-"""Positional PID of paper eq. 2 and the cross-axis coupled MIMO PID of eq. 26-27.
+"""The PID law: a 2-DOF positional PID (setpoint weights, measurement filter) and the coupled MIMO PID of eq. 26-27.
 
 Both are vectorised over ``n_loops`` independent loops: every signal and gain is a scalar or an
-array of shape (n_loops,). Gains are passed on every step because the agent changes them online.
+array of shape (n_loops,). Gains are passed on every step because the agent changes them online;
+the structure (setpoint weights b, c, measurement filter Tf) is held by the PID (``set_structure``).
 
-Discrete law (eq. 2), sample time dt = ``sample_time_s``::
+Discrete law, sample time dt = ``sample_time_s``, per loop::
 
-    I(k) = I(k-1) + e(k)*dt                      error sum, includes the current error   [e.u. * s]
-    D(k) = (e(k) - e(k-1)) / dt                  backward difference                      [e.u. / s]
-    u(k) = Kp * (e(k) + I(k)/Ti + Td*D(k))       then clipped to [u_min, u_max]
+    yf(k) = F(y(k))                              measurement filter (Tf = 0: yf = y exactly)
+    e(k)  = r(k) - y(k)                          integral error (unfiltered: no steady-state offset)
+    ep(k) = b*r(k) - yf(k)                       proportional error, setpoint weight b in [0, 1]
+    ed(k) = c*r(k) - yf(k)                       derivative error, c in {0, 1} (0: derivative on the measurement)
+    I(k)  = I(k-1) + e(k)*dt                     error sum, includes the current error   [e.u. * s]
+    D(k)  = (ed(k) - ed(k-1)) / dt               backward difference                      [e.u. / s]
+    u(k)  = Kp * (ep(k) + I(k)/Ti + Td*D(k))     then clipped to [u_min, u_max]
 
-- First sample after ``reset()``: e(-1) := e(0), so D(0) = 0 (no derivative kick).
+With b = c = 1 and Tf = 0 this is paper eq. 2 exactly, bit for bit (1.0*r == r): the paper's variant.
+
+- Measurement filter F (``measurement_filter_s`` Tf [s], ``measurement_filter_order`` 1 or 2): order 1 is
+  the low pass 1/(1 + s Tf), order 2 two such sections of Tf/2 each, 1/(1 + s Tf/2)^2 (same mean delay Tf,
+  critically damped); each section by backward Euler, x(k) = (T*x(k-1) + dt*in(k)) / (T + dt). The
+  sections start at y(0) (no transient at the first sample). F feeds P and D only.
+- First sample after ``reset()``: ed(-1) := ed(0), so D(0) = 0 (no derivative kick).
 - ``Ti = inf`` means no integral action (1/inf = 0). The error sum is still kept, exactly as
   eq. 2 writes it; with clamping it also stops growing while the output is saturated.
 - Optional derivative filter (``derivative_filter_N``): D is passed through a first-order low pass
-  with time constant Tf = Td/N, discretised with backward Euler
-  (Tf*(Df(k) - Df(k-1))/dt + Df(k) = D(k))::
+  with time constant Td/N, discretised with backward Euler::
 
-      Df(k) = (Tf*Df(k-1) + dt*D(k)) / (Tf + dt)
+      Df(k) = (Tdf*Df(k-1) + dt*D(k)) / (Tdf + dt),   Tdf = Td/N
 
-  Td = 0 gives Tf = 0, i.e. no filtering (and no derivative action anyway).
+  Td = 0 gives Tdf = 0, i.e. no filtering (and no derivative action anyway).
+- Bumpless start (``preset_output``): before the first sample the error sum is set so that the whole
+  output at t = 0 is the actuator's value u0 when r(0) = y(0): I(-1) = (u0 - Kp*(ep(0) - e(0))) / Ki, so a
+  setpoint weight b != 1 gives no kick either (with b = 1 this is I(-1) = u0 / Ki).
 
 Anti-windup (``anti_windup``), with u_try = u computed from I(k-1) + e(k)*dt:
 
@@ -30,7 +43,7 @@ Anti-windup (``anti_windup``), with u_try = u computed from I(k-1) + e(k)*dt:
   error sum, so the tracking signal is divided by Ki to get error units), discretised with
   backward Euler like the rectangular sum of eq. 2::
 
-      I(k) = I(k-1) + dt*e(k) + dt*(u_sat(k) - u_unsat(k)) / (Ki*Tt),  u_unsat(k) = Kp*(e + I(k)/Ti + Td*D)
+      I(k) = I(k-1) + dt*e(k) + dt*(u_sat(k) - u_unsat(k)) / (Ki*Tt)
 
   Solved in closed form (clipping is piecewise linear and the saturation side does not change)::
 
@@ -67,21 +80,30 @@ def parallel_gains(Kp, Ti, Td):
     return Kp / np.asarray(Ti, dtype=float), Kp * np.asarray(Td, dtype=float)
 
 
+FILTER_ORDERS = (1, 2)
+
+
 @dataclass
 class PIDState:
     """Internal state of a PID, all arrays of shape (n_loops,).
 
-    integral: error sum I [error units * s]; last_error: e(k-1) [error units]; derivative: last
-    (filtered) derivative D [error units / s]; initialized: False until the first step after reset.
+    integral: error sum I [error units * s]; last_error: ed(k-1), the derivative error of the last sample
+    [error units]; derivative: last (filtered) derivative D [error units / s]; filtered: the measurement
+    filter's output yf(k-1) [measurement units]; filter_stage: the first section's output of a second-order
+    filter (equal to filtered for order 1); initialized: False until the first step after reset.
     """
 
     integral: np.ndarray
     last_error: np.ndarray
     derivative: np.ndarray
     initialized: bool
+    filtered: np.ndarray | None = None
+    filter_stage: np.ndarray | None = None
 
     def copy(self) -> "PIDState":
-        return PIDState(self.integral.copy(), self.last_error.copy(), self.derivative.copy(), self.initialized)
+        return PIDState(self.integral.copy(), self.last_error.copy(), self.derivative.copy(), self.initialized,
+                        None if self.filtered is None else self.filtered.copy(),
+                        None if self.filter_stage is None else self.filter_stage.copy())
 
 
 def _per_loop(value, n_loops: int, name: str) -> list:
@@ -100,7 +122,8 @@ def _per_loop(value, n_loops: int, name: str) -> list:
 
 
 class PID:
-    """Positional PID (eq. 2) for ``n_loops`` independent loops with saturation and anti-windup.
+    """2-DOF positional PID (module docstring; eq. 2 with b = c = 1, Tf = 0) for ``n_loops`` independent loops
+    with saturation and anti-windup.
 
     Args:
         sample_time_s: dt [s], > 0.
@@ -110,13 +133,19 @@ class PID:
         Tt: back-calculation tracking time constant [s], scalar or (n_loops,); None = sqrt(Ti*Td),
             or Ti when Td == 0, evaluated every step with the current gains.
         derivative_filter_N: None = unfiltered derivative; else filter time constant Td/N.
+        setpoint_weight: b in [0, 1] (scalar or (n_loops,)); 1 = the paper's proportional term.
+        derivative_weight: c in [0, 1] (0: derivative on the measurement; 1: on the error, the paper's).
+        measurement_filter_s: Tf [s] >= 0 of the measurement filter feeding P and D; 0 = none.
+        measurement_filter_order: 1 or 2.
 
     ``unsaturated_u`` (n_loops,): u before saturation in the last step (zeros after reset); with
     back-calculation it includes the step's tracking correction (see module docstring).
     """
 
     def __init__(self, sample_time_s: float, n_loops: int = 1, u_min=-np.inf, u_max=np.inf,
-                 anti_windup: str = "clamping", Tt=None, derivative_filter_N: float | None = None):
+                 anti_windup: str = "clamping", Tt=None, derivative_filter_N: float | None = None,
+                 setpoint_weight=1.0, derivative_weight=1.0, measurement_filter_s=0.0,
+                 measurement_filter_order: int = 1):
         if not (np.isfinite(sample_time_s) and sample_time_s > 0):
             raise ValueError(f"sample_time_s must be a finite number > 0, got {sample_time_s!r}")
         if isinstance(n_loops, bool) or int(n_loops) != n_loops or n_loops < 1:
@@ -125,6 +154,8 @@ class PID:
             raise ValueError(f"anti_windup must be one of {ANTI_WINDUP_MODES}, got {anti_windup!r}")
         if derivative_filter_N is not None and not derivative_filter_N > 0:
             raise ValueError(f"derivative_filter_N must be > 0 or None, got {derivative_filter_N!r}")
+        if measurement_filter_order not in FILTER_ORDERS:
+            raise ValueError(f"measurement_filter_order must be one of {FILTER_ORDERS}, got {measurement_filter_order!r}")
         self.sample_time_s = float(sample_time_s)
         self.n_loops = n = int(n_loops)
         self._u_min = _per_loop(u_min, n, "u_min")
@@ -136,7 +167,36 @@ class PID:
         if self._Tt is not None and not all(t > 0 for t in self._Tt):
             raise ValueError(f"Tt must be > 0, got {Tt!r}")
         self.derivative_filter_N = None if derivative_filter_N is None else float(derivative_filter_N)
+        self.measurement_filter_order = int(measurement_filter_order)
+        self.set_structure(setpoint_weight, derivative_weight, measurement_filter_s)
         self.reset()
+
+    def set_structure(self, setpoint_weight, derivative_weight, measurement_filter_s) -> None:
+        """Set b, c (in [0, 1]) and Tf [s] (>= 0), scalars or (n_loops,); the state is kept (a search changes
+        them between episodes, after reset)."""
+        n = self.n_loops
+        b = _per_loop(setpoint_weight, n, "setpoint_weight")
+        c = _per_loop(derivative_weight, n, "derivative_weight")
+        tf = _per_loop(measurement_filter_s, n, "measurement_filter_s")
+        if not all(0 <= v <= 1 for v in b + c):
+            raise ValueError(f"setpoint weights must lie in [0, 1], got b={setpoint_weight!r}, c={derivative_weight!r}")
+        if not all(0 <= v < math.inf for v in tf):
+            raise ValueError(f"measurement_filter_s must be finite and >= 0, got {measurement_filter_s!r}")
+        self._b, self._c, self._tf = b, c, tf
+        self._section = [v / self.measurement_filter_order for v in tf]  # time constant of each filter section
+        self._weighted = any(v != 1.0 for v in b + c) or any(tf)
+
+    @property
+    def setpoint_weight(self) -> np.ndarray:
+        return np.array(self._b)
+
+    @property
+    def derivative_weight(self) -> np.ndarray:
+        return np.array(self._c)
+
+    @property
+    def measurement_filter_s(self) -> np.ndarray:
+        return np.array(self._tf)
 
     @property
     def u_min(self) -> np.ndarray:
@@ -155,25 +215,26 @@ class PID:
         return np.array(self._unsaturated_u)
 
     def reset(self) -> None:
-        """Zero the error sum and derivative; the next step has no derivative kick."""
+        """Zero the error sum and derivative; the next step has no derivative kick and starts the filter."""
         n = self.n_loops
         self._integral = [0.0] * n
         self._last_error = [0.0] * n
         self._derivative = [0.0] * n
+        self._filtered = [0.0] * n
+        self._stage = [0.0] * n
         self._initialized = False
         self._unsaturated_u = [0.0] * n
 
     def get_state(self) -> PIDState:
         """A copy of the internal state (later steps do not change it)."""
         return PIDState(np.array(self._integral), np.array(self._last_error), np.array(self._derivative),
-                        self._initialized)
+                        self._initialized, np.array(self._filtered), np.array(self._stage))
 
-    def raw_state(self) -> tuple[list, list, list, bool]:
-        """(integral, last_error, derivative, initialized) WITHOUT copying: the live lists of n_loops floats.
-
-        For readers that copy the values out at once (the C forecast); never mutate them.
+    def raw_state(self) -> tuple[list, list, list, bool, list, list]:
+        """(integral, last_error, derivative, initialized, filtered, filter_stage) WITHOUT copying: the live
+        lists of n_loops floats. For readers that copy the values out at once (the C forecast); never mutate them.
         """
-        return self._integral, self._last_error, self._derivative, self._initialized
+        return self._integral, self._last_error, self._derivative, self._initialized, self._filtered, self._stage
 
     def set_state(self, state: PIDState) -> None:
         """Restore a state from ``get_state`` (copied in, so ``state`` stays reusable)."""
@@ -181,6 +242,11 @@ class PID:
         self._integral = _per_loop(np.asarray(state.integral, dtype=float), n, "PIDState.integral")
         self._last_error = _per_loop(np.asarray(state.last_error, dtype=float), n, "PIDState.last_error")
         self._derivative = _per_loop(np.asarray(state.derivative, dtype=float), n, "PIDState.derivative")
+        zeros = np.zeros(n)
+        self._filtered = _per_loop(np.asarray(zeros if state.filtered is None else state.filtered, dtype=float), n,
+                                   "PIDState.filtered")
+        self._stage = _per_loop(np.asarray(zeros if state.filter_stage is None else state.filter_stage, dtype=float),
+                                n, "PIDState.filter_stage")
         self._initialized = bool(state.initialized)
 
     def copy(self) -> "PID":
@@ -188,26 +254,65 @@ class PID:
         return copy.deepcopy(self)
 
     def step(self, setpoint, measurement, Kp, Ti, Td) -> np.ndarray:
-        """One sample with e = setpoint - measurement; returns saturated u, shape (n_loops,)."""
-        return self.step_error(np.subtract(setpoint, measurement, dtype=float), Kp, Ti, Td)
-
-    def step_error(self, error, Kp, Ti, Td) -> np.ndarray:
-        """One sample of eq. 2 on a given error (scalar or (n_loops,)); returns saturated u (n_loops,).
+        """One sample on (setpoint, measurement); returns saturated u, shape (n_loops,).
 
         Kp [u per error unit], Ti [s] (> 0, inf = no integral), Td [s] (>= 0): scalars or (n_loops,).
         """
         n = self.n_loops
-        return np.array(self.step_values(_per_loop(error, n, "error"), _per_loop(Kp, n, "Kp"),
-                                         _per_loop(Ti, n, "Ti"), _per_loop(Td, n, "Td")))
+        return np.array(self.step_values(_per_loop(setpoint, n, "setpoint"), _per_loop(measurement, n, "measurement"),
+                                         _per_loop(Kp, n, "Kp"), _per_loop(Ti, n, "Ti"), _per_loop(Td, n, "Td")))
 
-    def step_values(self, errors: list, Kps: list, Tis: list, Tds: list) -> list:
-        """`step_error` on lists of n_loops floats, unchecked; returns saturated u as a list. The hot path."""
+    def step_error(self, error, Kp, Ti, Td) -> np.ndarray:
+        """One sample of the error form, setpoint = error and measurement = 0 (eq. 2 when b = c = 1, Tf = 0)."""
+        n = self.n_loops
+        return self.step(error, [0.0] * n, Kp, Ti, Td)
+
+    def filter_measurement(self, measurements: list) -> list:
+        """yf(k) from y(k) (lists of n_loops floats): advances the measurement filter's state, once per sample."""
+        if not any(self._tf):
+            return measurements
+        dt = self.sample_time_s
+        if not self._initialized:
+            self._filtered = list(measurements)
+            self._stage = list(measurements)
+            return list(measurements)
+        second = self.measurement_filter_order == 2
+        out = list(measurements)
+        for i, y in enumerate(measurements):
+            T = self._section[i]
+            if T == 0.0:
+                continue
+            x = (T * self._stage[i] + dt * y) / (T + dt)
+            self._stage[i] = x
+            if second:
+                x = (T * self._filtered[i] + dt * x) / (T + dt)
+            self._filtered[i] = x
+            out[i] = x
+        return out
+
+    def weighted_errors(self, setpoints: list, measurements: list) -> tuple[list, list, list]:
+        """(e, ep, ed) for one sample (lists of n_loops floats), advancing the measurement filter."""
+        n = self.n_loops
+        errors = [setpoints[i] - measurements[i] for i in range(n)]
+        if not self._weighted:
+            return errors, errors, errors
+        yf = self.filter_measurement(measurements)
+        b, c = self._b, self._c
+        return (errors, [b[i] * setpoints[i] - yf[i] for i in range(n)],
+                [c[i] * setpoints[i] - yf[i] for i in range(n)])
+
+    def step_values(self, setpoints: list, measurements: list, Kps: list, Tis: list, Tds: list) -> list:
+        """`step` on lists of n_loops floats, unchecked; returns saturated u as a list. The hot path."""
+        return self.step_weighted(*self.weighted_errors(setpoints, measurements), Kps, Tis, Tds)
+
+    def step_weighted(self, errors: list, p_errors: list, d_errors: list, Kps: list, Tis: list, Tds: list) -> list:
+        """One sample on the integral, proportional and derivative errors (e, ep, ed of the module docstring)."""
         n = self.n_loops
         dt = self.sample_time_s
         N = self.derivative_filter_N
         mode = self.anti_windup
         if not self._initialized:
-            self._last_error = list(errors)
+            self._last_error = list(d_errors)
             self._initialized = True
         integrals, last_errors, derivatives = self._integral, self._last_error, self._derivative
         u_out = [0.0] * n
@@ -215,13 +320,14 @@ class PID:
 
         for i in range(n):
             e, kp, ti, td = errors[i], Kps[i], Tis[i], Tds[i]
-            d = (e - last_errors[i]) / dt
+            ed = d_errors[i]
+            d = (ed - last_errors[i]) / dt
             if N is not None:
                 tf = td / N
                 d = (tf * derivatives[i] + dt * d) / (tf + dt)
             ki = kp / ti
             integral = integrals[i] + e * dt
-            u_unsat = kp * (e + td * d) + ki * integral
+            u_unsat = kp * (p_errors[i] + td * d) + ki * integral
             lo, hi = self._u_min[i], self._u_max[i]
             u = lo if u_unsat < lo else hi if u_unsat > hi else u_unsat  # NaN passes through
             if u != u_unsat:  # saturated
@@ -234,7 +340,7 @@ class PID:
                     integral += tracked / ki
                     u_unsat += tracked
             integrals[i] = integral
-            last_errors[i] = e
+            last_errors[i] = ed
             derivatives[i] = d
             u_out[i] = u
             u_unsat_out[i] = u_unsat
@@ -242,15 +348,17 @@ class PID:
         self._unsaturated_u = u_unsat_out
         return u_out
 
-    def preset_integral(self, u0: list, Kps: list, Tis: list) -> None:
-        """Bumpless start: before the first step, set the error sum so that the integral term Kp/Ti*I equals u0.
+    def preset_output(self, u0: list, setpoints: list, Kps: list, Tis: list) -> None:
+        """Bumpless start: before the first step, set the error sum so that the output at t = 0 is u0 when
+        r(0) = y(0) (module docstring): I = (u0 - Kp*(b - 1)*r(0)) / Ki.
 
-        u0, Kps, Tis: lists of n_loops floats (u0 in control-signal units). Loops without integral
+        u0, setpoints, Kps, Tis: lists of n_loops floats (u0 in control-signal units). Loops without integral
         action (Ti = inf or Kp = 0) keep I = 0. Call after reset(), before the first step.
         """
         for i in range(self.n_loops):
             ki = Kps[i] / Tis[i]
-            self._integral[i] = u0[i] / ki if ki != 0 else 0.0
+            kick = Kps[i] * ((self._b[i] - 1.0) * setpoints[i])
+            self._integral[i] = (u0[i] - kick) / ki if ki != 0 else 0.0
 
 
 def coupling_matrix(coupling) -> np.ndarray:
@@ -283,15 +391,18 @@ class CoupledPID:
 
     Coupled error e = (r - y) + C @ y with C = coupling_matrix(coupling), i.e.
     e_roll = (r_roll - roll) + c_rp*pitch + c_ry*yaw, e_pitch = ... + c_pr*roll + c_py*yaw,
-    e_yaw = ... + c_yr*roll + c_yp*pitch; each axis is then a PID of eq. 2 on its coupled error.
+    e_yaw = ... + c_yr*roll + c_yp*pitch; each axis is then the PID of the module docstring on its coupled
+    errors: e from (r, y), ep from (b*r, yf) and ed from (c*r, yf), each through eq. 27.
     Constructor arguments are those of PID (n_loops is fixed to 3). Angles in rad, u in N*m.
     """
 
     n_loops = 3
 
     def __init__(self, sample_time_s: float, u_min=-np.inf, u_max=np.inf, anti_windup: str = "clamping",
-                 Tt=None, derivative_filter_N: float | None = None):
-        self.pid = PID(sample_time_s, 3, u_min, u_max, anti_windup, Tt, derivative_filter_N)
+                 Tt=None, derivative_filter_N: float | None = None, setpoint_weight=1.0, derivative_weight=1.0,
+                 measurement_filter_s=0.0, measurement_filter_order: int = 1):
+        self.pid = PID(sample_time_s, 3, u_min, u_max, anti_windup, Tt, derivative_filter_N, setpoint_weight,
+                       derivative_weight, measurement_filter_s, measurement_filter_order)
 
     @property
     def sample_time_s(self) -> float:
@@ -301,24 +412,33 @@ class CoupledPID:
     def unsaturated_u(self) -> np.ndarray:
         return self.pid.unsaturated_u
 
+    def set_structure(self, setpoint_weight, derivative_weight, measurement_filter_s) -> None:
+        self.pid.set_structure(setpoint_weight, derivative_weight, measurement_filter_s)
+
     def coupled_error(self, setpoint, measurement, coupling) -> np.ndarray:
         """e_couple (3,) of eq. 27 from setpoint (3,), measurement (3,), coupling (6,) in COUPLING_NAMES order."""
-        return np.array(self._coupled_error(setpoint, measurement, coupling))
-
-    def _coupled_error(self, setpoint, measurement, coupling) -> list:
-        return _coupled_errors(_per_loop(setpoint, 3, "setpoint"), _per_loop(measurement, 3, "measurement"),
-                               _per_loop(coupling, 6, "coupling"))
+        return np.array(_coupled_errors(_per_loop(setpoint, 3, "setpoint"), _per_loop(measurement, 3, "measurement"),
+                                        _per_loop(coupling, 6, "coupling")))
 
     def step(self, setpoint, measurement, Kp, Ti, Td, coupling) -> np.ndarray:
         """One sample of eq. 26; Kp, Ti, Td scalars or (3,); returns saturated u (3,)."""
-        return self.pid.step_error(self._coupled_error(setpoint, measurement, coupling), Kp, Ti, Td)
+        return np.array(self.step_values(_per_loop(setpoint, 3, "setpoint"), _per_loop(measurement, 3, "measurement"),
+                                         _per_loop(Kp, 3, "Kp"), _per_loop(Ti, 3, "Ti"), _per_loop(Td, 3, "Td"),
+                                         _per_loop(coupling, 6, "coupling")))
 
     def step_values(self, r: list, y: list, Kps: list, Tis: list, Tds: list, c: list) -> list:
         """`step` on lists of floats (r, y, gains (3,), coupling (6,)), unchecked; returns u as a list."""
-        return self.pid.step_values(_coupled_errors(r, y, c), Kps, Tis, Tds)
+        pid = self.pid
+        errors = _coupled_errors(r, y, c)
+        if not pid._weighted:
+            return pid.step_weighted(errors, errors, errors, Kps, Tis, Tds)
+        yf = pid.filter_measurement(y)
+        b, cw = pid._b, pid._c
+        return pid.step_weighted(errors, _coupled_errors([b[i] * r[i] for i in range(3)], yf, c),
+                                 _coupled_errors([cw[i] * r[i] for i in range(3)], yf, c), Kps, Tis, Tds)
 
-    def preset_integral(self, u0: list, Kps: list, Tis: list) -> None:
-        self.pid.preset_integral(u0, Kps, Tis)
+    def preset_output(self, u0: list, setpoints: list, Kps: list, Tis: list) -> None:
+        self.pid.preset_output(u0, setpoints, Kps, Tis)
 
     def reset(self) -> None:
         self.pid.reset()
@@ -326,7 +446,7 @@ class CoupledPID:
     def get_state(self) -> PIDState:
         return self.pid.get_state()
 
-    def raw_state(self) -> tuple[list, list, list, bool]:
+    def raw_state(self) -> tuple:
         return self.pid.raw_state()
 
     def set_state(self, state: PIDState) -> None:

@@ -91,7 +91,7 @@ def deliverable_schedule(policy: Policy, scenario, seed: int, anchor: Gains | No
                     + ": left out of the schedule.\n")
         schedule, detuned = robust_schedule(schedule, config, limit)
         if detuned:
-            note += (f"Rows of the gain schedule ({schedule.variable}) detuned (Kp / lambda, Ti * lambda) to meet "
+            note += (f"Rows of the gain schedule ({schedule.variable}) detuned (Kp / lambda, Ti and Td * lambda) to meet "
                      f"Ms <= {limit:g}: " + "; ".join(detuned) + ".\n")
         built.append((kind, schedule, note, {"schedule_detuned_rows": detuned} if detuned else {}))
     if not built:

@@ -3,7 +3,8 @@
 The gain schedule is replayed as a plain PID (no neural network) and the fixed PID runs with exactly
 the gains the search returned, both on the evaluation schedule and on the Monte-Carlo set
 (evaluation.randomize_samples episodes with parameters drawn from evaluation.randomize, seeds
-evaluation.seed + 1, + 2, ...). Robustness margins (prlpid_fmi.robustness.margins) are measured at every
+evaluation.seed + 1, + 2, ...), and on the load experiment of the fixed PID's design (tuning.load_design:
+load steps at the plant input at the low end, middle and high end of the setpoint range). Robustness margins (prlpid_fmi.robustness.margins) are measured at every
 breakpoint of a setpoint schedule; for every row of an error schedule (and its gains at error 0) at
 the low end, middle and high end of the setpoint range (range_points); and at the middle of the
 setpoint range for the fixed PID and any other table.
@@ -15,9 +16,11 @@ import math
 import warnings
 
 from prlpid_fmi.deliver.rule import Candidate, Decision, Deployed, choose
-from prlpid_fmi.loop.evaluation import constant_gains, evaluate_gains
+from prlpid_fmi.loop.evaluation import constant_gains, evaluate_gains, gains_rollout
 from prlpid_fmi.loop.gains import Gains
 from prlpid_fmi.robustness.margins import margins_of, operating_point, setpoint_range_points
+from prlpid_fmi.robustness.status import status
+from prlpid_fmi.tuning.load_design import load_experiment
 from prlpid_fmi.tuning.schedule.replay import replay_schedule, training_ise
 from prlpid_fmi.tuning.schedule.table import LOOP_VARIABLE, GainSchedule, fixed_schedule
 
@@ -55,7 +58,9 @@ def assess_fixed(scenario, gains: Gains) -> Candidate:
     mc = [evaluate_gains(fn, c, seed=s)[0] for c, s in _monte_carlo(scenario)]
     points = setpoint_range_points(scenario.tuning)
     margins = _margins_at(scenario.tuning, lambda p: fn(None), points)
-    return Candidate(Deployed.FIXED_PID.value, metrics, mc, margins, [p[0] for p in points])
+    load = load_experiment(scenario.tuning, scenario.baseline.load_step,
+                           lambda cfg: gains_rollout(fn, cfg, seed=0))
+    return Candidate(Deployed.FIXED_PID.value, metrics, mc, margins, [p[0] for p in points], load_iae=load)
 
 
 def assess_schedule(scenario, schedule: GainSchedule) -> Candidate:
@@ -65,6 +70,8 @@ def assess_schedule(scenario, schedule: GainSchedule) -> Candidate:
     plain = dataclasses.replace(config, randomize={}) if config.randomize else config
     metrics, _ = replay_schedule(schedule, plain, seed=scenario.evaluation.seed, intervals=intervals)
     mc = [replay_schedule(schedule, c, seed=s)[0] for c, s in _monte_carlo(scenario)]
+    load = load_experiment(scenario.tuning, scenario.baseline.load_step,
+                           lambda cfg: replay_schedule(schedule, cfg, seed=0)[1])
 
     def gains(point):
         return schedule.gains_object(point[0]).values()
@@ -76,11 +83,12 @@ def assess_schedule(scenario, schedule: GainSchedule) -> Candidate:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             margins = [margins_of(scenario.tuning, row, point) for row, point in pairs]
-        return Candidate(Deployed.SCHEDULE.value, metrics, mc, margins, [point[loop] for _, point in pairs])
+        return Candidate(Deployed.SCHEDULE.value, metrics, mc, margins, [point[loop] for _, point in pairs],
+                         load_iae=load)
     points = [operating_point(config, b) for b in schedule.breakpoints] \
         if schedule.variable.startswith("setpoint") else [operating_point(config)]
     return Candidate(Deployed.SCHEDULE.value, metrics, mc, _margins_at(scenario.tuning, gains, points),
-                     [p[0] for p in points])
+                     [p[0] for p in points], load_iae=load)
 
 
 def error_loop(schedule: GainSchedule) -> int | None:
@@ -133,9 +141,11 @@ def max_sensitivity(scenario) -> float:
 def candidate_summary(c: Candidate) -> dict:
     """What metrics.json records of a candidate."""
     return {"metrics": c.metrics, "monte_carlo": c.monte_carlo,
-            "margins": [{"operating_point": b, "Ms": m.Ms, "gain_margin": m.gain_margin,
-                         "phase_margin_deg": m.phase_margin_deg, "reliable": m.reliable, "note": m.note}
+            "margins": [{"operating_point": b, "Ms": m.Ms, "Mt": m.Mt, "gain_margin": m.gain_margin,
+                         "phase_margin_deg": m.phase_margin_deg, "delay_margin_s": m.delay_margin_s,
+                         "state": status(m).value, "reliable": m.reliable, "note": m.note}
                         for b, m in zip(c.breakpoints, c.margins)],
             "worst_Ms": c.worst_Ms if math.isfinite(c.worst_Ms) else None,
+            "load_iae": None if math.isnan(c.load_iae) else c.load_iae,
             "holdout_ise": None if math.isnan(c.holdout_ise) else c.holdout_ise if math.isfinite(c.holdout_ise)
             else "inf"}

@@ -1,15 +1,18 @@
 """Choosing what to deploy: the adaptive gain schedule (replayed as a plain PID) or the tuned fixed PID.
 
 Rule (one place; explained in docs/architecture.md "Deliverable"):
-- A controller is eligible when it never diverged (evaluation and every Monte-Carlo sample) and its
-  worst peak sensitivity Ms over its operating points is at most `max_sensitivity`.
+- A controller is eligible when it never diverged (evaluation and every Monte-Carlo sample), no margin
+  estimate failed (robustness.status: diverged, at a limit, too lightly damped to settle) and its worst
+  peak sensitivity Ms over the verified estimates is at most `max_sensitivity` (estimates impossible to
+  make, on a plant that varies faster than the experiment, neither qualify nor disqualify).
 - Its score is the evaluation's ISE plus the mean ISE over the Monte-Carlo samples.
 - The schedule is deployed when it is eligible, scores at least MIN_IMPROVEMENT below the fixed PID (a
   table of gains must earn its place over one set of gains: a tie is not a win), its total variation
   of u is at most TOTAL_VARIATION_LIMIT times the fixed PID's (no ISE bought by chattering), and its
   ISE on held-out episodes of the training distribution (`holdout_ise`: seeds used for nothing else)
   is no worse than the fixed PID's (a win on one evaluation schedule must carry over to setpoints and
-  disturbances it was not measured on); otherwise the fixed PID when it is eligible; otherwise nothing
+  disturbances it was not measured on), and its load IAE (load steps at the plant input over the setpoint
+  range) is at most LOAD_TOLERANCE times the fixed PID's (setpoint ISE alone does not decide); otherwise the fixed PID when it is eligible; otherwise nothing
   is deployable.
 """
 from __future__ import annotations
@@ -19,6 +22,7 @@ import math
 from dataclasses import dataclass, field
 
 from prlpid_fmi.metrics import overall_metric
+from prlpid_fmi.robustness.status import Robustness, meets_limit, status, why
 
 
 class Deployed(str, enum.Enum):
@@ -44,6 +48,7 @@ class Deployed(str, enum.Enum):
 
 
 TOTAL_VARIATION_LIMIT = 1.5
+LOAD_TOLERANCE = 1.02  # the schedule's load IAE may be at most this x the fixed PID's
 MIN_IMPROVEMENT = 0.01  # the schedule's score must be at most (1 - this) x the fixed PID's
 
 
@@ -62,6 +67,7 @@ class Candidate:
     margins: list = field(default_factory=list)
     breakpoints: list = field(default_factory=list)
     holdout_ise: float = math.nan  # ISE over held-out training-distribution episodes (NaN: not measured)
+    load_iae: float = math.nan  # load IAE per unit load of tuning.load_design's experiment (NaN: not measured)
 
     @property
     def diverged(self) -> bool:
@@ -69,15 +75,19 @@ class Candidate:
 
     @property
     def worst_Ms(self) -> float:
-        """Largest Ms over the operating points whose estimate counts: reliable ones, and inf (the loop
-        diverged or sat at a limit there); NaN when every estimate is unreliable (see `unverified`)."""
+        """Largest Ms over the operating points whose estimate counts (robustness.status: verified or failed;
+        inf where the loop diverged or sat at a limit); NaN when every one was impossible (see `unverified`)."""
         return max((m.Ms for m in self.margins if counts(m)), default=math.nan)
 
     @property
     def unverified(self) -> bool:
-        """The margins were measured but no estimate is reliable (a time-varying or strongly nonlinear
-        plant): robustness could not be checked, so it neither qualifies nor disqualifies."""
+        """The margins were measured but every estimate was impossible (robustness.status: the plant varies
+        faster than the experiment): robustness could not be checked, so it neither qualifies nor disqualifies."""
         return bool(self.margins) and not any(counts(m) for m in self.margins)
+
+    def states(self) -> list[tuple]:
+        """(operating point, robustness.status.Robustness) per margin estimate."""
+        return [(b, status(m)) for b, m in zip(self.breakpoints, self.margins)]
 
     @property
     def score(self) -> float:
@@ -104,22 +114,29 @@ class Candidate:
             out.append("its robustness margins could not be measured")
         elif self.unverified:
             pass  # said in the verdict, not a reason to refuse
-        elif math.isinf(self.worst_Ms):
-            out.append(f"its loop is not robustly stable at every operating point: in the margin measurement it "
-                       f"diverged or was held at an actuator limit (Ms = infinity; limit {max_sensitivity:g})")
-        elif not self.worst_Ms <= max_sensitivity:
-            out.append(f"its peak sensitivity Ms = {self.worst_Ms:.2f} exceeds the limit {max_sensitivity:g}")
+        else:
+            failed = [(b, m) for b, m in zip(self.breakpoints, self.margins) if status(m) == Robustness.FAILED]
+            if failed:
+                b, m = failed[0]
+                out.append(f"its loop fails the robustness check at {len(failed)} of {len(self.margins)} operating "
+                           f"points (at {_point(b)}, {why(m, max_sensitivity)})")
+            elif not self.worst_Ms <= max_sensitivity:
+                out.append(f"its peak sensitivity Ms = {self.worst_Ms:.2f} exceeds the limit {max_sensitivity:g}")
         return out
 
 
+def _point(b) -> str:
+    return f"{b:g}" if isinstance(b, (int, float)) else str(b)
+
+
 def counts(m) -> bool:
-    """Whether a Margins estimate decides: reliable, or infinite (diverged / saturated: always a failure)."""
-    return bool(m.reliable) or not math.isfinite(m.Ms)
+    """Whether a Margins estimate decides (robustness.status: verified or failed, not impossible)."""
+    return status(m) != Robustness.IMPOSSIBLE
 
 
 def meets(m, limit: float) -> bool:
-    """A Margins estimate meets the Ms limit, or cannot judge it (finite but unreliable)."""
-    return not counts(m) or m.Ms <= limit
+    """robustness.status.meets_limit: verified within the limit, or impossible to measure."""
+    return meets_limit(m, limit)
 
 
 @dataclass(frozen=True)
@@ -143,6 +160,11 @@ def choose(schedule: Candidate | None, fixed: Candidate, max_sensitivity: float)
             if tv_s > TOTAL_VARIATION_LIMIT * tv_f:
                 problems.append(f"its control signal varies {tv_s / tv_f:.1f}x as much as the fixed PID's "
                                 f"(limit {TOTAL_VARIATION_LIMIT}x)")
+            l_s, l_f = schedule.load_iae, fixed.load_iae
+            if not (math.isnan(l_s) or math.isnan(l_f)) and not l_s <= LOAD_TOLERANCE * l_f:
+                problems.append(f"it rejects load steps worse than the fixed PID (load IAE {l_s:.4g} against "
+                                f"{l_f:.4g}, limit {LOAD_TOLERANCE}x): better setpoint tracking does not make up "
+                                "for that")
             h_s, h_f = schedule.holdout_ise, fixed.holdout_ise
             if not (math.isnan(h_s) or math.isnan(h_f)) and not h_s <= h_f:
                 problems.append("its win does not carry over: on held-out episodes of the training distribution "

@@ -4,14 +4,18 @@ The core takes gains in physical units (Kp, Ti [s], Td [s], coupling). Three dri
 agent's action path (PidTuningEnv: clip, smoothing, gain map), the fixed-PID search (constant gains)
 and the gain-schedule replay (table lookup). None of them reaches into another's internals.
 
+Random load steps (training.load_disturbance, with random setpoints only): the second half of every
+setpoint hold has a load at one loop's plant input, drawn at reset (`_random_loads`).
+
 One step k (sample time Ts), all signals plain Python lists of n_loops floats:
   FMU disturbances due at k -> reward forecast on the prior (eq. 12-14, before the plant moves)
   -> PID (eq. 2 / 26-27) on (setpoint_k, measurement_k) -> + actuator offsets and noise -> clip
   -> plant step -> measurement_{k+1} (+ offsets, noise) -> reward (eq. 10-11 + control-variation term).
 
-Bumpless start: before the first PID step the error sum is preset so that the integral term equals
-the plant's input at t = 0 (its start value, clipped to the limits), i.e. the input that holds an
-initial steady state (the two-tank needs 25 cm3/s). The control-variation term of the first step
+Bumpless start: before the first PID step the error sum is preset so that the PID's output equals
+the plant's input at t = 0 (its start value, clipped to the limits) when the plant starts at the
+setpoint, i.e. the input that holds an initial steady state (the two-tank needs 25 cm3/s); a setpoint
+weight b != 1 adds no kick (control.pid.PID.preset_output). The control-variation term of the first step
 is taken against that input too.
 """
 from __future__ import annotations
@@ -75,14 +79,32 @@ def randomized_parameters(config: TuningConfig) -> list[tuple[str, float, float]
     return [(name, float(lo), float(hi)) for name, lo, hi in spec]
 
 
-def make_pid(config: TuningConfig) -> PID | CoupledPID:
-    """The scenario's PID law, the one construction every loop driver uses: one positional PID (eq. 2) per loop,
-    or the cross-axis coupled PID (eq. 26-27) of three loops; actuator limits, anti-windup and derivative filter
-    from the config."""
+UNTUNED_SETPOINT_WEIGHT = 1.0  # b while controller.setpoint_weight is "tuned" and not yet tuned
+UNTUNED_MEASUREMENT_FILTER_S = 0.0  # Tf while controller.measurement_filter is "tuned" and not yet tuned
+
+
+def pid_structure(config: TuningConfig) -> tuple[list[float], list[float], list[float]]:
+    """(b, c, Tf) lists of n_loops floats in force: config.tuned_structure when set, else the controller's
+    setpoint_weight, derivative_weight and measurement_filter, "tuned" read as UNTUNED_* (the one rule)."""
     n = config.n_loops
+    if config.tuned_structure is not None:
+        return ([float(s[0]) for s in config.tuned_structure], [float(s[1]) for s in config.tuned_structure],
+                [float(s[2]) for s in config.tuned_structure])
+    b = UNTUNED_SETPOINT_WEIGHT if config.setpoint_weight == "tuned" else float(config.setpoint_weight)
+    tf = UNTUNED_MEASUREMENT_FILTER_S if config.measurement_filter == "tuned" else float(config.measurement_filter)
+    return [b] * n, [float(config.derivative_weight)] * n, [tf] * n
+
+
+def make_pid(config: TuningConfig) -> PID | CoupledPID:
+    """The scenario's PID law, the one construction every loop driver uses: one 2-DOF positional PID per loop
+    (control.pid; eq. 2 with b = c = 1, Tf = 0), or the cross-axis coupled PID (eq. 26-27) of three loops;
+    actuator limits, anti-windup, derivative filter and structure (pid_structure) from the config."""
+    n = config.n_loops
+    b, c, tf = pid_structure(config)
     args = dict(sample_time_s=config.sample_time_s, u_min=[float(l.u_min) for l in config.loops],
                 u_max=[float(l.u_max) for l in config.loops], anti_windup=config.anti_windup,
-                derivative_filter_N=config.derivative_filter_N)
+                derivative_filter_N=config.derivative_filter_N, setpoint_weight=b, derivative_weight=c,
+                measurement_filter_s=tf, measurement_filter_order=config.measurement_filter_order)
     if config.coupled:
         if n != 3:
             raise PlantError(f"the cross-axis coupled PID needs 3 loops (roll, pitch, yaw), got {n}")
@@ -144,6 +166,7 @@ class LoopCore(LoopConstants):
                 self._fmu_events.setdefault(d.end_step, []).append((d.target, self._fmu_defaults[d.target]))
         self._offsets = {kind: [(d.start_step, d.end_step, self.loop_names.index(d.target), d.value)
                                 for d in c.disturbances if d.kind == kind] for kind in ("actuator", "measurement")}
+        self._scenario_loads = list(self._offsets["actuator"])
         self.prior = self.forecast = None
         if c.forecast_horizon > 0:
             self.prior, self.forecast = self._make_prior(path, forecast_path)
@@ -209,10 +232,25 @@ class LoopCore(LoopConstants):
         if c.actuator_noise_std > 0:
             self._noise_u = rng.normal(0.0, c.actuator_noise_std, (c.episode_steps + 1, self.n_loops)).tolist()
         self.setpoint = self._setpoint_at(0)
+        self._offsets["actuator"] = self._scenario_loads + self._random_loads(rng)
         self.measurement = self._measure(y_true, 0)
         self.previous_error = [r - y for r, y in zip(self.setpoint, self.measurement)]
         self.applied_setpoint = list(self.setpoint)
         self.forecast_reward = self.step_reward = None
+
+    def _random_loads(self, rng: np.random.Generator) -> list[tuple]:
+        """training.load_disturbance: with random setpoints, in the second half of every setpoint hold a load
+        step at a random loop's plant input, a random sign, load_disturbance x its control span; as actuator
+        offsets (start, end, loop, value)."""
+        c = self.config
+        if not c.load_disturbance > 0 or self._schedule is not None:
+            return []
+        hold, loads = c.setpoint_hold_steps, []
+        for start in range(0, c.episode_steps, hold):
+            i = int(rng.integers(self.n_loops))
+            sign = 1.0 if rng.random() < 0.5 else -1.0
+            loads.append((start + hold // 2, start + hold, i, sign * c.load_disturbance * self.u_scale[i]))
+        return loads
 
     def _setpoint_at(self, k: int) -> list[float]:
         c = self.config
@@ -259,13 +297,12 @@ class LoopCore(LoopConstants):
         Returns (reward, terminated): terminated when the plant rejects the step, a measurement is not
         finite, or |error| / measurement_scale exceeds divergence_bound (reward = divergence penalty).
         """
-        n = self.n_loops
         self.begin_step()
         setpoint, measurement = self.setpoint, self.measurement
         if self._bumpless:
             self._bumpless = False
             if any(self.pid_output):
-                self.pid.preset_integral(self.pid_output, Kp, Ti)
+                self.pid.preset_output(self.pid_output, setpoint, Kp, Ti)
         self.forecast_reward = None
         if self.forecast is not None:
             self.forecast_reward = self.forecast.mean_reward(setpoint, measurement, Kp, Ti, Td, coupling,
@@ -273,8 +310,14 @@ class LoopCore(LoopConstants):
         if coupling is not None:
             u = self.pid.step_values(setpoint, measurement, Kp, Ti, Td, coupling)
         else:
-            u = self.pid.step_values([setpoint[i] - measurement[i] for i in range(n)], Kp, Ti, Td)
+            u = self.pid.step_values(setpoint, measurement, Kp, Ti, Td)
         return self._apply(u)
+
+    def set_structure(self, setpoint_weight: list[float], derivative_weight: list[float],
+                      measurement_filter_s: list[float]) -> None:
+        """Change the PID's b, c and Tf (n_loops floats each) for the next episodes (the fixed-PID search);
+        call between episodes."""
+        self.pid.set_structure(setpoint_weight, derivative_weight, measurement_filter_s)
 
     def step_control(self, u: list[float]) -> tuple[float, bool]:
         """One sample with the control signal u (n_loops floats, before actuator offsets, noise and

@@ -15,6 +15,7 @@ restart costs a fork and the FMU's instantiation, not an interpreter start.
 """
 from __future__ import annotations
 
+import dataclasses
 import warnings
 from pathlib import Path
 
@@ -79,6 +80,9 @@ def _serve(conn, config: TuningConfig, forecast_path: str, extracted: dict) -> N
                     rng.bit_generator.state = state
                 core.reset(rng, schedule)
                 conn.send(("ok", _snapshot(core)))
+            elif op == "set_structure":
+                core.set_structure(*args)
+                conn.send(("ok", None))
             elif op == "begin_step":
                 core.begin_step()
                 conn.send(("ok", None))
@@ -237,6 +241,16 @@ class IsolatedCore(LoopConstants):
             warnings.warn(f"{name} crashed ({how}) in its worker process at t = {t:g} s: the episode ends with the "
                           "divergence penalty and a fresh worker starts the next one", stacklevel=3)
         return self.penalty, True
+
+    def set_structure(self, setpoint_weight, derivative_weight, measurement_filter_s) -> None:
+        """As LoopCore.set_structure; a restarted worker is built with it too."""
+        structure = tuple(zip(map(float, setpoint_weight), map(float, derivative_weight), map(float, measurement_filter_s)))
+        self.config = dataclasses.replace(self.config, tuned_structure=structure)
+        if self._proc is not None:
+            try:
+                self._call("set_structure", (list(setpoint_weight), list(derivative_weight), list(measurement_filter_s)))
+            except _WorkerDied:
+                self._lost()
 
     def begin_step(self) -> None:
         self._call("begin_step")

@@ -16,7 +16,9 @@ from prlpid_fmi import rundir as rd
 from prlpid_fmi.deliver.evidence import HOLDOUT_EPISODES
 from prlpid_fmi.deliver.rule import Candidate, Deployed
 from prlpid_fmi.fmu.resolve import loop_units as units_of_loops
+from prlpid_fmi.loop.core import pid_structure
 from prlpid_fmi.metrics import overall_metric
+from prlpid_fmi.robustness.status import why
 
 METRIC_COLUMNS = ("ISE", "IAE", "ITAE", "Overshoot", "SettlingTime", "RiseTime", "SteadyStateError",
                   "PeakDeviation", "RecoveryTime", "ControlEffort", "TotalVariation", "Chatter")
@@ -80,6 +82,10 @@ def plot_links() -> list[str]:
     return ["Plots:", ""] + [f"- [{name}]({name}): {what}" for name, what in PLOTS] + [""]
 
 
+_DESIGNS = {"load": "designed for load rejection under the Ms and noise limits, then b for the setpoint response",
+            "setpoint": "differential evolution on the training distribution's setpoint ISE"}
+
+
 def render_report(scenario, policy_m: dict, fixed_m: dict | None, fixed_gains: dict | None,
                   source: Path | None = None, units: tuple[str, str] = ("", ""),
                   learning_curve: bool = True, opening: tuple[str, ...] = ()) -> str:
@@ -98,8 +104,11 @@ def render_report(scenario, policy_m: dict, fixed_m: dict | None, fixed_gains: d
               f"{f' (output in {y_unit}, control signal in {u_unit})' if y_unit or u_unit else ''}.", ""]
     lines += ended_early_lines([("adaptive policy", policy_m), ("fixed PID", fixed_m)])
     if fixed_gains:
-        lines += ["Fixed PID (differential evolution on the training distribution): "
-                  + _gains_text(fixed_gains, y_unit, u_unit) + ".", ""]
+        b, c, tf = pid_structure(scenario.tuning)
+        structure = "; ".join(f"{name} = {', '.join(f'{v:.4g}' for v in values)}{unit}"
+                              for name, values, unit in (("b", b, ""), ("c", c, ""), ("Tf", tf, " s")))
+        lines += [f"Fixed PID ({_DESIGNS.get(scenario.baseline.objective, scenario.baseline.objective)}): "
+                  + _gains_text(fixed_gains, y_unit, u_unit) + f"; {structure}.", ""]
     lines += ["Ratio = adaptive policy ÷ fixed PID; lower is better for every metric here "
               "(below 1: the adaptive policy is better). – = not defined (no setpoint step, no baseline, "
               "or a zero divisor); never = did not settle or recover within its segment.", "",
@@ -157,6 +166,10 @@ def candidates_table(sched, fixed, units: tuple[str, str] = ("", ""), margins: b
     if margins:
         lines.append("| worst Ms (limit in the verdict) | – | " + " | ".join(number(c.worst_Ms, 3) for c in cands)
                      + " |")
+    if all(not math.isnan(c.load_iae) for c in cands):
+        lines.append(f"| load IAE per unit load, load steps at the plant input (low / mid / high setpoint) | "
+                     f"{unit_label('IAE', y_unit, u_unit)} per {u_unit or 'u-unit'} | "
+                     + " | ".join(number(c.load_iae) for c in cands) + " |")
     if all(not math.isnan(c.holdout_ise) for c in cands):
         lines.append(f"| ISE, {HOLDOUT_EPISODES} held-out training-distribution episodes | "
                      f"{unit_label('ISE', y_unit, u_unit)} | " + " | ".join(
@@ -169,6 +182,56 @@ def candidates_table(sched, fixed, units: tuple[str, str] = ("", ""), margins: b
         lines.append(f"| worst ISE, Monte-Carlo set | {ise} | " + " | ".join(
             number(max((overall_metric(m["overall"], "ISE") for m in c.monte_carlo), default=None))
             for c in cands) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def margins_table(candidates, limit: float, point_unit: str = "") -> str:
+    """Every margin estimate of the candidates, one row per operating point: Ms, Mt, gain, phase and delay
+    margins and the robustness state (robustness.status)."""
+    lines = [f"| controller | operating point{f' [{point_unit}]' if point_unit else ''} | Ms | Mt | gain margin [dB] | "
+             "phase margin [°] | delay margin [s] | state |", "|---|---|---|---|---|---|---|---|"]
+    for c in candidates:
+        if c is None:
+            continue
+        for b, m in zip(c.breakpoints, c.margins):
+            point = f"{b:.4g}" if isinstance(b, (int, float)) else str(b)
+            cells = " | ".join(_margin(v) for v in (m.Ms, m.Mt, m.gain_margin_db, m.phase_margin_deg, m.delay_margin_s))
+            lines.append(f"| {c.name} | {point} | {cells} | {why(m, limit)} |")
+    return "\n".join(lines) + "\n"
+
+
+def _margin(value: float) -> str:
+    """A margin as text: 3 significant digits, "∞" / "-∞" for infinite ones, "–" for NaN."""
+    if math.isinf(value):
+        return "∞" if value > 0 else "-∞"
+    return number(value, 3)
+
+
+def design_section(fixed: dict, loop_names) -> str:
+    """How the fixed PID was designed (fixed_pid.json's "design" and "structure"), in words and one table."""
+    design, structure = fixed.get("design") or {}, fixed.get("structure") or {}
+    if design.get("objective") != "load":
+        return ""
+    lines = ["## How the fixed PID was designed", "",
+             "Kp, Ti, Td (and the measurement filter Tf) minimise the IAE of a load step at the plant input "
+             f"({design['load_step']:.0%} of the control span) at the low end, middle and high end of the setpoint "
+             "range, subject to the Ms and noise limits; then the setpoint weight b shapes the setpoint response "
+             "(tuning.load_design; docs/architecture.md).", "",
+             "| loop | Kp | Ti [s] | Td [s] | b | c | Tf [s] |", "|---|---|---|---|---|---|---|"]
+    g = fixed["gains"]
+    for i, name in enumerate(loop_names):
+        lines.append(f"| {name} | {number(g['Kp'][i], 4)} | {number(g['Ti'][i], 4)} | {number(g['Td'][i], 4)} | "
+                     f"{number(structure['setpoint_weight'][i], 3)} | {number(structure['derivative_weight'][i], 3)} | "
+                     f"{number(structure['measurement_filter_s'][i], 4)} |")
+    lines += ["", f"Load IAE per unit load (mean over the points) [output units·s per input unit]: "
+                  f"{number(design['load_cost'], 4)}; the search's optimum without the overshoot limit: "
+                  f"{number(design['load_optimum'], 4)}."]
+    traded = design.get("traded_for_overshoot")
+    if traded:
+        lines.append(f"No setpoint weight kept the overshoot within the limit with the load-optimal gains, so the gains "
+                     f"gave up load rejection ({number(traded['load_cost'] / design['load_optimum'], 3)}x the optimum) "
+                     f"for an overshoot of {number(traded['Overshoot'], 3)} %"
+                     + ("." if traded["feasible"] else ": no candidate met every limit; the least violation is kept."))
     return "\n".join(lines) + "\n"
 
 

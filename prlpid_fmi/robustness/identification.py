@@ -38,6 +38,7 @@ CONVERGENCE_TOLERANCE = 1e-3  # max |L_p - L_{p-1}| / |1 + L_p| between the last
 MAX_PERIODS = 6             # measured periods at most (after the transient wait)
 MIN_WAIT = 200              # samples waited after the multisine starts, at least (at most one period)
 AMPLITUDE_FRACTION = 0.02   # default multisine peak: 2 % of the u range (or of Kp * measurement_scale)
+DECAY_RATIO = 0.5            # PlantResponse.decaying: last change between periods / first change at most this
 AMPLITUDE_RETRIES = 4       # halvings of the amplitude when the control signal hits a limit
 
 
@@ -103,6 +104,14 @@ class PlantResponse:
     amplitude: float
     saturated: bool
     diverged: bool
+    changes: tuple = ()  # the change between each pair of consecutive periods, in order
+
+    @property
+    def decaying(self) -> bool:
+        """The changes between periods fall, period after period, to at most DECAY_RATIO x the first (3 changes
+        or more): a transient dying out, as in a lightly damped linear loop; a time-varying plant's go up and down."""
+        c = self.changes
+        return len(c) >= 3 and all(b <= a for a, b in zip(c, c[1:])) and c[-1] <= DECAY_RATIO * c[0]
 
 
 class ClosedLoopRig:
@@ -167,7 +176,7 @@ class ClosedLoopRig:
         self.pid.reset()
         u0 = np.clip(self.plant.get(list(self.plant.inputs)), self.u_min, self.u_max)
         if np.any(u0 != 0):
-            self.pid.preset_integral(u0.tolist(), self.Kp, self.Ti)
+            self.pid.preset_output(u0.tolist(), self._ramp(y0, 0).tolist(), list(self.Kp), list(self.Ti))
         return y0, u0
 
     def _ramp(self, y0: np.ndarray, k: int) -> np.ndarray:
@@ -246,7 +255,7 @@ class ClosedLoopRig:
             if coupling is not None:
                 u = pid.step_values(r, y, Kp, Ti, Td, coupling)
             else:
-                u = pid.step_values([r[i] - y[i] for i in range(n)], Kp, Ti, Td)
+                u = pid.step_values(r, y, Kp, Ti, Td)
             u[loop] += dk
             for i in range(n):
                 if not lo[i] < u[i] < hi[i]:
@@ -304,7 +313,7 @@ def measure_response(rig: ClosedLoopRig, loop: int, bins: Sequence[int], period:
         rig.restore()
         d = multisine(bins, period, amplitude)
         _, _, saturated, diverged = rig.simulate(loop, d[:wait])
-        estimates, change, periods, distortion = [], math.inf, 0, math.nan
+        estimates, change, changes, periods, distortion = [], math.inf, [], 0, math.nan
         start = wait
         while not diverged:
             uu, yy, sat, diverged = rig.simulate(loop, np.roll(d, -(start % period)))
@@ -322,6 +331,7 @@ def measure_response(rig: ClosedLoopRig, loop: int, bins: Sequence[int], period:
             if len(estimates) >= 2:
                 L1, L0 = C * estimates[-1], C * estimates[-2]
                 change = float(np.max(np.abs(L1 - L0) / np.abs(1 + L1)))
+                changes.append(change)
                 if change <= CONVERGENCE_TOLERANCE or periods >= MAX_PERIODS:
                     break
         if not (saturated or diverged) or attempt == AMPLITUDE_RETRIES:
@@ -330,4 +340,5 @@ def measure_response(rig: ClosedLoopRig, loop: int, bins: Sequence[int], period:
     response = estimates[-1] if estimates else np.full(len(bins), np.nan + 0j)
     if period % 2 == 0 and bins[-1] == period // 2:
         response[-1] = response[-1].real  # exactly real at Nyquist for a real system
-    return PlantResponse(omega, response, period, periods, change, distortion, amplitude, saturated, diverged)
+    return PlantResponse(omega, response, period, periods, change, distortion, amplitude, saturated, diverged,
+                         tuple(changes))

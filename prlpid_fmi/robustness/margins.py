@@ -38,6 +38,7 @@ import control
 import numpy as np
 
 from prlpid_fmi.config import TuningConfig
+from prlpid_fmi.loop.core import pid_structure
 from prlpid_fmi.robustness.identification import (
     CONVERGENCE_TOLERANCE,
     ClosedLoopRig,
@@ -59,18 +60,29 @@ DISTORTION_LIMIT = 0.02      # relative response at non-excited bins above which
 
 
 def pid_transfer_function(Kp: float, Ti: float, Td: float, sample_time_s: float,
-                          derivative_filter_N: float | None = None) -> control.TransferFunction:
-    """C(z) of the positional PID of eq. 2 (see the module docstring), dt = sample_time_s.
+                          derivative_filter_N: float | None = None, measurement_filter_s: float = 0.0,
+                          measurement_filter_order: int = 1) -> control.TransferFunction:
+    """C(z), the feedback part of the PID of control.pid (u = -C y + setpoint terms), dt = sample_time_s::
 
+        C(z) = Kp * (F(z) + (Ts/Ti) z/(z - 1) + Td (z - 1)/((Tdf + Ts) z - Tdf) F(z)),   Tdf = Td/N (0 without)
+        F(z) = (Ts z / ((T + Ts) z - T))^order,   T = Tf / order (F = 1 when Tf = 0)
+
+    the measurement filter F acting on P and D, not on the integral. The setpoint weights b, c do not enter
+    (they act on the setpoint only), so Ms, the margins and the load response do not depend on them.
     Ti = inf drops the integral term, Td = 0 the derivative term.
     """
     Ts = float(sample_time_s)
-    terms = [(np.array([1.0]), np.array([1.0]))]
+    F = (np.array([1.0]), np.array([1.0]))
+    if measurement_filter_s > 0:
+        T = measurement_filter_s / measurement_filter_order
+        for _ in range(measurement_filter_order):
+            F = (np.polymul(F[0], [Ts, 0.0]), np.polymul(F[1], [T + Ts, -T]))
+    terms = [F]
     if math.isfinite(Ti):
         terms.append((np.array([Ts / Ti, 0.0]), np.array([1.0, -1.0])))
     if Td != 0:
         Tf = Td / derivative_filter_N if derivative_filter_N else 0.0
-        terms.append((np.array([Td, -Td]), np.array([Tf + Ts, -Tf])))
+        terms.append((np.polymul([Td, -Td], F[0]), np.polymul([Tf + Ts, -Tf], F[1])))
     num, den = np.array([0.0]), np.array([1.0])
     for n, d in terms:
         num, den = np.polyadd(np.polymul(num, d), np.polymul(n, den)), np.polymul(den, d)
@@ -78,12 +90,24 @@ def pid_transfer_function(Kp: float, Ti: float, Td: float, sample_time_s: float,
 
 
 def pid_frequency_response(Kp: float, Ti: float, Td: float, sample_time_s: float, omega,
-                           derivative_filter_N: float | None = None) -> np.ndarray:
-    """C(e^{j w Ts}) at w = omega [rad/s], complex array of omega's shape (exactly real at Nyquist, w = pi/Ts)."""
-    C = pid_transfer_function(Kp, Ti, Td, sample_time_s, derivative_filter_N)
-    wT = np.asarray(omega, float) * sample_time_s
+                           derivative_filter_N: float | None = None, measurement_filter_s: float = 0.0,
+                           measurement_filter_order: int = 1) -> np.ndarray:
+    """C(e^{j w Ts}) at w = omega [rad/s], complex array of omega's shape (exactly real at Nyquist, w = pi/Ts):
+    the terms of `pid_transfer_function` evaluated at z directly (the search calls this for every candidate)."""
+    Ts = float(sample_time_s)
+    wT = np.asarray(omega, float) * Ts
     z = np.where(np.isclose(wT, np.pi, rtol=1e-12, atol=0), -1.0 + 0j, np.exp(1j * wT))
-    return np.polyval(C.num[0][0], z) / np.polyval(C.den[0][0], z)
+    F = np.ones_like(z)
+    if measurement_filter_s > 0:
+        T = measurement_filter_s / measurement_filter_order
+        F = (Ts * z / ((T + Ts) * z - T)) ** measurement_filter_order
+    C = F.copy()
+    if math.isfinite(Ti):
+        C = C + (Ts / Ti) * z / (z - 1)
+    if Td != 0:
+        Tf = Td / derivative_filter_N if derivative_filter_N else 0.0
+        C = C + Td * (z - 1) / ((Tf + Ts) * z - Tf) * F
+    return Kp * C
 
 
 @dataclass(frozen=True, eq=False)
@@ -96,8 +120,9 @@ class Margins:
     frequencies_rad_s (K,): the grid; plant_response (K,) complex: the estimated P(e^{j w Ts}) (with
     several loops, the effective plant the loop's PID sees with the other loops closed);
     controller_response (K,): C(e^{j w Ts}). amplitude: multisine peak [u units] used.
-    reliable: False when the estimate or the margins should not be trusted, with the reason in note.
-    loop: the loop's measured output name; per_loop: every loop's Margins (several loops only).
+    reliable: False when the estimate or the margins should not be trusted, with the reason in note and
+    its kinds in problems (PROBLEM_KINDS). loop: the loop's measured output name; per_loop: every loop's
+    Margins (several loops only).
     """
 
     Ms: float
@@ -114,6 +139,7 @@ class Margins:
     note: str
     loop: str
     per_loop: tuple = ()
+    problems: tuple = ()  # kinds of the flags behind reliable = False: PROBLEM_KINDS
 
     @property
     def gain_margin_db(self) -> float:
@@ -121,6 +147,24 @@ class Margins:
         if math.isnan(self.gain_margin):
             return math.nan
         return 20 * math.log10(self.gain_margin) if self.gain_margin > 0 else -math.inf
+
+    @property
+    def Mt(self) -> float:
+        """Peak complementary sensitivity max |L / (1 + L)| over the grid (inf when Ms is)."""
+        if not math.isfinite(self.Ms) or len(self.frequencies_rad_s) == 0:
+            return math.inf
+        L = self.loop_response
+        return float(np.max(np.abs(L / (1 + L))))
+
+    @property
+    def delay_margin_s(self) -> float:
+        """The extra loop delay [s] that the loop tolerates: phase margin [rad] / gain crossover [rad/s]; inf
+        without a gain crossover, 0 for a non-positive phase margin, NaN when there are no margins (Ms inf)."""
+        if not math.isfinite(self.Ms):
+            return math.nan
+        if not math.isfinite(self.phase_margin_deg) or not self.gain_crossover_rad_s > 0:
+            return math.inf
+        return max(0.0, math.radians(self.phase_margin_deg) / self.gain_crossover_rad_s)
 
     @property
     def loop_response(self) -> np.ndarray:
@@ -224,10 +268,11 @@ def _no_margins(loop: str, amplitude: float, note: str) -> Margins:
 
 
 def _controller(rig: ClosedLoopRig, loop: int):
-    """w [rad/s] -> C(e^{j w Ts}) of loop `loop`'s PID as the rig runs it."""
+    """w [rad/s] -> C(e^{j w Ts}) of loop `loop`'s PID as the rig runs it (feedback part, filter included)."""
     c = rig.config
+    tf = pid_structure(c)[2][loop]
     return lambda w: pid_frequency_response(rig.Kp[loop], rig.Ti[loop], rig.Td[loop], c.sample_time_s, w,
-                                            c.derivative_filter_N)
+                                            c.derivative_filter_N, tf, c.measurement_filter_order)
 
 
 def _measure_loop(rig: ClosedLoopRig, loop: int, frequencies, amplitude: float, wait: int) -> list[PlantResponse]:
@@ -288,24 +333,34 @@ def _loop_result(rig: ClosedLoopRig, loop: int, responses: list[PlantResponse]) 
     no_integrator = not math.isfinite(rig.Ti[loop]) and len(L) > 1 and abs(abs(L[1]) / abs(L[0]) - 1) < 0.1
     Ms, w_ms, gm, wpc, pm, wgc = margins_from_loop_response(omega, L, finite_dc_gain=no_integrator)
     problems = _problems(responses)
-    return Margins(Ms, w_ms, gm, wpc, pm, wgc, omega, P, C, amplitude, not problems, "; ".join(problems), name)
+    return Margins(Ms, w_ms, gm, wpc, pm, wgc, omega, P, C, amplitude, not problems,
+                   "; ".join(text for _, text in problems), name, problems=tuple(kind for kind, _ in problems))
 
 
-def _problems(responses: list[PlantResponse]) -> list[str]:
-    """Why estimates from these experiments cannot be trusted (empty: reliable). Each test is on the worst
-    experiment, so a flag raised by one experiment stays whatever further experiments measure."""
+PROBLEM_KINDS = ("saturated", "lightly_damped", "varying", "distorted", "not_settled")  # Margins.problems
+
+
+def _problems(responses: list[PlantResponse]) -> list[tuple[str, str]]:
+    """Why estimates from these experiments cannot be trusted, as (kind, sentence) (empty: reliable). Each test is
+    on the worst experiment, so a flag raised by one experiment stays whatever further experiments measure."""
     problems = []
     if any(r.saturated for r in responses):
         amplitude = min(r.amplitude for r in responses)
-        problems.append(f"the control signal reached a limit even with a multisine peak of {amplitude:.3g}")
-    change = max(r.change for r in responses)
-    if change > 10 * CONVERGENCE_TOLERANCE:
-        problems.append(f"the response did not reach a periodic steady state (change {change:.2g} between periods: "
-                        "a time-varying plant, or a loop too lightly damped to settle)")
+        problems.append(("saturated", f"the control signal reached a limit even with a multisine peak of "
+                                      f"{amplitude:.3g}"))
+    worst = max(responses, key=lambda r: r.change)
+    if worst.change > 10 * CONVERGENCE_TOLERANCE:
+        if worst.decaying:
+            problems.append(("lightly_damped", f"the response did not reach a periodic steady state (change "
+                                               f"{worst.change:.2g} between periods, falling: a loop too lightly "
+                                               "damped to settle)"))
+        else:
+            problems.append(("varying", f"the response did not reach a periodic steady state (change "
+                                        f"{worst.change:.2g} between periods, not falling: a time-varying plant)"))
     distortion = max(r.distortion for r in responses)
     if distortion > DISTORTION_LIMIT:
-        problems.append(f"the plant does not respond linearly around this operating point "
-                        f"(distortion {distortion:.1%}: nonlinear or time-varying)")
+        problems.append(("distorted", f"the plant does not respond linearly around this operating point "
+                                      f"(distortion {distortion:.1%}: nonlinear or time-varying)"))
     return problems
 
 
@@ -358,7 +413,7 @@ def loop_margins(config: TuningConfig, Kp: Sequence[float], Ti: Sequence[float],
     finally:
         rig.close()
     if not settling.settled and not settling.diverged:
-        results = [dataclasses.replace(m, reliable=False, note="; ".join(filter(None, [
+        results = [dataclasses.replace(m, reliable=False, problems=m.problems + ("not_settled",), note="; ".join(filter(None, [
             m.note, f"the loop had not settled at the operating point after {settling.steps} samples"])))
             for m in results]
     if n == 1:
@@ -366,11 +421,12 @@ def loop_margins(config: TuningConfig, Kp: Sequence[float], Ti: Sequence[float],
     worst = max(results, key=lambda m: (m.Ms, -m.phase_margin_deg if math.isfinite(m.phase_margin_deg) else 0))
     notes = [f"{m.loop}: {m.note}" for m in results if m.note]
     return dataclasses.replace(worst, reliable=all(m.reliable for m in results), note="; ".join(notes),
-                               per_loop=tuple(results))
+                               per_loop=tuple(results), problems=tuple(dict.fromkeys(k for m in results
+                                                                                     for k in m.problems)))
 
 
 def format_margins(m: Margins) -> str:
-    """One line for reports, e.g. "Ms 1.42, GM 8.3 dB at 12.1 rad/s, PM 52° at 3.4 rad/s"."""
+    """One line for reports, e.g. "Ms 1.42, Mt 1.21, GM 8.3 dB at 12.1 rad/s, PM 52° at 3.4 rad/s, DM 0.27 s"."""
     if not math.isfinite(m.Ms):
         text = f"Ms inf ({m.note})"
     else:
@@ -378,7 +434,8 @@ def format_margins(m: Margins) -> str:
             f"GM {m.gain_margin_db:.1f} dB at {m.phase_crossover_rad_s:.3g} rad/s"
         pm = "PM inf" if not math.isfinite(m.phase_margin_deg) else \
             f"PM {m.phase_margin_deg:.0f}° at {m.gain_crossover_rad_s:.3g} rad/s"
-        text = f"Ms {m.Ms:.2f}, {gm}, {pm}"
+        dm = "DM inf" if not math.isfinite(m.delay_margin_s) else f"DM {m.delay_margin_s:.3g} s"
+        text = f"Ms {m.Ms:.2f}, Mt {m.Mt:.2f}, {gm}, {pm}, {dm}"
         if not m.reliable:
             text += f" (unreliable: {m.note})"
     if m.per_loop:

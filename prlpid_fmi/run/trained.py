@@ -57,6 +57,17 @@ def anchor_gains(scenario: Scenario, fixed: dict | None):
     return gains_from_dict(fixed["gains"])
 
 
+def with_structure(scenario: Scenario, fixed: dict | None) -> Scenario:
+    """The scenario with the PID structure (b, c, Tf per loop) fixed_pid.json records in force (unchanged for a
+    run without one, or one written before the 2-DOF law: those ran with the controller's settings)."""
+    s = (fixed or {}).get("structure")
+    if not s:
+        return scenario
+    structure = tuple(zip(map(float, s["setpoint_weight"]), map(float, s["derivative_weight"]),
+                          map(float, s["measurement_filter_s"])))
+    return dataclasses.replace(scenario, tuning=dataclasses.replace(scenario.tuning, tuned_structure=structure))
+
+
 def load_trained(run_dir: Path) -> Scenario:
     """The scenario of a finished run (its scenario.yaml), with the plant isolation its run.json recorded."""
     if not (run_dir / rd.SCENARIO).is_file() or not (run_dir / rd.MODEL).is_file():
@@ -66,7 +77,8 @@ def load_trained(run_dir: Path) -> Scenario:
         isolation = json.loads((run_dir / rd.RUN_INFO).read_text()).get("isolation", "auto")
     except (OSError, ValueError, AttributeError):
         isolation = "auto"
-    return with_isolation(scenario, isolation)
+    fixed = json.loads((run_dir / rd.FIXED_PID).read_text()) if (run_dir / rd.FIXED_PID).is_file() else None
+    return with_structure(with_isolation(scenario, isolation), fixed)
 
 
 def on_other_evaluation(trained: Scenario, scenario_path: str | Path) -> Scenario:
@@ -78,7 +90,9 @@ def on_other_evaluation(trained: Scenario, scenario_path: str | Path) -> Scenari
                        f"(got {[l.output for l in other.tuning.loops]}; expected the same loops and coupling)")
     return with_isolation(dataclasses.replace(other, tuning=dataclasses.replace(
         other.tuning, loops=trained.tuning.loops, coupled=trained.tuning.coupled,
-        coupling_range=trained.tuning.coupling_range)), trained.tuning.isolation)
+        coupling_range=trained.tuning.coupling_range, tuned_structure=trained.tuning.tuned_structure,
+        measurement_filter_order=trained.tuning.measurement_filter_order,
+        derivative_filter_N=trained.tuning.derivative_filter_N)), trained.tuning.isolation)
 
 
 def deployed_controller(run_dir: Path):

@@ -25,7 +25,7 @@ from prlpid_fmi import rundir as rd
 from prlpid_fmi.deliver.rule import Decision, Deployed
 from prlpid_fmi.errors import ArgumentError, Interrupted, PrlPidError
 from prlpid_fmi.loop.gains import gains_from_dict
-from prlpid_fmi.report.markdown import candidates_table, loop_units
+from prlpid_fmi.report.markdown import candidates_table, design_section, loop_units, margins_table
 from prlpid_fmi.run.evaluate import (
     Evaluation,
     evaluate_controllers,
@@ -33,7 +33,7 @@ from prlpid_fmi.run.evaluate import (
     evaluation_report,
     write_evaluation_files,
 )
-from prlpid_fmi.run.trained import anchor_gains, load_policy, with_isolation
+from prlpid_fmi.run.trained import anchor_gains, load_policy, with_isolation, with_structure
 from prlpid_fmi.rundir import write_atomic, write_json
 from prlpid_fmi.scenario.load import Scenario, load_scenario, scenario_to_yaml
 from prlpid_fmi.schema.types import MAX_SEED
@@ -106,6 +106,8 @@ def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None
         return run_dir
     scenario, info = started.scenario, started.info
     fixed = fixed_pid_stage(scenario, run_dir, progress_bar, baseline)
+    scenario = with_structure(scenario, fixed)  # the tuned b, c, Tf from here on
+    started = dataclasses.replace(started, scenario=scenario)
     anchor = anchor_gains(scenario, fixed)
     training_stage(scenario, run_dir, info, resume, anchor, progress_bar)
     policy = load_policy(run_dir, scenario.agent.algorithm)
@@ -169,13 +171,14 @@ def fixed_pid_stage(scenario: Scenario, run_dir: Path, progress_bar: bool, basel
     result = search_module.tune_fixed_pid(scenario.tuning, seed=scenario.agent.seed, episodes=b.episodes,
                                           maxiter=b.maxiter, popsize=b.popsize,
                                           callback=search.update if search else None,
-                                          max_sensitivity=max_sensitivity(scenario))
+                                          max_sensitivity=max_sensitivity(scenario), baseline=b,
+                                          deploy=scenario.deploy)
     if search:
         search.close()
     fixed = {"action": result.action.tolist(), "gains": result.gains.as_dict(), "cost": result.cost,
-             "evaluations": result.evaluations}
+             "evaluations": result.evaluations, "structure": result.structure_dict(), "design": result.info}
     write_json(run_dir / rd.FIXED_PID, fixed)
-    write_schedule_csv(fixed_schedule(result.gains, scenario.tuning), run_dir / rd.FIXED_PID_CSV)
+    write_schedule_csv(fixed_schedule(result.gains, with_structure(scenario, fixed).tuning), run_dir / rd.FIXED_PID_CSV)
     return fixed
 
 
@@ -254,9 +257,12 @@ def files_stage(run_dir: Path, started: Started, ev: Evaluation, fixed: dict | N
         metrics.update(deployed=choice.decision.deploy, decision=list(choice.decision.reasons),
                        schedule_replay=candidate_summary(choice.schedule) if choice.schedule is not None else None,
                        fixed_pid_assessment=candidate_summary(choice.fixed))
+        units = loop_units(scenario.tuning)
         opening = (verdict(choice.decision, choice.schedule, choice.fixed, max_sensitivity(scenario),
                            scenario.tuning.gain_mapping).rstrip(), "",
-                   candidates_table(choice.schedule, choice.fixed, loop_units(scenario.tuning)))
+                   candidates_table(choice.schedule, choice.fixed, units), "### Robustness at each operating point", "",
+                   margins_table((choice.fixed, choice.schedule), max_sensitivity(scenario), units[0]),
+                   design_section(fixed, [l.output for l in scenario.tuning.loops]))
     elif table.table is not None:
         write_schedule_csv(table.table, run_dir / rd.SCHEDULE)
     write_json(run_dir / rd.METRICS, metrics)

@@ -96,7 +96,7 @@ class Scenario:
             disturbances=e.disturbances,
             measurement_noise_std=t.measurement_noise_std if e.measurement_noise_std is None else e.measurement_noise_std,
             actuator_noise_std=t.actuator_noise_std if e.actuator_noise_std is None else e.actuator_noise_std,
-            randomize=e.randomize)
+            randomize=e.randomize, load_disturbance=0.0)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -145,14 +145,15 @@ def build_scenario(model: ScenarioModel, name: str, path: Optional[str] = None) 
         leak_check_every=p.leak_check_every, leak_limit_mb=p.leak_limit_mb,
         prior=PriorConfig(fmu=model.prior.fmu, parameters=dict(model.prior.parameters),
                           state_map=dict(model.prior.state_map)),
-        **_fields(c, ("anti_windup", "derivative_filter_N", "coupled", "coupling_range", "gain_mapping")),
+        **_fields(c, ("anti_windup", "derivative_filter_N", "setpoint_weight", "derivative_weight", "measurement_filter",
+                     "measurement_filter_order", "coupled", "coupling_range", "gain_mapping")),
         anchor_bands=AnchorBands(**c.anchor_bands.model_dump()),
         **_fields(st, ("forecast_horizon", "smoothing", "smoothing_window", "smoothing_alpha")),
         reward=RewardWeights(**_fields(r, reward_keys)), divergence_penalty=r.divergence_penalty,
         episode_steps=t.episode_steps, setpoint_hold_steps=t.setpoint_hold_steps,
         setpoint_schedule=_schedule(t.setpoints), disturbances=_disturbances(t.disturbances),
         measurement_noise_std=t.measurement_noise_std, actuator_noise_std=t.actuator_noise_std,
-        randomize=_randomize(t.randomize))
+        randomize=_randomize(t.randomize), load_disturbance=t.load_disturbance)
     agent = AgentConfig(**{**model.agent.model_dump(), "net_arch": tuple(model.agent.net_arch),
                            "extra": dict(model.agent.extra)})
 
@@ -215,6 +216,7 @@ def scenario_model(s: Scenario) -> ScenarioModel:
                      "setpoints": _schedule_doc(t.setpoint_schedule),
                      "measurement_noise_std": t.measurement_noise_std, "actuator_noise_std": t.actuator_noise_std,
                      "disturbances": [_disturbance_doc(d) for d in t.disturbances],
+                     "load_disturbance": t.load_disturbance,
                      "randomize": {k: list(v) for k, v in dict(t.randomize).items()}},
         "evaluation": {"episode_steps": e.episode_steps, "setpoints": _schedule_doc(e.setpoint_schedule),
                        "intervals": [list(i) for i in e.intervals],

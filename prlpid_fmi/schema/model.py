@@ -12,7 +12,7 @@ validation context (checks.py), in section order, so that one pass reports every
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any, Literal, Optional
+from typing import Annotated, Any, Literal, Optional, Union
 
 from pydantic import (
     AfterValidator,
@@ -346,6 +346,18 @@ class ControllerModel(Section):
     anti_windup: AntiWindup = Field("clamping", description="clamping | back_calculation | none")
     derivative_filter_N: Optional[Positive] = Field(
         None, description="null: unfiltered derivative; N > 0: first-order filter with time constant Td / N")
+    setpoint_weight: Union[Literal["tuned"], Fraction] = Field(
+        "tuned", description="b in [0, 1], the setpoint's weight in the proportional term (1: the paper's eq. 2); "
+                             "tuned: chosen after the feedback gains, the fastest setpoint response within "
+                             "deploy.max_overshoot (b changes neither Ms nor the load response)")
+    derivative_weight: Fraction = Field(
+        0.0, description="c in [0, 1], the setpoint's weight in the derivative term; 0: derivative on the measurement "
+                         "(no derivative kick), 1: on the error (the paper's eq. 2)")
+    measurement_filter: Union[Literal["tuned"], NonNegative] = Field(
+        "tuned", description="Tf [s] of the low pass on the measurement that feeds P and D (0: none); tuned: searched "
+                             "with the feedback gains when the scenario has measurement noise, else 0")
+    measurement_filter_order: Literal[1, 2] = Field(
+        1, description="1: 1/(1 + s Tf); 2: 1/(1 + s Tf/2)^2 (steeper roll-off for derivative action)")
     coupled: Flag = Field(False, description="cross-axis coupled PID (paper eq. 26-27); needs exactly 3 loops (roll, "
                                              "pitch, yaw); adds 6 coupling actions")
     coupling_range: Positive = Field(0.5, description="coupling coefficients lie in [-c, c]")
@@ -668,6 +680,10 @@ class TrainingModel(_EpisodeSection):
     measurement_noise_std: NonNegative = Field(0.0, description="Gaussian noise on every measurement [output units]")
     actuator_noise_std: NonNegative = Field(0.0, description="Gaussian noise on every control signal [input units]")
     disturbances: list[DisturbanceModel] = Field(default_factory=list, description="disturbances of every episode")
+    load_disturbance: number(ge=0, le=1) = Field(
+        0.05, description="with random setpoints, a load step at the plant input in the second half of every "
+                          "setpoint hold (a random loop, a random sign), this fraction of the loop's control span; "
+                          "0: none (the paper's episodes)")
     randomize: dict[RandomizedParameter, RandomRange] = Field(
         default_factory=dict, description="{FMU parameter or input: [low, high]}: drawn uniformly and set before "
                                           "every episode starts, like plant.parameters [FMU units]")
@@ -698,9 +714,24 @@ class BaselineModel(Section):
     """Search budget of the fixed-PID baseline: differential evolution over constant gains inside the gain ranges,
     each candidate scored on seeded training episodes."""
 
+    objective: Literal["load", "setpoint"] = Field(
+        "load", description="load: Kp, Ti, Td (and Tf) minimise the IAE of load steps at the plant input at the low, "
+                            "middle and high setpoint, subject to deploy.max_sensitivity and deploy.max_noise_gain, "
+                            "then b shapes the setpoint response; setpoint: the paper-era cost, ISE of the training "
+                            "episodes plus the reward's control-variation term")
+    load_step: number(gt=0, le=1) = Field(
+        0.1, description="size of the load steps of the load objective, a fraction of the loop's control span "
+                         "(u_max - u_min, or control_scale)")
+    load_tolerance: number(ge=1) = Field(
+        1.3, description="when no setpoint weight keeps the overshoot within deploy.max_overshoot, the feedback gains "
+                         "may give up load rejection up to this factor on the load optimum's IAE to meet it")
+    widen_ranges: number(ge=1) = Field(
+        4.0, description="factor f >= 1 by which the search widens log gain ranges at both ends ([low/f, high*f]) "
+                          "and Td's high end, so that the optimum of a plant lies inside; 1: the scenario's ranges "
+                          "exactly (the paper's sweeps)")
     episodes: Count = Field(3, description="seeded training episodes per cost evaluation")
-    maxiter: Count = Field(20, description="generations of differential evolution")
-    popsize: Count = Field(8, description="population = popsize x number of gains searched")
+    maxiter: Count = Field(30, description="generations of differential evolution")
+    popsize: Count = Field(15, description="population = popsize x number of gains searched")
 
 
 ScheduleBy = Literal["auto", "setpoint", "measurement", "error"]  # deploy.schedule_by (prlpid_fmi.tuning.schedule.trajectories)
@@ -711,6 +742,11 @@ class DeployModel(Section):
 
     max_sensitivity: number(gt=1) = Field(2.0, description="limit of the peak sensitivity Ms = max |S(jw)|; a "
                                                            "controller above it is never deployed")
+    max_overshoot: NonNegative = Field(0.05, description="setpoint overshoot limit of the tuned setpoint weight b, "
+                                                         "a fraction of the step")
+    max_noise_gain: Positive = Field(
+        0.02, description="limit of the standard deviation of u caused by the scenario's measurement noise, a fraction "
+                          "of the loop's control span (from |C S| over the Nyquist band at each operating point)")
     schedule_points: Count = Field(9, description="operating points (rows) of the gain schedule `tune` reads from "
                                                   "the policy: setpoints evenly spaced over the first loop's "
                                                   "setpoint_range; Ms is measured at each")

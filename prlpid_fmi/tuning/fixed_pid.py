@@ -1,5 +1,9 @@
 """The well-tuned fixed PID that every adaptive policy is reported against, and the anchor it learns around.
 
+baseline.objective "load" (the default) designs it for load rejection under the Ms and noise limits, then sets
+the setpoint weight (tuning.load_design); it measures the plant with the PID the "setpoint" search below finds
+in STABILISING_GENERATIONS generations. baseline.objective "setpoint" is the paper-era search below, alone:
+
 Constant Kp, Ti, Td (and coupling) are searched inside the scenario's gain ranges by differential
 evolution. The search vector lives in [-1, 1]^n and is mapped like the paper's absolute action map
 (geometric for log ranges), but the candidate gains drive the loop core directly (no action path).
@@ -16,9 +20,10 @@ FMU, prlpid_fmi.robustness.margins) at most that limit at every operating point 
 low end, the middle and the high end (margins.setpoint_range_points; a fixed PID is used at every setpoint,
 and a nonlinear plant's Ms changes over the range). The cheapest few members of the final DE population are
 tried in order of cost; if none qualifies, the best one is detuned, at its worst failing point until every
-point meets the limit, by the smallest lambda there, in two ways: Kp / lambda with Ti * lambda (a uniformly
-slower loop: the integral gain Kp/Ti falls by lambda^2, so the last part of a step can creep in) and Kp /
-lambda with Ti kept (the integral time stays); the one with the lower J is kept.
+point meets the limit, by the smallest lambda there, in two ways: Kp / lambda with Ti and Td * lambda (the
+same controller on a time axis lambda times slower: the integral gain Kp/Ti falls by lambda^2, so the last part
+of a step can creep in) and Kp / lambda with Ti and Td kept; the one with the lower J is kept. The load design
+uses the first alone.
 """
 from __future__ import annotations
 
@@ -28,25 +33,36 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import differential_evolution
 
-from prlpid_fmi.config import TuningConfig
+from prlpid_fmi.config import BaselineConfig, DeployConfig, TuningConfig
 from prlpid_fmi.loop.actions import ActionMap
-from prlpid_fmi.loop.core import LoopCore
+from prlpid_fmi.loop.core import LoopCore, pid_structure
 from prlpid_fmi.loop.evaluation import Trajectory, gains_rollout
 from prlpid_fmi.loop.gains import Gains, gains_from_values
 from prlpid_fmi.loop.isolated import make_core
 from prlpid_fmi.robustness.margins import margins_of, setpoint_range_points
+from prlpid_fmi.robustness.status import meets_limit
+from prlpid_fmi.tuning.load_design import LoadDesign, SetpointDesign, setpoint_weight
 
 DIVERGED_COST = 1e6
 
 
 @dataclass(frozen=True)
 class FixedPid:
-    """Result of the search: its vector in [-1, 1]^n, the gains (exactly those evaluated), the cost."""
+    """Result of the search: its vector in [-1, 1]^n, the gains (exactly those evaluated), the cost, the
+    evaluations, the structure (b, c, Tf lists per loop) and what the design found (info: estimates per point,
+    the setpoint weights tried; empty for the setpoint objective)."""
 
     action: np.ndarray
     gains: Gains
     cost: float
     evaluations: int
+    structure: tuple = ((), (), ())
+    info: dict = dataclasses.field(default_factory=dict)
+
+    def structure_dict(self) -> dict:
+        """{"setpoint_weight", "derivative_weight", "measurement_filter_s"}: lists per loop (fixed_pid.json)."""
+        b, c, tf = self.structure
+        return {"setpoint_weight": list(b), "derivative_weight": list(c), "measurement_filter_s": list(tf)}
 
     def gains_values(self) -> tuple:
         """(Kp, Ti, Td, coupling) lists, what LoopCore.step takes."""
@@ -73,21 +89,23 @@ def _cost(vector: np.ndarray, core: LoopCore, gain_map: ActionMap, seeds: list[i
 
 
 ROBUST_CANDIDATES = 4  # cheapest DE population members whose Ms is measured before detuning
-DETUNE_STEP = 1.15  # detuning factors lambda = DETUNE_STEP**k (Kp / lambda, Ti * lambda) ...
+DETUNE_STEP = 1.15  # detuning factors lambda = DETUNE_STEP**k (Kp / lambda, Ti and Td * lambda) ...
 DETUNE_SCAN = (1, 2, 4, 8, 16, 30)  # ... scanned at these k (lambda 1.15 to 66), then bisected
 DETUNE_BISECTIONS = 4
 
 
 def _meets(config: TuningConfig, gains: tuple, point: list[float], limit: float) -> bool:
-    """Ms <= limit at the point. The search is conservative: an unreliable estimate counts too (a loop
-    in a limit cycle at the Nyquist frequency gives one), unlike the deliverable (deliver.rule.meets)."""
-    return margins_of(config, gains, point).Ms <= limit
+    """The deliverable's rule at the point (robustness.status.meets_limit): verified within the limit, or impossible
+    to measure there (a time-varying plant); a failed estimate (diverged, saturated, lightly damped) does not."""
+    return meets_limit(margins_of(config, gains, point), limit)
 
 
 def detune(config: TuningConfig, gains: tuple, point: list[float], limit: float,
            keep_ti: bool = False) -> tuple | None:
-    """`gains` detuned (Kp / lambda, Ti * lambda or Ti kept with keep_ti, lambda = DETUNE_STEP**k, clipped
-    into the gain ranges) by the smallest k that gives Ms <= limit at `point`: a scan of k in DETUNE_SCAN,
+    """`gains` detuned (Kp / lambda, Ti * lambda and Td * lambda, or Ti and Td kept with keep_ti, lambda =
+    DETUNE_STEP**k, clipped into the gain ranges) by the smallest k that gives Ms <= limit at `point`. Kp / lambda
+    with Ti, Td * lambda is C(lambda s) / lambda, the same controller on a time axis lambda times slower, its zeros
+    and crossover moved down together. A scan of k in DETUNE_SCAN,
     then bisection on k between the last failing and the first passing value. None when no k in the scan
     passes (an unstable plant fails at both ends, so the scan starts small)."""
     Kp, Ti, Td, coupling = gains
@@ -96,7 +114,8 @@ def detune(config: TuningConfig, gains: tuple, point: list[float], limit: float,
     def detuned(k):
         lam = DETUNE_STEP ** k
         return ([max(x / lam, l.Kp.low) for x, l in zip(Kp, config.loops)],
-                [min(x * lam ** ti_factor, l.Ti.high) for x, l in zip(Ti, config.loops)], list(Td), coupling)
+                [min(x * lam ** ti_factor, l.Ti.high) for x, l in zip(Ti, config.loops)],
+                [min(x * lam ** ti_factor, max(l.Td.high, x)) for x, l in zip(Td, config.loops)], coupling)
 
     low = 0.0  # k known to fail (the gains themselves)
     for k in DETUNE_SCAN:
@@ -148,12 +167,22 @@ def _robust(config: TuningConfig, gain_map: ActionMap, population, energies, lim
 
 
 def tune_fixed_pid(config: TuningConfig, seed: int = 0, episodes: int = 3, maxiter: int = 20,
-                   popsize: int = 8, callback=None, max_sensitivity: float | None = None) -> FixedPid:
-    """Search constant gains minimising J (module docstring) over `episodes` seeded training episodes.
+                   popsize: int = 8, callback=None, max_sensitivity: float | None = None,
+                   baseline: BaselineConfig = BaselineConfig(), deploy: DeployConfig = DeployConfig()) -> FixedPid:
+    """The fixed PID of baseline.objective: "load" (tuning.load_design: load IAE under the Ms and noise limits,
+    then the setpoint weight) or "setpoint" (J of the module docstring over `episodes` seeded training episodes).
 
     callback(evaluations_done, evaluations_expected): progress, called after every generation.
     max_sensitivity: the Ms limit the result must meet (None: no robustness requirement).
+    baseline: objective, load_step and widen_ranges; deploy: max_overshoot and max_noise_gain.
     """
+    if baseline.objective == "load":
+        return _load_pid(config, seed, episodes, maxiter, popsize, callback, max_sensitivity, baseline, deploy)
+    return _setpoint_pid(config, seed, episodes, maxiter, popsize, callback, max_sensitivity)
+
+
+def _setpoint_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, popsize: int, callback,
+                  max_sensitivity: float | None, progress=None) -> FixedPid:
     search = dataclasses.replace(config, forecast_horizon=0)
     gain_map = ActionMap(config.loops, config.coupled, config.coupling_range)
     seeds = [seed + i for i in range(episodes)]
@@ -162,7 +191,7 @@ def tune_fixed_pid(config: TuningConfig, seed: int = 0, episodes: int = 3, maxit
     expected = (maxiter + 1) * popsize * n
     done = [popsize * n]
 
-    def progress(*_args, **_kwargs):
+    def step(*_args, **_kwargs):
         done[0] += popsize * n
         if callback is not None:
             callback(min(done[0], expected), expected)
@@ -170,7 +199,7 @@ def tune_fixed_pid(config: TuningConfig, seed: int = 0, episodes: int = 3, maxit
     try:
         result = differential_evolution(_cost, [(-1.0, 1.0)] * n, args=(core, gain_map, seeds),
                                         maxiter=maxiter, popsize=popsize, seed=seed, polish=False, tol=1e-6,
-                                        callback=progress)
+                                        callback=progress or step)
         vector, gains = result.x, gain_map.values(result.x.tolist())
         cost = float(result.fun)
         if max_sensitivity is not None:
@@ -179,7 +208,70 @@ def tune_fixed_pid(config: TuningConfig, seed: int = 0, episodes: int = 3, maxit
             cost = _cost_of(gains, core, seeds)
     finally:
         core.close()
-    return FixedPid(vector, gains_from_values(*gains), cost, int(result.nfev))
+    return FixedPid(vector, gains_from_values(*gains), cost, int(result.nfev), pid_structure(config))
+
+
+STABILISING_GENERATIONS = 6  # generations of the setpoint search that finds the PID the plant is measured with
+
+
+def _load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, popsize: int, callback,
+              max_sensitivity: float | None, baseline: BaselineConfig, deploy: DeployConfig) -> FixedPid:
+    """tuning.load_design's three steps, then the Ms check on the FMU with the final controller (detuned by
+    `detune_over` where a point fails: the plant-response estimate is an estimate)."""
+    design = LoadDesign(config, baseline.load_step, max_sensitivity, deploy.max_noise_gain, baseline.widen_ranges)
+    n_first = 3 * config.n_loops + (6 if config.coupled else 0)
+    expected = (STABILISING_GENERATIONS + 1) * popsize * n_first + (maxiter + 1) * popsize * design.n
+    done = [0]
+
+    def advance(count):
+        def step(*_args, **_kwargs):
+            done[0] += count
+            if callback is not None:
+                callback(min(done[0], expected), expected)
+        return step
+
+    first = _setpoint_pid(config, seed, episodes, STABILISING_GENERATIONS, popsize, None, None,
+                          progress=advance(popsize * n_first))
+    try:
+        design.prepare(first.gains.values())
+        result = design.search(seed, maxiter, popsize, callback=advance(popsize * design.n))
+        vector = np.asarray(result.x)
+        gains, tf = design.gains(vector), design.filters(vector)
+        best_load = float(result.fun)
+        b, c, _ = pid_structure(config)
+        choices, traded = [], None
+        seeds = [seed + i for i in range(episodes)]
+        if config.setpoint_weight == "tuned":
+            weight, choices = setpoint_weight(config, gains, (b, c, tf), seeds, deploy.max_overshoot)
+            b = [weight] * config.n_loops
+            if not any(r["Overshoot"] <= 100.0 * deploy.max_overshoot for r in choices):
+                trade = SetpointDesign(design, best_load, baseline.load_tolerance, deploy.max_overshoot, seeds)
+                try:
+                    second = trade.search(np.append(vector, 2.0 * weight - 1.0), seed, maxiter, popsize,
+                                          callback=advance(popsize * trade.n))
+                    vector = np.asarray(second.x)
+                    gains, tf = design.gains(vector[:-1]), design.filters(vector[:-1])
+                    b = [trade.weight(vector)] * config.n_loops
+                    load, ise, overshoot = trade.evaluate(vector)
+                    traded = {"load_cost": load, "ISE": ise, "Overshoot": overshoot,
+                              "feasible": bool(getattr(second, "constr_violation", 0) <= 0),
+                              "evaluations": int(second.nfev)}
+                finally:
+                    trade.close()
+        structure = (b, c, tf)
+        tuned = dataclasses.replace(design.search_config, tuned_structure=tuple(zip(b, c, tf)))
+        if max_sensitivity is not None:
+            points = setpoint_range_points(config)
+            repaired = detune_over(tuned, gains, points, max_sensitivity)
+            gains = repaired if repaired is not None else gains
+        cost = design.load_cost(gains, tf)
+        info = {"objective": "load", "load_cost": cost, "load_optimum": best_load, "load_step": baseline.load_step,
+                "traded_for_overshoot": traded,
+                "estimates": design.estimates(gains, tf), "setpoint_weights": choices,
+                "stabilising_gains": first.gains.as_dict(), "feasible": bool(getattr(result, "constr_violation", 0) <= 0)}
+    finally:
+        design.close()
+    return FixedPid(vector, gains_from_values(*gains), cost, first.evaluations + int(result.nfev), structure, info)
 
 
 def _cost_of(gains: tuple, core: LoopCore, seeds: list[int]) -> float:

@@ -65,7 +65,7 @@ class FmiForecast(Forecast):
                 if self.coupled:
                     u = pid.step_values(setpoint, y, Kp, Ti, Td, coupling)
                 else:
-                    u = pid.step_values([setpoint[i] - y[i] for i in range(n)], Kp, Ti, Td)
+                    u = pid.step_values(setpoint, y, Kp, Ti, Td)
                 try:
                     y = prior.step_values(u)
                 except self._rejected:

@@ -1,0 +1,69 @@
+"""A plant's measured frequency response at one operating point, and what any PID would achieve on it.
+
+The closed-loop experiment of robustness.identification measures P(e^{j w Ts}) on the FMU with some
+stabilising PID in the loop; around an operating point where the plant is linear, P does not depend on
+that PID. So the sensitivity peak and the noise gain of *another* PID C follow from P alone, without a
+new experiment (Astrom & Hagglund's loop-shaping view of PID design):
+
+- Ms(C) = max_w |1 / (1 + C P)| over a fine grid: log|P| and the unwrapped phase of P interpolated
+  linearly in log w between the measured frequencies (INTERPOLATED_POINTS points);
+- noise gain(C) = std(u) / std(n) for white measurement noise n on every sample, u = -C S n:
+  sqrt((1/pi) * integral_0^pi |C S(e^{j theta})|^2 d theta), theta = w Ts, by the trapezoid rule on that
+  grid (below the lowest measured frequency |C S| is taken as flat at its lowest value).
+
+Both hold for the feedback part of the PID (robustness.margins.pid_frequency_response); the setpoint
+weights b, c do not enter. They are estimates for the search: a deployed controller's margins are measured
+with that controller in the loop (robustness.margins.loop_margins).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+INTERPOLATED_POINTS = 600  # log-spaced frequencies of the interpolated grid
+
+
+@dataclass(frozen=True, eq=False)
+class MeasuredPlant:
+    """P at one operating point: frequencies_rad_s (K,) ascending, response (K,) complex; sample_time_s [s];
+    point: the setpoints per loop; control_signal: u there per loop (from the experiment's settling)."""
+
+    frequencies_rad_s: np.ndarray
+    response: np.ndarray
+    sample_time_s: float
+    point: tuple
+    control_signal: tuple
+
+    def grid(self) -> tuple[np.ndarray, np.ndarray]:
+        """(w, P) on the interpolated grid: INTERPOLATED_POINTS log-spaced frequencies from the lowest to the
+        highest measured one, plus the measured ones (computed once)."""
+        cached = self.__dict__.get("_grid")
+        if cached is None:
+            cached = self._interpolated()
+            object.__setattr__(self, "_grid", cached)
+        return cached
+
+    def _interpolated(self) -> tuple[np.ndarray, np.ndarray]:
+        w0, P0 = self.frequencies_rad_s, self.response
+        w = np.union1d(np.geomspace(w0[0], w0[-1], INTERPOLATED_POINTS), w0)
+        logw = np.log(w0)
+        mag = np.interp(np.log(w), logw, np.log(np.abs(P0)))
+        phase = np.interp(np.log(w), logw, np.unwrap(np.angle(P0)))
+        return w, np.exp(mag + 1j * phase)
+
+    def sensitivity_peak(self, controller) -> float:
+        """Ms of the PID whose feedback response is controller(w) (w [rad/s] -> complex array)."""
+        w, P = self.grid()
+        return float(np.max(np.abs(1.0 / (1.0 + controller(w) * P))))
+
+    def noise_gain(self, controller) -> float:
+        """std(u) / std(n) for white measurement noise on every sample (module docstring)."""
+        w, P = self.grid()
+        C = controller(w)
+        cs2 = np.abs(C / (1.0 + C * P)) ** 2
+        theta = w * self.sample_time_s
+        integral = cs2[0] * theta[0] + float(np.sum(0.5 * (cs2[1:] + cs2[:-1]) * np.diff(theta)))
+        if theta[-1] < np.pi:  # the grid stops short of Nyquist: |C S| flat from there
+            integral += cs2[-1] * (np.pi - theta[-1])
+        return float(np.sqrt(integral / np.pi))

@@ -1,0 +1,360 @@
+"""The fixed PID's feedback gains for load rejection, and its setpoint weight for the setpoint response.
+
+Astrom & Hagglund's design, on the FMU (baseline.objective "load"):
+
+1. Feedback gains Kp, Ti, Td (and the measurement filter Tf, when tuned and the scenario has measurement
+   noise) minimise the load cost, by differential evolution inside the scenario's gain ranges widened by
+   baseline.widen_ranges (log ranges [low/f, high*f], Td's high end * f)::
+
+       J_load = mean over operating points p and loops i of  sum_k Ts |r_k - y_k| / |d_i|   [output units * s / input unit]
+
+   the IAE per unit load of a step d_i at loop i's plant input (baseline.load_step x the loop's control span,
+   signed away from the nearer actuator limit), after the loop held setpoint p for setpoint_hold_steps samples;
+   loops are loaded one after another, setpoint_hold_steps apart. Points: the low end, the middle and the high end
+   of the setpoint range (robustness.margins.setpoint_range_points). No noise, no randomisation: the cost is
+   deterministic. A diverging episode costs DIVERGED_COST.
+2. Subject to, at every point, Ms <= deploy.max_sensitivity and std(u) from the scenario's measurement noise
+   <= deploy.max_noise_gain x the control span, both from the plant's frequency response measured at that point
+   (robustness.plant_response; measured once, with a stabilising PID, `plant_responses`). DE's feasibility rules
+   (scipy's NonlinearConstraint) keep infeasible candidates out; their load cost is never simulated.
+3. Then b (controller.setpoint_weight "tuned"): on noise-free training episodes (setpoint steps), the b in
+   B_GRID with the lowest ISE among those with overshoot <= deploy.max_overshoot. b changes neither Ms nor the
+   load response (robustness.margins.pid_transfer_function), so it comes second.
+4. When no b meets the overshoot limit with those gains (an unstable plant: the fastest load rejection needs a
+   short Ti, whose setpoint response overshoots even with b = 0), the gains give up some load rejection:
+   (Kp, Ti, Td[, Tf], b) minimise the setpoint ISE of those episodes subject to step 2's limits,
+   J_load <= baseline.load_tolerance x step 2's optimum, and overshoot <= deploy.max_overshoot (SetpointDesign).
+   If nothing meets them all, the least violation is kept and the report says so.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+from scipy.optimize import NonlinearConstraint, differential_evolution, minimize
+
+from prlpid_fmi.config import Disturbance, GainRange, TuningConfig
+from prlpid_fmi.loop.actions import ActionMap
+from prlpid_fmi.loop.core import LoopCore, control_scales, pid_structure
+from prlpid_fmi.loop.evaluation import gains_rollout
+from prlpid_fmi.loop.isolated import make_core
+from prlpid_fmi.robustness.margins import margins_of, pid_frequency_response, setpoint_range_points
+from prlpid_fmi.robustness.plant_response import MeasuredPlant
+
+DIVERGED_COST = 1e6
+B_GRID = tuple(i / 20 for i in range(21))  # setpoint weights tried
+TF_RANGE = (0.1, 100.0)  # measurement filter search range [sample times], log
+INIT_SPREAD = 0.15  # std of SetpointDesign's initial population around its start [search coordinates]
+POLISH_EVALUATIONS = 60  # Nelder-Mead evaluations per searched parameter after differential evolution
+
+
+def widened(config: TuningConfig, factor: float) -> TuningConfig:
+    """config with every loop's log gain ranges widened to [low/f, high*f] and Td's high end to high*f."""
+    def wider(r: GainRange, name: str) -> GainRange:
+        if r.scale == "log":
+            return GainRange(r.low / factor, r.high * factor, "log")
+        if name == "Td":
+            return GainRange(r.low, r.low + (r.high - r.low) * factor, r.scale)
+        return r
+    loops = tuple(dataclasses.replace(l, Kp=wider(l.Kp, "Kp"), Ti=wider(l.Ti, "Ti"), Td=wider(l.Td, "Td"))
+                  for l in config.loops)
+    return dataclasses.replace(config, loops=loops)
+
+
+def plant_responses(config: TuningConfig, gains: tuple, points: list[list[float]]) -> list[list[MeasuredPlant] | None]:
+    """Per point, each loop's measured plant response (with `gains` in the loop; the others closed), or None where
+    the experiment gave none (the loop diverged or sat at a limit there)."""
+    out = []
+    for p in points:
+        m = margins_of(config, gains, p)
+        loops = m.per_loop or (m,)
+        if any(len(x.frequencies_rad_s) < 2 or not np.all(np.isfinite(x.plant_response)) for x in loops):
+            out.append(None)
+            continue
+        out.append([MeasuredPlant(x.frequencies_rad_s, x.plant_response, config.sample_time_s, tuple(p), ())
+                    for x in loops])
+    return out
+
+
+def _load_config(config: TuningConfig, point: list[float], loads: list[float]) -> TuningConfig:
+    """The load experiment at `point`: setpoint held, loop i loaded with loads[i] [input units] from
+    setpoint_hold_steps * (i + 1) samples on; no noise, no randomisation."""
+    hold = config.setpoint_hold_steps
+    disturbances = tuple(Disturbance("actuator", l.output, hold * (i + 1), float(loads[i]))
+                         for i, l in enumerate(config.loops))
+    return dataclasses.replace(config, setpoint_schedule=((0, tuple(point)),), disturbances=disturbances,
+                               episode_steps=hold * (config.n_loops + 1), measurement_noise_std=0.0,
+                               actuator_noise_std=0.0, randomize={}, forecast_horizon=0, load_disturbance=0.0)
+
+
+def signed_loads(config: TuningConfig, probe, load_step: float) -> list[float]:
+    """Per loop, the load [input units]: load_step x the control span, signed away from the actuator limit nearer
+    to u at the end of the probe's hold (a Trajectory of the unloaded experiment; u = 0 if it ended early)."""
+    hold = config.setpoint_hold_steps
+    u_held = probe.control_signal[min(hold, probe.steps) - 1] if not probe.terminated else None
+    loads = []
+    for i, (l, span) in enumerate(zip(config.loops, control_scales(config))):
+        u = float(u_held[i]) if u_held is not None else 0.0
+        mid = 0.5 * (l.u_min + l.u_max) if math.isfinite(l.u_min + l.u_max) else 0.0
+        # u in the lower half: a negative load, which the PID meets by raising u (away from u_min)
+        loads.append((-1.0 if u <= mid else 1.0) * load_step * span)
+    return loads
+
+
+def load_iae(traj, config: TuningConfig) -> float:
+    """sum over loops of Ts * sum_k |r_k - y_k| / |d_i| from the first load on (one experiment, module docstring);
+    DIVERGED_COST (more for an earlier end) when the episode ended early."""
+    if traj.terminated:
+        return DIVERGED_COST * (1.0 + (config.episode_steps - traj.steps) / config.episode_steps)
+    e = np.abs(traj.setpoint - traj.measurement)[config.setpoint_hold_steps:]
+    loads = np.array([abs(d.value) for d in config.disturbances])
+    return float(np.sum(e / loads) * config.sample_time_s) / len(loads)
+
+
+def load_experiment(config: TuningConfig, load_step: float, run) -> float:
+    """J_load of any controller: run(config) -> Trajectory runs it on a config (a fixed PID, a schedule replay).
+    Each point: an unloaded probe (for the load's sign), then the loaded experiment."""
+    config = dataclasses.replace(config, forecast_horizon=0)
+    total, points = 0.0, setpoint_range_points(config)
+    for p in points:
+        probe = run(_load_config(config, p, [0.0] * config.n_loops))
+        loaded = _load_config(config, p, signed_loads(config, probe, load_step))
+        total += load_iae(run(loaded), loaded)
+    return total / len(points)
+
+
+class LoadDesign:
+    """The load cost, its constraints and the setpoint-weight choice for one tuning problem (module docstring).
+
+    Args: config (the scenario's tuning problem, forecast off), load_step (fraction of the control span),
+    max_sensitivity, max_noise_gain (fraction of the span), widen (factor on the gain ranges), tune_filter
+    (search Tf too). Call `prepare(gains)` with a stabilising PID first; `close()` at the end.
+    """
+
+    def __init__(self, config: TuningConfig, load_step: float, max_sensitivity: float | None, max_noise_gain: float,
+                 widen: float):
+        self.config = dataclasses.replace(config, forecast_horizon=0)
+        self.load_step = float(load_step)
+        self.limit = max_sensitivity
+        self.max_noise = float(max_noise_gain)
+        self.points = setpoint_range_points(self.config)
+        self.search_config = widened(self.config, widen)
+        self.gain_map = ActionMap(self.search_config.loops, config.coupled, config.coupling_range)
+        self.b, self.c, self.tf = pid_structure(self.config)
+        self.tune_filter = config.measurement_filter == "tuned" and config.measurement_noise_std > 0
+        self.n = self.gain_map.size + (config.n_loops if self.tune_filter else 0)
+        self.spans = control_scales(self.config)
+        self.cores: list[LoopCore] = []
+        self.plants: list = []
+
+    # -- the structure a vector stands for -------------------------------------------------------------------
+    def gains(self, vector) -> tuple:
+        """(Kp, Ti, Td, coupling) lists of a search vector."""
+        return self.gain_map.values(list(vector)[:self.gain_map.size])
+
+    def filters(self, vector) -> list[float]:
+        """Tf per loop [s] of a search vector (the fixed ones when Tf is not searched)."""
+        if not self.tune_filter:
+            return list(self.tf)
+        lo, hi = (math.log(x * self.config.sample_time_s) for x in TF_RANGE)
+        tail = list(vector)[self.gain_map.size:]
+        return [math.exp(lo + (min(max(a, -1.0), 1.0) + 1.0) / 2.0 * (hi - lo)) for a in tail]
+
+    def controller(self, gains: tuple, tf: list[float], loop: int):
+        """w -> C(e^{j w Ts}) of loop `loop` (feedback part)."""
+        c = self.config
+        Kp, Ti, Td, _ = gains
+        return lambda w: pid_frequency_response(Kp[loop], Ti[loop], Td[loop], c.sample_time_s, w,
+                                                c.derivative_filter_N, tf[loop], c.measurement_filter_order)
+
+    # -- constraints -------------------------------------------------------------------------------------------
+    def constraint_values(self, vector) -> np.ndarray:
+        """[max Ms - limit, max noise share - max_noise_gain] over points and loops (<= 0: feasible)."""
+        gains, tf = self.gains(vector), self.filters(vector)
+        ms, noise = 0.0, 0.0
+        sigma = self.config.measurement_noise_std
+        for plants in self.plants:
+            if plants is None:
+                continue
+            for i, plant in enumerate(plants):
+                C = self.controller(gains, tf, i)
+                ms = max(ms, plant.sensitivity_peak(C))
+                if sigma > 0:
+                    noise = max(noise, sigma * plant.noise_gain(C) / self.spans[i])
+        limit = self.limit if self.limit is not None else math.inf
+        return np.array([ms - limit, noise - self.max_noise])
+
+    def estimates(self, gains: tuple, tf: list[float]) -> list[dict]:
+        """Per point: {"point", "Ms", "noise_gain"} estimated from the measured plant responses (None: none)."""
+        out = []
+        for p, plants in zip(self.points, self.plants):
+            if plants is None:
+                out.append({"point": p, "Ms": None, "noise_gain": None})
+                continue
+            Cs = [self.controller(gains, tf, i) for i in range(len(plants))]
+            out.append({"point": p, "Ms": max(pl.sensitivity_peak(C) for pl, C in zip(plants, Cs)),
+                        "noise_gain": max(pl.noise_gain(C) for pl, C in zip(plants, Cs))})
+        return out
+
+    # -- the load cost -----------------------------------------------------------------------------------------
+    def prepare(self, gains: tuple) -> None:
+        """Measure the plant responses with `gains` in the loop and open one load-experiment core per point, the
+        load signed away from the actuator limit nearer to u at the point (as `gains` hold it)."""
+        self.plants = plant_responses(self.config, gains, self.points)
+        for p in self.points:
+            probe = gains_rollout(lambda c: gains, _load_config(self.config, p, [0.0] * self.config.n_loops), seed=0)
+            self.cores.append(make_core(_load_config(self.config, p, signed_loads(self.config, probe, self.load_step))))
+
+    def load_cost(self, gains: tuple, tf: list[float]) -> float:
+        """J_load (module docstring) of constant gains with measurement filter tf."""
+        total = 0.0
+        for core in self.cores:
+            core.set_structure(self.b, self.c, tf)
+            total += load_iae(gains_rollout(lambda c: gains, core.config, seed=0, core=core), core.config)
+        return total / max(len(self.cores), 1)
+
+    def cost(self, vector) -> float:
+        return self.load_cost(self.gains(vector), self.filters(vector))
+
+    def penalised(self, vector) -> float:
+        """The load cost where the constraints hold, else DIVERGED_COST x (1 + the largest violation)."""
+        violation = float(np.max(self.constraint_values(vector))) if any(self.plants) else 0.0
+        return self.cost(vector) if violation <= 0 else DIVERGED_COST * (1.0 + violation)
+
+    def search(self, seed: int, maxiter: int, popsize: int, callback=None):
+        """Differential evolution of the load cost under the constraints, then a Nelder-Mead polish of the penalised
+        cost from its result (POLISH_EVALUATIONS per parameter at most); scipy's OptimizeResult of the better."""
+        constraints = NonlinearConstraint(self.constraint_values, -np.inf, 0.0) if any(self.plants) else ()
+        result = differential_evolution(self.cost, [(-1.0, 1.0)] * self.n, maxiter=maxiter, popsize=popsize,
+                                        seed=seed, polish=False, tol=1e-6, callback=callback, constraints=constraints)
+        if self.penalised(result.x) < DIVERGED_COST:
+            polished = minimize(self.penalised, result.x, method="Nelder-Mead", bounds=[(-1.0, 1.0)] * self.n,
+                                options={"maxfev": POLISH_EVALUATIONS * self.n, "xatol": 1e-4, "fatol": 1e-7})
+            if polished.fun < result.fun:
+                result.x, result.fun = polished.x, float(polished.fun)
+            result.nfev += int(polished.nfev)
+        return result
+
+    def close(self) -> None:
+        for core in self.cores:
+            core.close()
+        self.cores = []
+
+
+def setpoint_response(core, gains: tuple, seeds: list[int]) -> tuple[float, float]:
+    """(ISE mean over the episodes, worst overshoot [% of the step]) of constant gains on `core`'s (noise-free)
+    episodes; (inf, inf) when one ends early. ISE = Ts sum_k e_k^2 summed over loops; overshoot per setpoint step
+    as metrics.compute_metrics defines it (the first step from the initial measurement), computed here directly
+    because the search calls it thousands of times."""
+    config = core.config
+    ise, overshoot = 0.0, 0.0
+    for s in seeds:
+        traj = gains_rollout(lambda c: gains, config, seed=s, core=core)
+        if traj.terminated:
+            return math.inf, math.inf
+        r, y = traj.setpoint, traj.measurement
+        ise += float(np.sum((r - y) ** 2) * config.sample_time_s)
+        overshoot = max(overshoot, _worst_overshoot(r, y))
+    return ise / len(seeds), overshoot
+
+
+def _worst_overshoot(r: np.ndarray, y: np.ndarray) -> float:
+    """Largest overshoot [%] over the setpoint steps of r (n+1, n_loops), each from the previous setpoint (the
+    first from y[0]); steps smaller than 1e-9 of the values are no steps."""
+    worst = 0.0
+    for i in range(r.shape[1]):
+        ri, yi = r[:, i], y[:, i]
+        starts = [0] + [int(k) + 1 for k in np.flatnonzero(np.diff(ri) != 0)]
+        for s, end in zip(starts, starts[1:] + [len(ri)]):
+            base = yi[0] if s == 0 else ri[s - 1]
+            delta = ri[s] - base
+            if abs(delta) <= 1e-9 * max(1.0, abs(ri[s]), abs(base)) or end - s < 2:
+                continue
+            sign = 1.0 if delta > 0 else -1.0
+            worst = max(worst, max(0.0, float(np.max(sign * (yi[s:end] - ri[s])))) / abs(delta) * 100.0)
+    return worst
+
+
+class SetpointDesign:
+    """Step 4 (module docstring): (Kp, Ti, Td[, Tf], b) minimising the setpoint ISE subject to Ms and noise as in
+    step 2, J_load <= load_tolerance x the step-2 optimum and overshoot <= max_overshoot. Used when no b in B_GRID
+    meets the overshoot limit with the step-2 gains. The vector is the load design's plus one entry for b."""
+
+    def __init__(self, design: LoadDesign, best_load: float, load_tolerance: float, max_overshoot: float,
+                 seeds: list[int]):
+        self.design = design
+        self.load_limit = load_tolerance * best_load
+        self.max_overshoot = 100.0 * max_overshoot
+        self.seeds = seeds
+        quiet = dataclasses.replace(design.config, measurement_noise_std=0.0, actuator_noise_std=0.0,
+                                    load_disturbance=0.0)
+        self.core = make_core(quiet)
+        self.n = design.n + 1
+        self._seen: dict = {}
+
+    def weight(self, vector) -> float:
+        return (min(max(float(vector[-1]), -1.0), 1.0) + 1.0) / 2.0
+
+    def evaluate(self, vector) -> tuple[float, float, float]:
+        """(load cost, ISE, overshoot) of a vector, simulated once per vector."""
+        key = tuple(float(v) for v in vector)
+        found = self._seen.get(key)
+        if found is None:
+            d = self.design
+            gains, tf = d.gains(vector[:-1]), d.filters(vector[:-1])
+            load = d.load_cost(gains, tf)
+            b = [self.weight(vector)] * d.config.n_loops
+            self.core.set_structure(b, d.c, tf)
+            ise, overshoot = setpoint_response(self.core, gains, self.seeds)
+            found = self._seen[key] = (load, ise, overshoot)
+            if len(self._seen) > 4096:
+                self._seen.pop(next(iter(self._seen)))
+        return found
+
+    def constraint_values(self, vector) -> np.ndarray:
+        cheap = self.design.constraint_values(vector[:-1])
+        if np.any(cheap > 0):  # not simulated: the robustness limits fail already
+            return np.concatenate([cheap, [1.0 + float(np.max(cheap)), 1.0]])
+        load, _, overshoot = self.evaluate(vector)
+        return np.concatenate([cheap, [load / self.load_limit - 1.0, overshoot / max(self.max_overshoot, 1e-9) - 1.0
+                                       if math.isfinite(overshoot) else DIVERGED_COST]])
+
+    def cost(self, vector) -> float:
+        _, ise, _ = self.evaluate(vector)
+        return ise if math.isfinite(ise) else DIVERGED_COST
+
+    def search(self, start, seed: int, maxiter: int, popsize: int, callback=None):
+        """DE from a population around `start` (the load optimum with its best b: the feasible set lies near it, within
+        load_tolerance of its load cost), spread INIT_SPREAD in the [-1, 1] coordinates; maxiter halved."""
+        maxiter = max(5, maxiter // 2)
+        rng = np.random.default_rng(seed)
+        start = np.clip(np.asarray(start, float), -1.0, 1.0)
+        init = np.clip(start + rng.normal(0.0, INIT_SPREAD, (popsize * self.n, self.n)), -1.0, 1.0)
+        init[0] = start
+        return differential_evolution(self.cost, [(-1.0, 1.0)] * self.n, maxiter=maxiter, seed=seed, polish=False,
+                                      tol=1e-6, callback=callback, init=init,
+                                      constraints=NonlinearConstraint(self.constraint_values, -np.inf, 0.0))
+
+    def close(self) -> None:
+        self.core.close()
+
+
+def setpoint_weight(config: TuningConfig, gains: tuple, structure: tuple[list, list, list], seeds: list[int],
+                    max_overshoot: float) -> tuple[float, list[dict]]:
+    """The b of B_GRID (module docstring, step 3) and the table of what each b gave ({"b", "ISE", "Overshoot"},
+    Overshoot in percent of the step, worst over the episodes' setpoint steps)."""
+    quiet = dataclasses.replace(config, measurement_noise_std=0.0, actuator_noise_std=0.0, forecast_horizon=0,
+                                load_disturbance=0.0)
+    core = make_core(quiet)
+    rows = []
+    try:
+        for b in B_GRID:
+            core.set_structure([b] * config.n_loops, structure[1], structure[2])
+            ise, overshoot = setpoint_response(core, gains, seeds)
+            rows.append({"b": b, "ISE": ise, "Overshoot": overshoot})
+    finally:
+        core.close()
+    within = [r for r in rows if r["Overshoot"] <= 100.0 * max_overshoot]
+    best = min(within, key=lambda r: r["ISE"]) if within else min(rows, key=lambda r: (r["Overshoot"], r["ISE"]))
+    return best["b"], rows
