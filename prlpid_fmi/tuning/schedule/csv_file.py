@@ -1,5 +1,12 @@
 """The gain table as a CSV file: metadata comment lines, one row per breakpoint; written atomically, read back
-exactly."""
+exactly.
+
+Per loop, every row carries Kp, Ti, Td, the parallel Ki, Kd (checked on reading) and the PID's structure
+b, c, Tf (setpoint weight, derivative weight, measurement filter [s]; control.pid). The structure is not
+scheduled: every row holds the same b, c, Tf for a loop, and a file whose rows disagree is refused. The
+metadata line measurement_filter_order gives the filter's order. A file written before the 2-DOF law has
+neither: it is read as b = c = 1, Tf = 0, order 1, the law (paper eq. 2) it was written with.
+"""
 from __future__ import annotations
 
 import csv
@@ -11,7 +18,13 @@ import numpy as np
 from prlpid_fmi.control import COUPLING_NAMES
 from prlpid_fmi.errors import PrlPidError
 from prlpid_fmi.rundir import write_atomic
-from prlpid_fmi.tuning.schedule.table import INTERPOLATION, PID_EQUATION, GainSchedule
+from prlpid_fmi.tuning.schedule.table import (
+    INTERPOLATION,
+    MEASUREMENT_FILTER_EQUATION,
+    PID_EQUATION,
+    STRUCTURE_COLUMNS,
+    GainSchedule,
+)
 from prlpid_fmi.version import __version__
 
 _ANTI_WINDUP_TEXT = {
@@ -31,11 +44,16 @@ def _metadata(s: GainSchedule) -> list[tuple[str, str]]:
     meta = [
         ("format", "prlpid-fmi gain schedule 1"),
         ("tool", f"prlpid-fmi {__version__}"),
-        ("pid_form", "positional ideal (ISA) PID, paper eq. 2; e = setpoint - measurement"
-                     + ("; coupled error e = (r - y) + C*y, paper eq. 27" if s.coupling is not None else "")),
-        ("pid_equation", f"{PID_EQUATION}; sum(e) includes the current e; e_prev = e at the first sample; "
-                         "u then clipped to [u_min, u_max]; Ti = inf means no integral action"),
-        ("equivalent_parallel", "u = Kp*e + Ki*sum(e)*Ts + Kd*(e - e_prev)/Ts with Ki = Kp/Ti, Kd = Kp*Td"),
+        ("pid_form", "positional ideal (ISA) 2-DOF PID, paper eq. 2 with setpoint weights b (proportional), "
+                     "c (derivative) and a measurement filter Tf feeding P and D (b = c = 1, Tf = 0: eq. 2 exactly); "
+                     "r = setpoint, y = measurement"
+                     + ("; coupled errors (r - y) + C*y, paper eq. 27, for e, ep (b*r, yf) and ed (c*r, yf)"
+                        if s.coupling is not None else "")),
+        ("pid_equation", (f"{PID_EQUATION}; yf = y through the measurement filter: {MEASUREMENT_FILTER_EQUATION}; "
+                          "I includes the current e; ed_prev = ed at the first sample (no derivative kick); "
+                          "u then clipped to [u_min, u_max]; Ti = inf means no integral action; "
+                          "b, c, Tf per loop in the b, c, Tf columns")),
+        ("equivalent_parallel", "u = Kp*ep + Ki*I + Kd*D with Ki = Kp/Ti, Kd = Kp*Td"),
         ("sample_time_s", _f(s.sample_time_s)),
         ("scheduling_variable", s.variable),
         ("scheduling_unit", s.unit),
@@ -43,6 +61,9 @@ def _metadata(s: GainSchedule) -> list[tuple[str, str]]:
         ("anti_windup", s.anti_windup),
         ("anti_windup_method", _ANTI_WINDUP_TEXT.get(s.anti_windup, s.anti_windup)),
         ("derivative_filter_N", "none" if s.derivative_filter_N is None else _f(s.derivative_filter_N)),
+        ("measurement_filter_order", str(s.measurement_filter_order)),
+        ("bumpless_start", ("I_prev = (u0 - Kp*((b - 1)*r))/Ki before the first sample, from the actuator's "
+                            "value u0 (any u0 != 0), so that u = u0 when r = y: no kick from b")),
         ("excluded_operating_points", "none" if not s.excluded else
          " ".join(_f(v) for v in s.excluded) + " (held setpoints where the closed loop diverged)"),
     ]
@@ -65,7 +86,8 @@ def write_schedule_csv(schedule: GainSchedule, path) -> Path:
     for j, bp in enumerate(s.breakpoints):
         row = [_f(bp)]
         for i in range(s.n_loops):
-            row += [_f(s.Kp[j, i]), _f(s.Ti[j, i]), _f(s.Td[j, i]), _f(Ki[j, i]), _f(Kd[j, i])]
+            row += [_f(s.Kp[j, i]), _f(s.Ti[j, i]), _f(s.Td[j, i]), _f(Ki[j, i]), _f(Kd[j, i]),
+                    _f(s.setpoint_weight[i]), _f(s.derivative_weight[i]), _f(s.measurement_filter_s[i])]
         if s.coupling is not None:
             row += [_f(c) for c in s.coupling[j]]
         w.writerow(row)
@@ -84,8 +106,39 @@ def read_schedule_metadata(path) -> dict[str, str]:
     return meta
 
 
+_STRUCTURE_DEFAULTS = {"b": 1.0, "c": 1.0, "Tf": 0.0}  # the law of a file without the structure columns (eq. 2)
+
+
+def _structure(path, table: np.ndarray, col: dict, loops: list) -> list[np.ndarray]:
+    """b, c, Tf (n_loops,) from their columns: the one value of every row; a file without a kind's columns
+    gets its _STRUCTURE_DEFAULTS. Raises PrlPidError for rows that disagree, or columns for some loops only."""
+    out = []
+    for kind in STRUCTURE_COLUMNS:
+        names = [f"{kind}[{name}]" for name in loops]
+        present = [c in col for c in names]
+        if not any(present):
+            out.append(np.full(len(loops), _STRUCTURE_DEFAULTS[kind]))
+            continue
+        if not all(present):
+            missing = [name for name, ok in zip(names, present) if not ok]
+            raise PrlPidError(f"{path}: column(s) {', '.join(missing)} missing (expected a {kind} column for every "
+                              f"loop, or none: then {kind} = {_STRUCTURE_DEFAULTS[kind]!r})")
+        values = []
+        for name in names:
+            column = table[:, col[name]]
+            distinct = list(dict.fromkeys(column.tolist()))
+            if len(distinct) != 1:
+                raise PrlPidError(f"{path}: column {name}: the rows disagree ({', '.join(repr(v) for v in distinct)}); "
+                                  f"expected one {kind} in every row (the PID structure is not scheduled)")
+            values.append(distinct[0])
+        out.append(np.array(values, float))
+    return out
+
+
 def read_schedule_csv(path) -> GainSchedule:
-    """Parse a CSV written by write_schedule_csv (exact round trip). Checks Ki/Kd against Kp, Ti, Td."""
+    """Parse a CSV written by write_schedule_csv (exact round trip). Checks Ki/Kd against Kp, Ti, Td, and that
+    every row has the same b, c, Tf per loop; a file without those columns (written before the 2-DOF law)
+    reads as b = c = 1, Tf = 0, measurement_filter_order 1."""
     meta = read_schedule_metadata(path)
     try:
         with open(path, newline="") as f:
@@ -106,6 +159,10 @@ def read_schedule_csv(path) -> GainSchedule:
     if header[0] != variable or not data:
         raise PrlPidError(f"{path}: first column {header[0]!r} is not the scheduling variable {variable!r}, or no rows")
     coupled = all(c in col for c in COUPLING_NAMES)
+    weight_b, weight_c, filter_tf = _structure(path, table, col, loops)
+    order = meta.get("measurement_filter_order", "1")
+    if order not in ("1", "2"):
+        raise PrlPidError(f"{path}: measurement_filter_order: (got {order!r}; expected 1 or 2)")
     s = GainSchedule(
         variable=variable, unit=meta.get("scheduling_unit", ""), breakpoints=table[:, 0].copy(),
         Kp=get("Kp"), Ti=get("Ti"), Td=get("Td"),
@@ -120,7 +177,9 @@ def read_schedule_csv(path) -> GainSchedule:
         derivative_filter_N=None if meta.get("derivative_filter_N", "none") == "none"
         else float(meta["derivative_filter_N"]),
         excluded=tuple(float(v) for v in meta.get("excluded_operating_points", "none").split(" (")[0].split()
-                       if v != "none"))
+                       if v != "none"),
+        setpoint_weight=weight_b, derivative_weight=weight_c, measurement_filter_s=filter_tf,
+        measurement_filter_order=int(order))
     if np.any(np.diff(s.breakpoints) <= 0):
         raise PrlPidError(f"{path}: breakpoints ({variable}) must be strictly increasing")
     if not (np.allclose(get("Ki"), s.Ki, rtol=1e-9, atol=0) and np.allclose(get("Kd"), s.Kd, rtol=1e-9, atol=0)):

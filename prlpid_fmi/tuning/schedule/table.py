@@ -14,6 +14,10 @@ them. No neural network is needed to run the result.
 - ``write_schedule_csv`` / ``read_schedule_csv``: a self-describing CSV (metadata in ``# `` lines).
 - ``replay_schedule``: run the plain gain-scheduled PID on the FMU, no neural network involved.
 
+The PID structure (setpoint weight b, derivative weight c, measurement filter Tf per loop, and the filter's
+order; prlpid_fmi.control.pid) is not scheduled: a table carries one (b, c, Tf) per loop, the values the gains
+were tuned with (loop.core.pid_structure of the config), and every consumer runs the table with them.
+
 Scheduling variables are named ``setpoint[<loop>]``, ``measurement[<loop>]``, ``error[<loop>]``
 (the loop's output name) or an FMU variable name. At every step the value seen by the table lookup
 is the current setpoint, the current (noisy, if noise is configured) measurement, the error
@@ -36,13 +40,20 @@ from prlpid_fmi.config import TuningConfig
 from prlpid_fmi.control import COUPLING_NAMES, parallel_gains
 from prlpid_fmi.loop.gains import Gains
 
-PID_EQUATION = "u = Kp*(e + (1/Ti)*sum(e)*Ts + Td*(e - e_prev)/Ts)"
+# The discrete law of prlpid_fmi.control.pid, written in its evaluation order (the exports compute it so)
+PID_EQUATION = ("u = Kp*(ep + Td*D) + (Kp/Ti)*I; I = I_prev + e*Ts; D = (ed - ed_prev)/Ts; "
+                "e = r - y, ep = b*r - yf, ed = c*r - yf")
+MEASUREMENT_FILTER_EQUATION = ("yf = x[n]; x[j] = (T*x_prev[j] + Ts*x[j-1])/(T + Ts) for j = 1..n, x[0] = y, "
+                               "T = Tf/n (n = measurement_filter_order); x[j] = y at the first sample; "
+                               "Tf = 0: yf = y exactly")
 INTERPOLATION = "linear between breakpoints, held constant outside"
 LOOP_SIGNALS = ("setpoint", "measurement", "error")  # scheduling variables read from a loop, not the FMU
 LOOP_VARIABLE = re.compile(r"^(setpoint|measurement|error)\[(.+)\]$")  # <signal>[<loop output>]
 
 __all__ = ["GainSchedule", "schedule_from_rows", "fixed_schedule", "table_meta", "exact_mean", "LOOP_SIGNALS",
-           "LOOP_VARIABLE", "PID_EQUATION", "INTERPOLATION"]
+           "LOOP_VARIABLE", "PID_EQUATION", "MEASUREMENT_FILTER_EQUATION", "INTERPOLATION", "STRUCTURE_COLUMNS"]
+
+STRUCTURE_COLUMNS = ("b", "c", "Tf")  # per loop, after the gains: setpoint weight, derivative weight, filter [s]
 
 
 @dataclass
@@ -56,6 +67,9 @@ class GainSchedule:
     units ("" if unknown). anti_windup, derivative_filter_N and u_min/u_max (n_loops,): the PID settings
     the gains were tuned with. excluded: operating points (held setpoints) left out because the
     closed loop diverged there; the table does not cover them.
+    setpoint_weight b, derivative_weight c, measurement_filter_s Tf [s] (n_loops,) and
+    measurement_filter_order (1 | 2): the PID's structure, the same for every row (None: b = c = 1, Tf = 0,
+    the law of paper eq. 2, which tables written before the 2-DOF law were tuned with).
     """
 
     variable: str
@@ -75,10 +89,30 @@ class GainSchedule:
     u_max: np.ndarray
     derivative_filter_N: Optional[float] = None
     excluded: tuple = ()
+    setpoint_weight: Optional[np.ndarray] = None
+    derivative_weight: Optional[np.ndarray] = None
+    measurement_filter_s: Optional[np.ndarray] = None
+    measurement_filter_order: int = 1
+
+    def __post_init__(self):
+        n = len(self.loop_names)
+        for name, default in (("setpoint_weight", 1.0), ("derivative_weight", 1.0), ("measurement_filter_s", 0.0)):
+            value = getattr(self, name)
+            value = np.full(n, default) if value is None else np.array(value, dtype=float).reshape(-1)
+            if value.shape != (n,):
+                raise ValueError(f"{name}: one value per loop ({n}), got {getattr(self, name)!r}")
+            setattr(self, name, value)
+        self.measurement_filter_order = int(self.measurement_filter_order)
 
     @property
     def n_loops(self) -> int:
         return len(self.loop_names)
+
+    @property
+    def structure(self) -> tuple:
+        """((b, c, Tf), ...) per loop: TuningConfig.tuned_structure's form (loop.core.pid_structure reads it)."""
+        return tuple((float(b), float(c), float(tf)) for b, c, tf in
+                     zip(self.setpoint_weight, self.derivative_weight, self.measurement_filter_s))
 
     @property
     def Ki(self) -> np.ndarray:
@@ -117,10 +151,10 @@ class GainSchedule:
         return Gains(*self.gains_at(value)) if self.coupling is not None else Gains(*self.gains_at(value), None)
 
     def columns(self) -> list[str]:
-        """CSV header: variable, then Kp/Ti/Td/Ki/Kd per loop, then coupling coefficients."""
+        """CSV header: variable, then Kp/Ti/Td/Ki/Kd/b/c/Tf per loop, then coupling coefficients."""
         cols = [self.variable]
         for name in self.loop_names:
-            cols += [f"{p}[{name}]" for p in ("Kp", "Ti", "Td", "Ki", "Kd")]
+            cols += [f"{p}[{name}]" for p in ("Kp", "Ti", "Td", "Ki", "Kd", *STRUCTURE_COLUMNS)]
         if self.coupling is not None:
             cols += list(COUPLING_NAMES)
         return cols
@@ -131,7 +165,8 @@ class GainSchedule:
         for name, uu, yu in zip(self.loop_names, self.input_units, self.output_units):
             u, y = _group(uu or "u-unit"), _group(yu or "y-unit")
             units.update({f"Kp[{name}]": f"{u}/{y}", f"Ti[{name}]": "s", f"Td[{name}]": "s",
-                          f"Ki[{name}]": f"{u}/({y}*s)", f"Kd[{name}]": f"{u}*s/{y}"})
+                          f"Ki[{name}]": f"{u}/({y}*s)", f"Kd[{name}]": f"{u}*s/{y}",
+                          f"b[{name}]": "1", f"c[{name}]": "1", f"Tf[{name}]": "s"})
         if self.coupling is not None:
             units.update({c: "1" for c in COUPLING_NAMES})
         return units
@@ -143,6 +178,15 @@ def _group(unit: str) -> str:
 
 
 # -- extraction -------------------------------------------------------------------------------------
+
+
+def structure_fields(config: TuningConfig) -> dict:
+    """The config's PID structure (loop.core.pid_structure) as GainSchedule fields."""
+    from prlpid_fmi.loop.core import pid_structure
+
+    b, c, tf = pid_structure(config)
+    return dict(setpoint_weight=np.array(b, float), derivative_weight=np.array(c, float),
+                measurement_filter_s=np.array(tf, float), measurement_filter_order=int(config.measurement_filter_order))
 
 
 def table_meta(core, config: TuningConfig) -> dict:
@@ -185,7 +229,7 @@ def schedule_from_rows(config: TuningConfig, variable: str, unit: str, rows: lis
         sample_time_s=float(config.sample_time_s), loop_names=tuple(names),
         anti_windup=config.anti_windup, u_min=np.array([l.u_min for l in config.loops], float),
         u_max=np.array([l.u_max for l in config.loops], float),
-        derivative_filter_N=config.derivative_filter_N, excluded=tuple(excluded), **meta)
+        derivative_filter_N=config.derivative_filter_N, excluded=tuple(excluded), **structure_fields(config), **meta)
 
 
 def fixed_schedule(gains: Gains, config: TuningConfig) -> GainSchedule:
@@ -202,7 +246,8 @@ def fixed_schedule(gains: Gains, config: TuningConfig) -> GainSchedule:
         loop_names=tuple(l.output for l in config.loops), loop_inputs=tuple(l.input for l in config.loops),
         output_units=tuple(output_units), input_units=tuple(input_units),
         anti_windup=config.anti_windup, u_min=np.array([l.u_min for l in config.loops], float),
-        u_max=np.array([l.u_max for l in config.loops], float), derivative_filter_N=config.derivative_filter_N)
+        u_max=np.array([l.u_max for l in config.loops], float), derivative_filter_N=config.derivative_filter_N,
+        **structure_fields(config))
 
 
 # -- replay ---------------------------------------------------------------------------------------
