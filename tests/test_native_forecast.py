@@ -4,8 +4,10 @@ Truth: FmiForecast, which runs the Python PID (control/pid.py), the Python rewar
 and the FMU through the standard FMI calls. Every comparison is `==` on floats (no tolerance): the
 mean reward, every step's reward, every predicted measurement and the prior's full serialized state
 afterwards. States, gains, setpoints and overrides are random; the anti-windup modes, the derivative
-filter, the coupled PID, divergence, a discarded step and the error paths are all covered.
+filter, the 2-DOF structure (setpoint weights b, c, the measurement filter Tf of order 1 and 2, changed by
+set_structure between calls), the coupled PID, divergence, a discarded step and the error paths are all covered.
 """
+import dataclasses
 import math
 
 import numpy as np
@@ -16,7 +18,9 @@ from prlpid_fmi.loop.forecast.fmi import FmiForecast
 from prlpid_fmi.loop.forecast import make_forecast
 from prlpid_fmi.errors import PlantError
 from prlpid_fmi.fmu import FmuPlant
+from prlpid_fmi.loop.core import LoopCore
 from prlpid_fmi.loop.forecast.native import NativeForecast, native_unavailable
+from prlpid_fmi.scenario.presets import preset
 from conftest import PLANTS, fmu
 
 TS = 0.1
@@ -89,14 +93,15 @@ def _warm_up(plant, pid, spec, rng, steps, coupling=None):
         if coupling is not None:
             pid.step_values(r, y, *gains, coupling)
         else:
-            pid.step_values([r[i] - y[i] for i in range(n)], *gains)
+            pid.step_values(r, y, *gains)
         y = plant.step_values(rng.uniform(*spec.input_range, n).tolist())
     return y
 
 
 def _pid_state(pid):
     s = pid.get_state()
-    return s.integral.tolist(), s.last_error.tolist(), s.derivative.tolist(), s.initialized
+    return (s.integral.tolist(), s.last_error.tolist(), s.derivative.tolist(), s.initialized, s.filtered.tolist(),
+            s.filter_stage.tolist())
 
 
 def _compare(plant, prior, native, fmi, args):
@@ -165,6 +170,114 @@ def test_quadrotor_coupled_pid(fmi_version):
             coupling = rng.uniform(-0.5, 0.5, 6).tolist()
             _compare(plant, prior, native, fmi, (r, y, Kp, Ti, Td, coupling, rng.uniform(-2, 2, 3).tolist()))
             y = _warm_up(plant, pid, spec, rng, 1, coupling)
+
+
+# (b, c, Tf in samples, filter order) of the 2-DOF law (control/pid.py); the tests above run b = c = 1, Tf = 0,
+# the paper's eq. 2
+STRUCTURES = {"b0.5-c0": (0.5, 0.0, 0.0, 1), "b0.3-c1-Tf2Ts": (0.3, 1.0, 2.0, 1),
+              "b0.7-c0-Tf3Ts-order2": (0.7, 0.0, 3.0, 2)}
+
+
+def _random_call(rng, spec, n, coupled=False):
+    """(setpoint, Kp, Ti, Td, coupling, u_prev) for one forecast call."""
+    r = rng.uniform(*spec.setpoints, n).tolist()
+    Kp, Ti, Td = [_log_uniform(rng, lo, hi, n) for lo, hi in spec.gains]
+    coupling = rng.uniform(-0.5, 0.5, 6).tolist() if coupled else None
+    return r, Kp, Ti, Td, coupling, rng.uniform(*spec.u_limits, n).tolist()
+
+
+@pytest.mark.parametrize("structure", list(STRUCTURES.values()), ids=list(STRUCTURES))
+@pytest.mark.parametrize("anti_windup", ["clamping", "back_calculation"])
+@pytest.mark.parametrize("name", PLANTS)
+def test_2dof_structure_native_equals_fmi_path_bit_for_bit(name, fmi_version, anti_windup, structure):
+    """Setpoint weights and the measurement filter: native == FMI path from a fresh PID (the filter starts at
+    y(0)) and from a warmed-up one; set_structure between calls is read by the next native call."""
+    spec = SPECS[name]
+    n = len(spec.inputs)
+    b, c, tf, order = structure
+    rng = np.random.default_rng([PLANTS.index(name), fmi_version, len(anti_windup), order, int(10 * b)])
+    filter_N = 8.0 if anti_windup == "back_calculation" else None
+    pid = PID(TS, n, spec.u_limits[0], spec.u_limits[1], anti_windup, derivative_filter_N=filter_N,
+              setpoint_weight=b, derivative_weight=c, measurement_filter_s=tf * TS, measurement_filter_order=order)
+    plant, prior, native, fmi = _pair(name, fmi_version, pid, 10, RewardWeights(control_variation_weight=0.3))
+    with plant, prior:
+        for extra, value in spec.extra_inputs:
+            plant.set({extra: value})
+        y = plant.step_values(rng.uniform(*spec.input_range, n).tolist())  # y != 0: the filter's start shows
+        r, Kp, Ti, Td, _, u_prev = _random_call(rng, spec, n)
+        _compare(plant, prior, native, fmi, (r, y, Kp, Ti, Td, None, u_prev))  # fresh PID
+        y = _warm_up(plant, pid, spec, rng, 5)
+        assert pid.raw_state()[3] and (tf == 0 or pid.raw_state()[4] != [0.0] * n)
+        mattered = []
+        for call in range(6):
+            r, Kp, Ti, Td, _, u_prev = _random_call(rng, spec, n)
+            if call == 0:
+                Ti = [math.inf] * n
+            args = (r, y, Kp, Ti, Td, None, u_prev)
+            weighted, _ = _compare(plant, prior, native, fmi, args)
+            pid.set_structure(1.0, 1.0, 0.0)  # the paper's law, the filter state kept
+            paper, _ = _compare(plant, prior, native, fmi, args)
+            pid.set_structure(b, c, tf * TS)
+            assert _compare(plant, prior, native, fmi, args)[0] == weighted
+            mattered.append(paper != weighted)
+            y = _warm_up(plant, pid, spec, rng, 1)
+        assert any(mattered)
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_quadrotor_coupled_pid_with_2dof_structure(fmi_version, order):
+    """Eq. 27 on (r, y), (b*r, yf) and (c*r, yf) with b != 1 and Tf > 0 (one loop unfiltered)."""
+    spec = SPECS["QuadrotorAttitude"]
+    rng = np.random.default_rng([13, order, fmi_version])
+    pid = CoupledPID(TS, -2.0, 2.0, "clamping" if order == 1 else "back_calculation",
+                     derivative_filter_N=None if order == 1 else 10.0, setpoint_weight=[0.5, 0.8, 0.2],
+                     derivative_weight=[0.0, 1.0, 0.0], measurement_filter_s=[2 * TS, 0.0, 3 * TS],
+                     measurement_filter_order=order)
+    plant, prior, native, fmi = _pair("QuadrotorAttitude", fmi_version, pid, 10,
+                                      RewardWeights(control_variation_weight=1.0))
+    with plant, prior:
+        y = plant.step_values(rng.uniform(*spec.input_range, 3).tolist())
+        r, Kp, Ti, Td, coupling, u_prev = _random_call(rng, spec, 3, coupled=True)
+        _compare(plant, prior, native, fmi, (r, y, Kp, Ti, Td, coupling, u_prev))  # fresh PID
+        y = _warm_up(plant, pid, spec, rng, 4, coupling)
+        for _ in range(8):
+            r, Kp, Ti, Td, coupling, u_prev = _random_call(rng, spec, 3, coupled=True)
+            _compare(plant, prior, native, fmi, (r, y, Kp, Ti, Td, coupling, u_prev))
+            y = _warm_up(plant, pid, spec, rng, 1, coupling)
+
+
+@pytest.mark.parametrize("scenario, structure, order, gains", [
+    ("first_order", ((0.3, 1.0, 2 * TS),), 1, ([3.0], [1.0], [0.05])),
+    ("two_tank", ((0.7, 0.0, 3 * TS),), 2, ([4.0], [40.0], [1.0])),
+    ("quadrotor", ((0.5, 0.0, 2 * TS), (0.8, 1.0, 0.0), (0.2, 0.0, 3 * TS)), 2, ([2.0] * 3, [5.0] * 3, [0.3] * 3)),
+], ids=["first_order", "two_tank", "quadrotor"])
+def test_loop_core_forecast_with_a_tuned_structure(fmi_version, scenario, structure, order, gains):
+    """A preset with tuned_structure: the loop's forecast rewards, native and FMI path, equal over episodes,
+    also after LoopCore.set_structure (as the fixed-PID search does between episodes)."""
+    config = dataclasses.replace(preset(scenario), fmi_version=fmi_version, tuned_structure=structure,
+                                 measurement_filter_order=order, episode_steps=40)
+    assert config.sample_time_s == TS
+    coupling = [0.1, -0.05, 0.2, 0.0, -0.1, 0.15] if config.coupled else None
+    cores = LoopCore(config), LoopCore(config, forecast_path="fmi")
+    assert isinstance(cores[0].forecast, NativeForecast) and isinstance(cores[1].forecast, FmiForecast)
+    paper = [1.0] * config.n_loops, [1.0] * config.n_loops, [0.0] * config.n_loops
+    runs = []
+    try:
+        for core in cores:
+            runs.append([])
+            for episode, change in enumerate((None, paper, [list(v) for v in zip(*structure)])):
+                if change is not None:
+                    core.set_structure(*change)
+                core.reset(np.random.default_rng(7))  # the same episode, only the structure changes
+                for _ in range(25):
+                    core.step(*gains, coupling)
+                    runs[-1].append((episode, core.forecast_reward, list(core.measurement)))
+    finally:
+        for core in cores:
+            core.close()
+    assert runs[0] == runs[1]
+    assert [r for e, r, _ in runs[0] if e == 0] == [r for e, r, _ in runs[0] if e == 2]
+    assert [r for e, r, _ in runs[0] if e == 0] != [r for e, r, _ in runs[0] if e == 1]
 
 
 def test_fresh_pid_and_no_overrides_and_zero_control_weight(fmi_version):
@@ -241,12 +354,15 @@ def test_native_keeps_prior_time_for_later_fmi_calls(fmi_version):
 
 
 def test_raw_state_is_the_live_state():
-    pid = PID(TS, 2, -1.0, 1.0)
-    pid.step_values([0.5, -2.0], [1.0, 3.0], [2.0, 1.0], [0.1, 0.0])
-    integral, last_error, derivative, initialized = pid.raw_state()
+    pid = PID(TS, 2, -1.0, 1.0, setpoint_weight=0.5, measurement_filter_s=[0.2, 0.0], measurement_filter_order=2)
+    for y in ([0.1, 0.4], [0.3, -0.2]):
+        pid.step_values([0.5, -2.0], y, [1.0, 3.0], [2.0, 1.0], [0.1, 0.0])
+    integral, last_error, derivative, initialized, filtered, filter_stage = pid.raw_state()
     state = pid.get_state()
-    assert (integral, last_error, derivative, initialized) == (state.integral.tolist(), state.last_error.tolist(),
-                                                               state.derivative.tolist(), True)
+    assert (integral, last_error, derivative, initialized, filtered, filter_stage) == (
+        state.integral.tolist(), state.last_error.tolist(), state.derivative.tolist(), True, state.filtered.tolist(),
+        state.filter_stage.tolist())
+    assert filtered[0] != filter_stage[0]  # the second-order filter's two sections differ after a step
     coupled = CoupledPID(TS)
     assert coupled.raw_state() == coupled.pid.raw_state()
 

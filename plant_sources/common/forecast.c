@@ -1,5 +1,5 @@
 /* The PRL-PID reward forecast in one call (see forecast.h). Every expression mirrors the Python
- * reference in prlpid_fmi/control (pid.py, reward.py, forecast.py) operation by operation: keep it
+ * reference (prlpid_fmi/control/pid.py, control/reward.py, loop/forecast/fmi.py) operation by operation: keep it
  * so, and build without floating-point contraction (the builder passes -ffp-contract=off). */
 #include <math.h>
 #include <string.h>
@@ -8,6 +8,7 @@
 
 typedef struct {
     double integral[PRLPID_MAX_LOOPS], last_error[PRLPID_MAX_LOOPS], derivative[PRLPID_MAX_LOOPS];
+    double filtered[PRLPID_MAX_LOOPS], stage[PRLPID_MAX_LOOPS];
     int initialized;
 } PidState;
 
@@ -22,18 +23,20 @@ size_t prlpid_forecast_struct_size(int which) {
     }
 }
 
-/* One sample of eq. 2 on the given errors (pid.py PID.step_values); writes saturated u. */
+/* One sample on the integral, proportional and derivative errors e, ep, ed (pid.py PID.step_weighted);
+ * writes saturated u. */
 static int pid_step(const PrlpidForecastSetup *s, const PrlpidForecastInput *in, PidState *st,
-                    const double *errors, double *u_out) {
+                    const double *errors, const double *p_errors, const double *d_errors, double *u_out) {
     const double dt = s->pid_sample_time;
     int i;
     if (!st->initialized) {
-        for (i = 0; i < s->n_loops; i++) st->last_error[i] = errors[i];
+        for (i = 0; i < s->n_loops; i++) st->last_error[i] = d_errors[i];
         st->initialized = 1;
     }
     for (i = 0; i < s->n_loops; i++) {
         double e = errors[i], kp = in->Kp[i], ti = in->Ti[i], td = in->Td[i];
-        double d = (e - st->last_error[i]) / dt;
+        double ed = d_errors[i];
+        double d = (ed - st->last_error[i]) / dt;
         double ki, integral, u_unsat, lo, hi, u;
         if (s->has_derivative_filter) {
             double tf = td / s->derivative_filter_N;
@@ -43,7 +46,7 @@ static int pid_step(const PrlpidForecastSetup *s, const PrlpidForecastInput *in,
         if (ti == 0.0) return PRLPID_EZERODIV;
         ki = kp / ti;
         integral = st->integral[i] + e * dt;
-        u_unsat = kp * (e + td * d) + ki * integral;
+        u_unsat = kp * (p_errors[i] + td * d) + ki * integral;
         lo = s->u_min[i];
         hi = s->u_max[i];
         u = u_unsat < lo ? lo : (u_unsat > hi ? hi : u_unsat); /* NaN passes through */
@@ -66,7 +69,7 @@ static int pid_step(const PrlpidForecastSetup *s, const PrlpidForecastInput *in,
             }
         }
         st->integral[i] = integral;
-        st->last_error[i] = e;
+        st->last_error[i] = ed;
         st->derivative[i] = d;
         u_out[i] = u;
     }
@@ -90,23 +93,77 @@ static double loop_reward(const PrlpidForecastSetup *s, double e, double e_prev,
     return r;
 }
 
-/* PID errors: setpoint - measurement, or eq. 27's coupled error (pid.py _coupled_errors). */
-static void pid_errors(const PrlpidForecastSetup *s, const PrlpidForecastInput *in, const double *y, double *errors) {
+/* Eq. 27 (pid.py _coupled_errors): e_i = (r_i - y_i) + sum_j C[i][j] * y_j, left to right, C's zero
+ * diagonal kept in the sum. */
+static void coupled_errors(const double *c, const double *r, const double *y, double *errors) {
+    const double C[3][3] = {{0.0, c[0], c[1]}, {c[2], 0.0, c[3]}, {c[4], c[5], 0.0}};
     int i;
+    for (i = 0; i < 3; i++) errors[i] = r[i] - y[i] + C[i][0] * y[0] + C[i][1] * y[1] + C[i][2] * y[2];
+}
+
+/* yf from y, advancing the measurement filter once per sample (pid.py PID.filter_measurement). */
+static void filter_measurement(const PrlpidForecastSetup *s, PidState *st, const double *y, double *yf) {
+    const double dt = s->pid_sample_time;
+    int i, filtered = 0;
+    for (i = 0; i < s->n_loops; i++) {
+        yf[i] = y[i];
+        if (s->measurement_filter[i] != 0.0) filtered = 1;
+    }
+    if (!filtered) return;
+    if (!st->initialized) {
+        for (i = 0; i < s->n_loops; i++) st->filtered[i] = st->stage[i] = y[i];
+        return;
+    }
+    for (i = 0; i < s->n_loops; i++) {
+        double T = s->measurement_filter[i] / (double)s->measurement_filter_order, x;
+        if (T == 0.0) continue;
+        x = (T * st->stage[i] + dt * y[i]) / (T + dt);
+        st->stage[i] = x;
+        if (s->measurement_filter_order == 2) x = (T * st->filtered[i] + dt * x) / (T + dt);
+        st->filtered[i] = x;
+        yf[i] = x;
+    }
+}
+
+/* The PID's errors e, ep, ed of one sample (pid.py PID.weighted_errors, CoupledPID.step_values): e from
+ * (r, y), ep from (b*r, yf), ed from (c*r, yf), each through eq. 27 when coupled; advances the filter. */
+static void pid_errors(const PrlpidForecastSetup *s, const PrlpidForecastInput *in, PidState *st, const double *y,
+                       double *errors, double *p_errors, double *d_errors) {
+    const double *r = in->setpoint;
+    double yf[PRLPID_MAX_LOOPS], br[PRLPID_MAX_LOOPS], cr[PRLPID_MAX_LOOPS];
+    int i, n = s->n_loops, weighted = 0;
+    if (s->coupled) coupled_errors(in->coupling, r, y, errors);
+    else for (i = 0; i < n; i++) errors[i] = r[i] - y[i];
+    for (i = 0; i < n; i++) {
+        if (s->setpoint_weight[i] != 1.0 || s->derivative_weight[i] != 1.0 || s->measurement_filter[i] != 0.0)
+            weighted = 1;
+    }
+    if (!weighted) {
+        memcpy(p_errors, errors, (size_t)n * sizeof(double));
+        memcpy(d_errors, errors, (size_t)n * sizeof(double));
+        return;
+    }
+    filter_measurement(s, st, y, yf);
     if (s->coupled) {
-        const double *c = in->coupling;
-        const double C[3][3] = {{0.0, c[0], c[1]}, {c[2], 0.0, c[3]}, {c[4], c[5], 0.0}};
-        for (i = 0; i < 3; i++)
-            errors[i] = in->setpoint[i] - y[i] + C[i][0] * y[0] + C[i][1] * y[1] + C[i][2] * y[2];
+        for (i = 0; i < 3; i++) {
+            br[i] = s->setpoint_weight[i] * r[i];
+            cr[i] = s->derivative_weight[i] * r[i];
+        }
+        coupled_errors(in->coupling, br, yf, p_errors);
+        coupled_errors(in->coupling, cr, yf, d_errors);
     } else {
-        for (i = 0; i < s->n_loops; i++) errors[i] = in->setpoint[i] - y[i];
+        for (i = 0; i < n; i++) {
+            p_errors[i] = s->setpoint_weight[i] * r[i] - yf[i];
+            d_errors[i] = s->derivative_weight[i] * r[i] - yf[i];
+        }
     }
 }
 
 int prlpid_forecast_core(Instance *plant, Instance *prior, const PrlpidForecastSetup *s,
                          const PrlpidForecastInput *in, PrlpidForecastResult *out) {
     double y[PRLPID_MAX_LOOPS], u[PRLPID_MAX_LOOPS], u_prev[PRLPID_MAX_LOOPS];
-    double errors[PRLPID_MAX_LOOPS], error[PRLPID_MAX_LOOPS], previous_error[PRLPID_MAX_LOOPS];
+    double errors[PRLPID_MAX_LOOPS], p_errors[PRLPID_MAX_LOOPS], d_errors[PRLPID_MAX_LOOPS];
+    double error[PRLPID_MAX_LOOPS], previous_error[PRLPID_MAX_LOOPS];
     double total = 0.0;
     PidState st;
     int n, i, k, rc, count = 0;
@@ -114,7 +171,8 @@ int prlpid_forecast_core(Instance *plant, Instance *prior, const PrlpidForecastS
     if (!plant || !prior || plant == prior || !s || !in || !out) return PRLPID_EINVAL;
     n = s->n_loops;
     if (n < 1 || n > PRLPID_MAX_LOOPS || s->horizon < 1 || (s->coupled && n != 3) || s->n_overrides < 0 ||
-        (s->n_overrides > 0 && (!s->override_vr || !s->override_value)) || !s->measurements || !s->rewards) {
+        (s->n_overrides > 0 && (!s->override_vr || !s->override_value)) || !s->measurements || !s->rewards ||
+        (s->measurement_filter_order != 1 && s->measurement_filter_order != 2)) {
         return PRLPID_EINVAL;
     }
     out->steps = out->n_measurements = out->stopped = 0;
@@ -127,6 +185,8 @@ int prlpid_forecast_core(Instance *plant, Instance *prior, const PrlpidForecastS
     memcpy(st.integral, in->integral, sizeof(st.integral));
     memcpy(st.last_error, in->last_error, sizeof(st.last_error));
     memcpy(st.derivative, in->derivative, sizeof(st.derivative));
+    memcpy(st.filtered, in->filtered, sizeof(st.filtered));
+    memcpy(st.stage, in->filter_stage, sizeof(st.stage));
     st.initialized = in->initialized;
     for (i = 0; i < n; i++) {
         previous_error[i] = (in->setpoint[i] - in->measurement[i]) / s->scale[i];
@@ -138,8 +198,8 @@ int prlpid_forecast_core(Instance *plant, Instance *prior, const PrlpidForecastS
         Status status;
         double r = 0.0;
         int diverged = 0;
-        pid_errors(s, in, y, errors);
-        rc = pid_step(s, in, &st, errors, u);
+        pid_errors(s, in, &st, y, errors, p_errors, d_errors);
+        rc = pid_step(s, in, &st, errors, p_errors, d_errors, u);
         if (rc != PRLPID_OK) return rc;
         if (instance_set_real(prior, s->input_vr, (size_t)n, u) != STATUS_OK) return PRLPID_EFMU;
         status = instance_do_step(prior, prior->m.time, s->step_size);

@@ -3,14 +3,16 @@
  *
  * prlpid_forecast(plant, prior, setup, input, result) copies the plant instance's full state into the
  * prior, sets the overrides on the prior, and rolls the prior `horizon` samples ahead with a copy of
- * the PID state and fixed gains: u = PID (eq. 2, optionally the coupled error of eq. 27) on the last
+ * the PID state and fixed gains: u = PID (the 2-DOF law of pid.py: setpoint weights b, c and the
+ * measurement filter Tf; eq. 2 when b = c = 1, Tf = 0; optionally the coupled errors of eq. 27) on the last
  * measurement, prior inputs := u, doStep, measurement := prior outputs, reward (eq. 10-11 plus the
  * control-variation term) on the normalised error. A discarded step or an error beyond the divergence
  * bound adds the divergence penalty and ends the roll-out. The result is the mean reward.
  *
- * The arithmetic is that of prlpid_fmi.control (pid.py PID.step_values / coupled error, reward.py
- * _loop_reward, forecast.py FmiForecast) in the same operation order, so that, compiled without
- * floating-point contraction, both give bit-identical results. Change them together.
+ * The arithmetic is that of prlpid_fmi (control/pid.py PID.filter_measurement, PID.weighted_errors,
+ * PID.step_weighted and CoupledPID.step_values; control/reward.py _loop_reward; loop/forecast/fmi.py
+ * FmiForecast) in the same operation order, so that, compiled without floating-point contraction, both
+ * give bit-identical results. Change them together.
  *
  * `plant` and `prior` are the FMI instance pointers (fmi2Component / fmi3Instance); each FMI layer
  * exports prlpid_forecast and unwraps them. prlpid_forecast_abi() returns PRLPID_FORECAST_ABI and
@@ -23,7 +25,7 @@
 #include <stddef.h>
 #include "instance.h"
 
-#define PRLPID_FORECAST_ABI 1
+#define PRLPID_FORECAST_ABI 2
 #define PRLPID_MAX_LOOPS 3
 
 #if defined(_WIN32)
@@ -39,11 +41,14 @@ enum {
     PRLPID_OK = 0,
     PRLPID_EINVAL = -1,      /* bad setup (n_loops, horizon, NULL pointers, plant == prior) */
     PRLPID_EFMU = -2,        /* the prior returned error on set/doStep/get (message in its log) */
-    PRLPID_EZERODIV = -3,    /* a division by zero Python raises ZeroDivisionError for (Ti = 0, Tf + dt = 0, Tt + dt = 0) */
+    PRLPID_EZERODIV = -3,    /* a division by zero where Python raises ZeroDivisionError (Ti = 0, Td/N + dt = 0,
+                                Tt + dt = 0) */
     PRLPID_EDOMAIN = -4      /* sqrt of a negative Ti*Td, where Python raises ValueError */
 };
 
-/* Fixed for a forecast object; arrays are per loop (first n_loops entries used). */
+/* Fixed for a forecast object, except the PID structure (setpoint_weight, derivative_weight,
+ * measurement_filter), which the caller refreshes before a call whenever the PID's changes; arrays are
+ * per loop (first n_loops entries used). */
 typedef struct {
     int n_loops;                    /* 1..3 */
     int horizon;                    /* N >= 1 */
@@ -52,12 +57,16 @@ typedef struct {
     int has_derivative_filter;      /* 1: first-order derivative filter Td/N */
     int has_Tt;                     /* 1: Tt below; 0: sqrt(Ti*Td), or Ti when Td = 0 */
     int n_overrides;                /* entries in override_vr / override_value */
+    int measurement_filter_order;   /* 1 | 2: sections of the measurement filter */
     unsigned int input_vr[PRLPID_MAX_LOOPS];   /* prior inputs the PID drives */
     unsigned int output_vr[PRLPID_MAX_LOOPS];  /* prior outputs it measures */
     double pid_sample_time;         /* PID dt, s */
     double step_size;               /* prior communication step, s */
     double derivative_filter_N;
     double Tt[PRLPID_MAX_LOOPS];    /* back-calculation tracking time constants, s */
+    double setpoint_weight[PRLPID_MAX_LOOPS];     /* b: ep = b*r - yf */
+    double derivative_weight[PRLPID_MAX_LOOPS];   /* c: ed = c*r - yf */
+    double measurement_filter[PRLPID_MAX_LOOPS];  /* Tf, s (0: yf = y) */
     double u_min[PRLPID_MAX_LOOPS], u_max[PRLPID_MAX_LOOPS];
     double scale[PRLPID_MAX_LOOPS];   /* measurement scale: error = (setpoint - y) / scale */
     double bound[PRLPID_MAX_LOOPS];   /* divergence bound on |error| */
@@ -77,6 +86,7 @@ typedef struct {
     double coupling[6];             /* c_rp, c_ry, c_pr, c_py, c_yr, c_yp (coupled only) */
     double u_prev[PRLPID_MAX_LOOPS];  /* control signal of the previous sample */
     double integral[PRLPID_MAX_LOOPS], last_error[PRLPID_MAX_LOOPS], derivative[PRLPID_MAX_LOOPS];  /* PID state */
+    double filtered[PRLPID_MAX_LOOPS], filter_stage[PRLPID_MAX_LOOPS];  /* PID state: measurement filter */
     int initialized;                /* PID state: 0 until its first step after reset */
 } PrlpidForecastInput;
 

@@ -6,6 +6,10 @@ reward arithmetic of prlpid_fmi.control, in the same operation order and without
 contraction: the result equals FmiForecast's bit for bit. Python fills preallocated ctypes structs by
 slice assignment and makes one foreign call per forecast.
 
+The PID's structure (setpoint weights b, c and measurement filter Tf, control.pid) can change between
+episodes (PID.set_structure, the fixed-PID search), so each call copies it into the setup together with the
+PID's state (filter state included); the measurement filter's order is fixed at the PID's construction.
+
 The C call moves the prior inside the library; FmuPlant keeps the prior's communication time in
 `prior.time`, so the binding writes the prior's time after the roll-out back to it (the FMI path
 leaves `prior.time` at the same value), and FmuPlant calls on the prior stay consistent.
@@ -20,7 +24,7 @@ from prlpid_fmi.control.pid import ANTI_WINDUP_MODES
 from prlpid_fmi.errors import PlantError
 from prlpid_fmi.loop.forecast.base import Forecast
 
-ABI_VERSION = 1
+ABI_VERSION = 2
 MAX_LOOPS = 3
 ANTI_WINDUP_CODES = {"clamping": 0, "back_calculation": 1, "none": 2}
 assert set(ANTI_WINDUP_CODES) == set(ANTI_WINDUP_MODES)
@@ -33,9 +37,11 @@ class ForecastSetup(ctypes.Structure):
 
     _fields_ = [("n_loops", c_int), ("horizon", c_int), ("anti_windup", c_int), ("coupled", c_int),
                 ("has_derivative_filter", c_int), ("has_Tt", c_int), ("n_overrides", c_int),
+                ("measurement_filter_order", c_int),
                 ("input_vr", c_uint * _L), ("output_vr", c_uint * _L),
                 ("pid_sample_time", c_double), ("step_size", c_double), ("derivative_filter_N", c_double),
-                ("Tt", c_double * _L), ("u_min", c_double * _L), ("u_max", c_double * _L),
+                ("Tt", c_double * _L), ("setpoint_weight", c_double * _L), ("derivative_weight", c_double * _L),
+                ("measurement_filter", c_double * _L), ("u_min", c_double * _L), ("u_max", c_double * _L),
                 ("scale", c_double * _L), ("bound", c_double * _L), ("u_scale", c_double * _L),
                 ("penalty", c_double),
                 ("alpha", c_double), ("beta", c_double), ("v_clip", c_double), ("e_clip", c_double),
@@ -47,7 +53,8 @@ class ForecastSetup(ctypes.Structure):
 
 # PrlpidForecastInput: these double arrays in this order, then `int initialized`.
 _INPUT_ARRAYS = (("setpoint", _L), ("measurement", _L), ("Kp", _L), ("Ti", _L), ("Td", _L), ("coupling", 6),
-                 ("u_prev", _L), ("integral", _L), ("last_error", _L), ("derivative", _L))
+                 ("u_prev", _L), ("integral", _L), ("last_error", _L), ("derivative", _L), ("filtered", _L),
+                 ("filter_stage", _L))
 
 
 class ForecastInput(ctypes.Structure):
@@ -113,6 +120,8 @@ class NativeForecast(Forecast):
         s = self._setup = ForecastSetup()
         s.n_loops, s.horizon, s.coupled = n, N, int(self.coupled)
         s.anti_windup = ANTI_WINDUP_CODES[core.anti_windup]
+        self._core = core
+        s.measurement_filter_order = core.measurement_filter_order
         s.has_derivative_filter = int(core.derivative_filter_N is not None)
         s.derivative_filter_N = core.derivative_filter_N if core.derivative_filter_N is not None else math.nan
         Tt = core.Tt
@@ -158,8 +167,8 @@ class NativeForecast(Forecast):
                     u_prev: list) -> float:
         """As FmiForecast.mean_reward, in one C call."""
         n = self.n_loops
-        v_setpoint, v_measurement, v_Kp, v_Ti, v_Td, v_coupling, v_u_prev, v_integral, v_last_error, v_derivative = \
-            self._views
+        (v_setpoint, v_measurement, v_Kp, v_Ti, v_Td, v_coupling, v_u_prev, v_integral, v_last_error, v_derivative,
+         v_filtered, v_filter_stage) = self._views
         v_setpoint[:n] = setpoint
         v_measurement[:n] = measurement
         v_Kp[:n] = Kp
@@ -168,11 +177,17 @@ class NativeForecast(Forecast):
         if self.coupled:
             v_coupling[:] = coupling
         v_u_prev[:n] = u_prev
-        integral, last_error, derivative, initialized = self.pid.raw_state()
+        integral, last_error, derivative, initialized, filtered, filter_stage = self.pid.raw_state()
         v_integral[:n] = integral
         v_last_error[:n] = last_error
         v_derivative[:n] = derivative
+        v_filtered[:n] = filtered
+        v_filter_stage[:n] = filter_stage
         self._input.initialized = initialized
+        core, s = self._core, self._setup  # the structure in force now (set_structure may have changed it)
+        s.setpoint_weight[:n] = core.setpoint_weight.tolist()
+        s.derivative_weight[:n] = core.derivative_weight.tolist()
+        s.measurement_filter[:n] = core.measurement_filter_s.tolist()
         if (self.plant.component, self.prior.component) != self._components:  # re-instantiated (reset fallback)
             self._components = (self.plant.component, self.prior.component)
             self._args[0].value, self._args[1].value = self._components
