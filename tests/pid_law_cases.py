@@ -1,18 +1,18 @@
 """The PID law as data: hand-checked cases every implementation must reproduce.
 
-The law is the 2-DOF positional PID of prlpid_fmi/control/pid.py (paper eq. 2 when b = c = 1 and
-Tf = 0, which every case before the 2-DOF law has). One specification, four implementations: the
-Python PID (prlpid_fmi/control/pid.py), the C reward forecast of the bundled plants
-(plant_sources/common/forecast.c), the exported C controller and the exported IEC 61131-3
-Structured Text (prlpid_fmi/export/templates/). tests/test_pid_law_spec.py runs the cases through
+The law is the 2-DOF positional PID of prlpid_fmi/control/pid.py with an output rate limit (paper
+eq. 2 when b = c = 1, Tf = 0 and no rate limit, which every case before the 2-DOF law has). One
+specification, four implementations: the Python PID (prlpid_fmi/control/pid.py), the C reward
+forecast of the bundled plants (plant_sources/common/forecast.c), the exported C controller and the
+exported IEC 61131-3 Structured Text (prlpid_fmi/export/templates/). tests/test_pid_law_spec.py runs the cases through
 each of them (skipping, with the reason, a case an implementation cannot be given).
 Changing the law means changing this file: the equations below,
 `exact_u` (the same equations in exact rational arithmetic) and the literal numbers of the cases;
 the tests then say which implementation still follows the old law.
 
 The law, per loop i and sample k (dt = sample time [s]; e, ep, ed, I, D in error units, error units
-* s and error units / s; all gains are those of sample k; b, c, Tf per loop and the filter order n
-per case, constant)::
+* s and error units / s; all gains are those of sample k; b, c, Tf, the rate limit R per loop and the
+filter order n per case, constant)::
 
     yf(k)    = F(y(k))                            measurement filter (below; Tf = 0: yf = y exactly)
     e(k)     = r(k) - y(k)                        integral error (unfiltered, unweighted)
@@ -23,8 +23,10 @@ per case, constant)::
     I_try    = I(k-1) + e(k) * dt                 the error sum includes the current error
     u_try    = Kp(k) * (ep(k) + Td(k) * D(k)) + Ki(k) * I_try
              ( = Kp*(ep + I_try/Ti + Td*D); b = c = 1, Tf = 0: eq. 2 )
-    u(k)     = clip(u_try, u_min, u_max)          the output (u_try exactly at a limit is not saturated)
-    I(k)     = I_try, except while saturated (u(k) != u_try):
+    lo(k)    = max(u_min, u(k-1) - R*dt)          the clip band: the limits, narrowed by the rate limit
+    hi(k)    = min(u_max, u(k-1) + R*dt)          (R = inf: lo = u_min, hi = u_max)
+    u(k)     = clip(u_try, lo(k), hi(k))          the output (u_try exactly at a limit is not saturated)
+    I(k)     = I_try, except while saturated (u(k) != u_try; the band is the limits here):
                clamping:          I(k) = I(k-1) when (u_try - u(k)) * Kp*e(k) > 0, i.e. when e(k)
                                   pushes further into the limit (otherwise I_try is kept);
                back_calculation:  I(k) = I_try + g * (u(k) - u_try) / Ki,  g = dt / (Tt + dt),
@@ -35,10 +37,15 @@ per case, constant)::
   by backward Euler: x_j(k) = (T * x_j(k-1) + dt * x_{j-1}(k)) / (T + dt), x_0 = y, yf = x_n
   (order 1: 1/(1 + s Tf); order 2: 1/(1 + s Tf/2)^2). On the first sample every section starts at
   the measurement: x_j(0) = y(0), so yf(0) = y(0). Tf = 0: yf = y, no state.
-- First sample (k = 0, after a reset): ed(-1) := ed(0), so D(0) = 0 (no derivative kick); I(-1) = 0.
-- Bumpless start from u_start (the output the actuator holds), when any loop's u_start != 0:
-  I(-1) = (u_start - Kp(0) * ((b - 1) * r(0))) / Ki(0), so that the first output is u_start when
-  r(0) = y(0), whatever b (I(-1) = 0 when Ki(0) = 0; with b = 1 this is u_start / Ki(0)).
+- First sample (k = 0, after a reset): ed(-1) := ed(0), so D(0) = 0 (no derivative kick).
+- Bumpless start, before every first sample (LoopCore always presets; u_start = 0 is a start value
+  like any other): the PID is balanced at the first measurement y(0) with the output the actuator
+  holds, I(-1) = (u_start - Kp(0) * ((b - 1) * y(0))) / Ki(0), so that the first output is u_start
+  when r(0) = y(0), whatever b, and a setpoint step at k = 0 acts through b like any later one
+  (I(-1) = 0 when Ki(0) = 0; with b = 1 this is u_start / Ki(0)).
+- Rate limit R [u units / s] (inf: none): u(-1) := u_start (the preset's output), so the band of the
+  first sample is around u_start; lo and hi are Python's max and min (the limit unless the rate
+  band lies strictly inside it).
 - Derivative filter with N: Tdf = Td/N, Df(-1) = 0 and, by backward Euler,
   Df(k) = (Tdf * Df(k-1) + dt * D(k)) / (Tdf + dt); Df replaces D in u_try (and is the state).
   Without N the derivative is D itself.
@@ -68,7 +75,7 @@ INF = math.inf
 @dataclass(frozen=True)
 class Loop:
     """One loop of a case: per sample the setpoint, measurement, gains (Kp, Ti, Td) and expected u; the
-    loop's structure b, c, Tf (constant)."""
+    loop's structure b, c, Tf and rate limit R (constant)."""
 
     r: tuple
     y: tuple
@@ -76,11 +83,12 @@ class Loop:
     u: tuple              # expected saturated output per sample
     u_min: float = -INF
     u_max: float = INF
-    u_start: float = 0.0  # bumpless start value (0: a cold start)
+    u_start: float = 0.0  # the output the actuator holds before the first sample (the preset balances at y(0))
     Tt: float | None = None  # back-calculation tracking time [s]; None: the default rule
     b: float = 1.0        # setpoint weight of the proportional error
     c: float = 1.0        # setpoint weight of the derivative error
     Tf: float = 0.0       # measurement filter [s] (0: none)
+    R: float = INF        # output rate limit [u units / s] (inf: none)
 
     def __post_init__(self):
         n = len(self.r)
@@ -114,8 +122,9 @@ class Case:
 
     @property
     def eq2(self) -> bool:
-        """b = c = 1 and Tf = 0 in every loop: paper eq. 2 (the law before setpoint weights and the filter)."""
-        return all(loop.b == 1.0 and loop.c == 1.0 and loop.Tf == 0.0 for loop in self.loops)
+        """b = c = 1, Tf = 0 and no rate limit in every loop: paper eq. 2 (the law before setpoint weights, the
+        filter and the rate limit)."""
+        return all(loop.b == 1.0 and loop.c == 1.0 and loop.Tf == 0.0 and loop.R == INF for loop in self.loops)
 
 
 def constant(gains: tuple, steps: int) -> tuple:
@@ -130,7 +139,8 @@ MUTATIONS = ("derivative_kick", "sum_without_current_error", "integrate_while_sa
              "tracking_time_sqrt_without_td", "unfiltered",
              "cold_start", "first_gains_held", "proportional_on_error", "derivative_on_error",
              "unfiltered_measurement", "integral_on_filtered", "one_filter_section", "filter_from_zero",
-             "kick_at_start")
+             "kick_at_start", "preset_at_setpoint", "preset_only_with_u_start", "no_rate_limit",
+             "anti_windup_ignores_rate")
 
 
 def _q(x) -> Fraction:
@@ -149,6 +159,15 @@ def _sqrt(x: Fraction) -> Fraction:
     return Fraction(a, b)
 
 
+def _clip(x: Fraction, lo: Fraction | None, hi: Fraction | None) -> Fraction:
+    """x clipped to [lo, hi] (None: unbounded), lo tested first."""
+    if lo is not None and x < lo:
+        return lo
+    if hi is not None and x > hi:
+        return hi
+    return x
+
+
 def exact_u(case: Case, mutation: str | None = None) -> list[list[Fraction]]:
     """u[loop][k] of the law above, in exact rational arithmetic (independent of prlpid_fmi).
 
@@ -157,17 +176,21 @@ def exact_u(case: Case, mutation: str | None = None) -> list[list[Fraction]]:
     integrate_while_saturated (clamping never holds the sum), hold_sum_whenever_saturated (clamping
     holds it also when e pulls out of the limit), no_tracking (back-calculation without correction),
     tracking_time_is_ti (Tt = Ti always), tracking_time_sqrt_without_td (Tt = sqrt(Ti*Td) also when
-    Td = 0, i.e. Tt = 0), unfiltered (N ignored), cold_start (u_start ignored),
+    Td = 0, i.e. Tt = 0), unfiltered (N ignored), cold_start (no preset: I(-1) = 0, no rate band at the first sample),
     first_gains_held (the gains of sample 0 throughout), proportional_on_error (b ignored: ep = e),
     derivative_on_error (c ignored and unfiltered: ed = e), unfiltered_measurement (Tf ignored),
     integral_on_filtered (e = r - yf), one_filter_section (order 2 as one section of Tf),
     filter_from_zero (the filter starts at 0, not at y(0)), kick_at_start (the bumpless preset ignores b:
-    I(-1) = u_start / Ki).
+    I(-1) = u_start / Ki), preset_at_setpoint (the law before the measurement preset: r(0) in place of y(0)),
+    preset_only_with_u_start (the rule before: no preset when every u_start is 0), no_rate_limit (R ignored),
+    anti_windup_ignores_rate (the output clipped to the rate band, but the anti-windup sees only the limits
+    u_min, u_max: it neither holds nor tracks while only the rate limit binds).
     """
     if mutation is not None and mutation not in MUTATIONS:
         raise ValueError(mutation)
     dt = _q(case.dt)
-    preset = any(loop.u_start != 0 for loop in case.loops) and mutation != "cold_start"
+    preset = mutation != "cold_start" and (mutation != "preset_only_with_u_start"
+                                           or any(loop.u_start != 0 for loop in case.loops))
     sections = 1 if mutation == "one_filter_section" else case.filter_order
     out = []
     for loop in case.loops:
@@ -175,6 +198,9 @@ def exact_u(case: Case, mutation: str | None = None) -> list[list[Fraction]]:
         integral, last_error, derivative = Fraction(0), None, Fraction(0)
         previous_e = Fraction(0)
         b, c, tf = _q(loop.b), _q(loop.c), _q(loop.Tf)
+        rate = None if loop.R == INF or mutation == "no_rate_limit" else _q(loop.R)
+        limits = (None if loop.u_min == -INF else _q(loop.u_min), None if loop.u_max == INF else _q(loop.u_max))
+        last_u = None  # u(k-1) of the rate limit (None: none yet)
         if mutation == "unfiltered_measurement":
             tf = Fraction(0)
         T = tf / sections
@@ -200,9 +226,11 @@ def exact_u(case: Case, mutation: str | None = None) -> list[list[Fraction]]:
             ed = r - y if mutation == "derivative_on_error" else c * r - yf
             if k == 0:
                 last_error = Fraction(0) if mutation == "derivative_kick" else ed
-                if preset and ki != 0:
-                    kick = Fraction(0) if mutation == "kick_at_start" else kp * ((b - 1) * r)
-                    integral = (_q(loop.u_start) - kick) / ki
+                if preset:
+                    balanced_at = r if mutation == "preset_at_setpoint" else y
+                    kick = Fraction(0) if mutation == "kick_at_start" else kp * ((b - 1) * balanced_at)
+                    integral = (_q(loop.u_start) - kick) / ki if ki != 0 else Fraction(0)
+                    last_u = _q(loop.u_start)
                 previous_e = e
             d = (ed - last_error) / dt
             if case.N is not None and mutation != "unfiltered":
@@ -211,15 +239,18 @@ def exact_u(case: Case, mutation: str | None = None) -> list[list[Fraction]]:
             summed = previous_e if mutation == "sum_without_current_error" else e
             i_try = integral + summed * dt
             u_try = kp * (ep + td * d) + ki * i_try
-            u = u_try
-            if loop.u_min != -INF and u_try < _q(loop.u_min):
-                u = _q(loop.u_min)
-            elif loop.u_max != INF and u_try > _q(loop.u_max):
-                u = _q(loop.u_max)
+            lo, hi = limits
+            if rate is not None and last_u is not None:  # the band: max(u_min, down), min(u_max, up)
+                down, up = last_u - rate * dt, last_u + rate * dt
+                lo = down if lo is None or down > lo else lo
+                hi = up if hi is None or up < hi else hi
+            u = _clip(u_try, lo, hi)
+            # what the anti-windup sees as the saturated output
+            limited = _clip(u_try, *limits) if mutation == "anti_windup_ignores_rate" else u
             new_integral = i_try
-            if u != u_try:  # saturated
+            if limited != u_try:  # saturated
                 if case.anti_windup == "clamping":
-                    hold = (u_try - u) * (kp * e) > 0  # e pushes further into the limit
+                    hold = (u_try - limited) * (kp * e) > 0  # e pushes further into the limit
                     if mutation == "hold_sum_whenever_saturated":
                         hold = True
                     elif mutation == "integrate_while_saturated":
@@ -235,8 +266,8 @@ def exact_u(case: Case, mutation: str | None = None) -> list[list[Fraction]]:
                         tt = _sqrt(_q(ti) * td)
                     else:
                         tt = _sqrt(_q(ti) * td) if td > 0 else _q(ti)
-                    new_integral = i_try + dt / (tt + dt) * (u - u_try) / ki
-            integral, last_error, derivative, previous_e = new_integral, ed, d, e
+                    new_integral = i_try + dt / (tt + dt) * (limited - u_try) / ki
+            integral, last_error, derivative, previous_e, last_u = new_integral, ed, d, e, u
             u_out.append(u)
         out.append(u_out)
     return out
@@ -681,7 +712,7 @@ MEASUREMENT_FILTER_SECOND_ORDER = Case(
              u=(0.5625, 0.61328125, 0.661376953125, 0.7062530517578125, 0.746647834777832), c=0.0, Tf=1.0),
     ))
 
-# k=0: [Kp 1, Ti 0.5, Td 0, Ki 2] I(-1) = (u_start - Kp*((b - 1)*r))/Ki = (1.5 - 1*((0.5 - 1)*0.75))/2 = 0.9375;
+# k=0: [Kp 1, Ti 0.5, Td 0, Ki 2] I(-1) = (u_start - Kp*((b - 1)*y(0)))/Ki = (1.5 - 1*((0.5 - 1)*0.75))/2 = 0.9375;
 #      e = 0.75 - 0.75 = 0, ep = 0.5*0.75 - 0.75 = -0.375; D = 0 (e(-1) := e(0)); I_try = 0.9375 + 0*0.5 = 0.9375;
 #      u_try = 1*(-0.375 + 0*0) + 2*0.9375 = 1.5; u = 1.5; I = 0.9375
 # k=1: e = 0.75 - 0.75 = 0, ep = 0.5*0.75 - 0.75 = -0.375; D = (0 - 0)/0.5 = 0; I_try = 0.9375 + 0*0.5 = 0.9375;
@@ -693,7 +724,7 @@ MEASUREMENT_FILTER_SECOND_ORDER = Case(
 BUMPLESS_SETPOINT_WEIGHT = Case(
     name='bumpless_setpoint_weight',
     what=('bumpless start u_start = 1.5 with b = 0.5 and r(0) = y(0) = 0.75 != 0: '
-          'I(-1) = (u_start - Kp*(b - 1)*r)/Ki gives u(0) = u_start (u_start/Ki would give 1.125), '
+          'I(-1) = (u_start - Kp*(b - 1)*y(0))/Ki gives u(0) = u_start (u_start/Ki would give 1.125), '
           'and the steady closed loop y = 0.5*u holds it'),
     dt=0.5, anti_windup='clamping', static_gain=0.5,
     loops=(
@@ -740,7 +771,115 @@ TWO_LOOPS_STRUCTURE = Case(
              u=(0.625, 0.3125, 0.71875, 0.09375)),
     ))
 
+# -- the measurement preset at every start, and the rate limit --------------------------------------------
+# The preset balances the PID at y(0) before every first sample (u_start = 0 too); "band" is [lo(k), hi(k)].
+
+# k=0: [Kp 1, Ti 1, Td 0, Ki 1] I(-1) = (u_start - Kp*((b - 1)*y(0)))/Ki = (1 - 1*((0.5 - 1)*0.5))/1 = 1.25;
+#      e = 1 - 0.5 = 0.5, ep = 0.5*1 - 0.5 = 0; D = 0 (e(-1) := e(0)); I_try = 1.25 + 0.5*0.5 = 1.5;
+#      u_try = 1*(0 + 0*0) + 1*1.5 = 1.5; u = 1.5; I = 1.5
+#      (= u_start + Kp*b*(r - y) + Ki*e*dt = 1 + 0.25 + 0.25; the preset at r(0) would give I(-1) = 1.5, u = 1.75)
+# k=1: e = 1 - 0.75 = 0.25, ep = 0.5*1 - 0.75 = -0.25; D = (0.25 - 0.5)/0.5 = -0.5; I_try = 1.5 + 0.25*0.5 = 1.625;
+#      u_try = 1*(-0.25 + 0*(-0.5)) + 1*1.625 = 1.375; u = 1.375; I = 1.625
+# k=2: e = 1 - 0.6875 = 0.3125, ep = 0.5*1 - 0.6875 = -0.1875; D = (0.3125 - 0.25)/0.5 = 0.125;
+#      I_try = 1.625 + 0.3125*0.5 = 1.78125; u_try = 1*(-0.1875 + 0*0.125) + 1*1.78125 = 1.59375; u = 1.59375;
+#      I = 1.78125
+# k=3: e = 1 - 0.796875 = 0.203125, ep = 0.5*1 - 0.796875 = -0.296875; D = (0.203125 - 0.3125)/0.5 = -0.21875;
+#      I_try = 1.78125 + 0.203125*0.5 = 1.8828125; u_try = 1*(-0.296875 + 0*(-0.21875)) + 1*1.8828125 = 1.5859375;
+#      u = 1.5859375; I = 1.8828125
+# k=4: e = 1 - 0.79296875 = 0.20703125, ep = 0.5*1 - 0.79296875 = -0.29296875;
+#      D = (0.20703125 - 0.203125)/0.5 = 0.0078125; I_try = 1.8828125 + 0.20703125*0.5 = 1.986328125;
+#      u_try = 1*(-0.29296875 + 0*0.0078125) + 1*1.986328125 = 1.693359375; u = 1.693359375; I = 1.986328125
+PRESET_SETPOINT_STEP = Case(
+    name='preset_setpoint_step',
+    what=('a setpoint step at t = 0 from a steady state (u_start = 1 holds y = 0.5 through y = 0.5*u) with b = 0.5: '
+          'the preset at y(0) lets the step act through b, u(0) = u_start + Kp*b*(r - y) + Ki*e*dt = 1.5 '
+          '(the preset at r(0) would give 1.75)'),
+    dt=0.5, anti_windup='clamping', static_gain=0.5,
+    loops=(
+        Loop(r=(1.0, 1.0, 1.0, 1.0, 1.0),
+             y=(0.5, 0.75, 0.6875, 0.796875, 0.79296875),
+             gains=constant((1.0, 1.0, 0.0), 5),
+             u=(1.5, 1.375, 1.59375, 1.5859375, 1.693359375), u_min=0.0, u_max=4.0, u_start=1.0, b=0.5),
+    ))
+
+# k=0: [Kp 1, Ti 1, Td 0, Ki 1] I(-1) = (0 - 1*((0.5 - 1)*1))/1 = 0.5; e = 1 - 1 = 0, ep = 0.5*1 - 1 = -0.5;
+#      D = 0 (e(-1) := e(0)); I_try = 0.5 + 0*0.5 = 0.5; u_try = 1*(-0.5 + 0*0) + 1*0.5 = 0; u = 0; I = 0.5
+#      (without a preset, the rule before for u_start = 0: I(-1) = 0, u = -0.5)
+# k=1: e = 0, ep = -0.5; D = (0 - 0)/0.5 = 0; I_try = 0.5; u_try = 1*(-0.5 + 0*0) + 1*0.5 = 0; u = 0; I = 0.5
+# k=2: e = 1 - 0.5 = 0.5, ep = 0.5*1 - 0.5 = 0; D = (0.5 - 0)/0.5 = 1; I_try = 0.5 + 0.5*0.5 = 0.75;
+#      u_try = 1*(0 + 0*1) + 1*0.75 = 0.75; u = 0.75; I = 0.75
+PRESET_ZERO_START = Case(
+    name='preset_zero_start',
+    what=('the preset happens also when u_start = 0: with b = 0.5 and r(0) = y(0) = 1, I(-1) = Kp*(1 - b)*y(0)/Ki '
+          'gives u(0) = u_start = 0 (no preset would give -0.5)'),
+    dt=0.5, anti_windup='none',
+    loops=(
+        Loop(r=(1.0, 1.0, 1.0),
+             y=(1.0, 1.0, 0.5),
+             gains=constant((1.0, 1.0, 0.0), 3),
+             u=(0.0, 0.0, 0.75), b=0.5),
+    ))
+
+# R*dt = 0.5*0.5 = 0.25; u(-1) = u_start = 0.
+# k=0: [Kp 2, Ti 1, Td 0, Ki 2] I(-1) = (0 - 2*((1 - 1)*0))/2 = 0; e = 1 - 0 = 1; D = 0 (e(-1) := e(0));
+#      I_try = 0 + 1*0.5 = 0.5; u_try = 2*(1 + 0*0) + 2*0.5 = 3; band [max(-2, 0 - 0.25), min(2, 0 + 0.25)] =
+#      [-0.25, 0.25]; u = 0.25; saturated, e pushes further: I = 0 (held)
+# k=1: e = 1 - 0.25 = 0.75; D = (0.75 - 1)/0.5 = -0.5; I_try = 0 + 0.75*0.5 = 0.375;
+#      u_try = 2*(0.75 + 0*(-0.5)) + 2*0.375 = 2.25; band [0, 0.5]; u = 0.5; held: I = 0
+# k=2: e = 1 - 0.5 = 0.5; D = (0.5 - 0.75)/0.5 = -0.5; I_try = 0 + 0.5*0.5 = 0.25;
+#      u_try = 2*(0.5 + 0*(-0.5)) + 2*0.25 = 1.5; band [0.25, 0.75]; u = 0.75; held: I = 0
+#      (u_try lies within [u_min, u_max]: only the rate limit binds, and the anti-windup holds all the same)
+# k=3: e = 1 - 0.75 = 0.25; D = (0.25 - 0.5)/0.5 = -0.5; I_try = 0 + 0.25*0.5 = 0.125;
+#      u_try = 2*(0.25 + 0*(-0.5)) + 2*0.125 = 0.75; band [0.5, 1]; u = 0.75; I = 0.125
+# k=4: e = 1 - 0.75 = 0.25; D = (0.25 - 0.25)/0.5 = 0; I_try = 0.125 + 0.25*0.5 = 0.25;
+#      u_try = 2*(0.25 + 0*0) + 2*0.25 = 1; band [0.5, 1]; u = 1 (at the band's edge: not saturated); I = 0.25
+# k=5: e = 1 - 1 = 0; D = (0 - 0.25)/0.5 = -0.5; I_try = 0.25 + 0*0.5 = 0.25; u_try = 2*(0 + 0*(-0.5)) + 2*0.25 = 0.5;
+#      band [0.75, 1.25]; u = 0.75; saturated, but e = 0 does not push: I = I_try = 0.25
+# k=6: e = 1 - 0.75 = 0.25; D = (0.25 - 0)/0.5 = 0.5; I_try = 0.25 + 0.25*0.5 = 0.375;
+#      u_try = 2*(0.25 + 0*0.5) + 2*0.375 = 1.25; band [0.5, 1]; u = 1; held: I = 0.25
+# k=7: e = 1 - 1 = 0; D = (0 - 0.25)/0.5 = -0.5; I_try = 0.25 + 0*0.5 = 0.25; u_try = 2*(0 + 0*(-0.5)) + 2*0.25 = 0.5;
+#      band [0.75, 1.25]; u = 0.75; I = 0.25
+RATE_LIMIT_CLAMPING = Case(
+    name='rate_limit_clamping',
+    what=('rate limit R = 0.5/s (0.25 per sample) from u_start = 0 on a setpoint step, clamping: the band '
+          'binds inside [u_min, u_max] = [-2, 2] and the sum is held as at a limit'),
+    dt=0.5, anti_windup='clamping', static_gain=1.0,
+    loops=(
+        Loop(r=(1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0),
+             y=(0.0, 0.25, 0.5, 0.75, 0.75, 1.0, 0.75, 1.0),
+             gains=constant((2.0, 1.0, 0.0), 8),
+             u=(0.25, 0.5, 0.75, 0.75, 1.0, 0.75, 1.0, 0.75), u_min=-2.0, u_max=2.0, R=0.5),
+    ))
+
+# R*dt = 1*0.5 = 0.5; u(-1) = u_start = 0.5; Tt = Ti = 0.5 (Td = 0), g = dt/(Tt + dt) = 0.5.
+# k=0: [Kp 1, Ti 0.5, Td 0, Ki 2] I(-1) = (0.5 - 1*((1 - 1)*0.5))/2 = 0.25; e = 1.5 - 0.5 = 1; D = 0 (e(-1) := e(0));
+#      I_try = 0.25 + 1*0.5 = 0.75; u_try = 1*(1 + 0*0) + 2*0.75 = 2.5; band [max(-4, 0.5 - 0.5), min(4, 0.5 + 0.5)] =
+#      [0, 1]; u = 1; saturated: I = 0.75 + 0.5*(1 - 2.5)/2 = 0.375
+# k=1: e = 1.5 - 1 = 0.5; D = (0.5 - 1)/0.5 = -1; I_try = 0.375 + 0.5*0.5 = 0.625;
+#      u_try = 1*(0.5 + 0*(-1)) + 2*0.625 = 1.75; band [0.5, 1.5]; u = 1.5; I = 0.625 + 0.5*(1.5 - 1.75)/2 = 0.5625
+# k=2: e = 1.5 - 1.5 = 0; D = (0 - 0.5)/0.5 = -1; I_try = 0.5625 + 0*0.5 = 0.5625;
+#      u_try = 1*(0 + 0*(-1)) + 2*0.5625 = 1.125; band [1, 2]; u = 1.125; I = 0.5625
+# k=3: e = 1.5 - 1.125 = 0.375; D = (0.375 - 0)/0.5 = 0.75; I_try = 0.5625 + 0.375*0.5 = 0.75;
+#      u_try = 1*(0.375 + 0*0.75) + 2*0.75 = 1.875; band [0.625, 1.625]; u = 1.625;
+#      I = 0.75 + 0.5*(1.625 - 1.875)/2 = 0.6875
+# k=4: e = 1.5 - 1.625 = -0.125; D = (-0.125 - 0.375)/0.5 = -1; I_try = 0.6875 + (-0.125)*0.5 = 0.625;
+#      u_try = 1*(-0.125 + 0*(-1)) + 2*0.625 = 1.125; band [1.125, 2.125]; u = 1.125 (at the band's edge); I = 0.625
+# k=5: e = 1.5 - 1.125 = 0.375; D = (0.375 - (-0.125))/0.5 = 1; I_try = 0.625 + 0.375*0.5 = 0.8125;
+#      u_try = 1*(0.375 + 0*1) + 2*0.8125 = 2; band [0.625, 1.625]; u = 1.625; I = 0.8125 + 0.5*(1.625 - 2)/2 = 0.71875
+RATE_LIMIT_BACK_CALCULATION = Case(
+    name='rate_limit_back_calculation',
+    what=('rate limit R = 1/s (0.5 per sample) from a steady u_start = 0.5 on a setpoint step 0.5 -> 1.5, '
+          'back-calculation: the band binds inside [u_min, u_max] = [-4, 4] and the sum tracks the band'),
+    dt=0.5, anti_windup='back_calculation', static_gain=1.0,
+    loops=(
+        Loop(r=(1.5, 1.5, 1.5, 1.5, 1.5, 1.5),
+             y=(0.5, 1.0, 1.5, 1.125, 1.625, 1.125),
+             gains=constant((1.0, 0.5, 0.0), 6),
+             u=(1.0, 1.5, 1.125, 1.625, 1.125, 1.625), u_min=-4.0, u_max=4.0, u_start=0.5, R=1.0),
+    ))
+
 CASES = (P_ONLY, PI_CLAMPING, PID_BACK_CALCULATION, PI_BACK_CALCULATION_GIVEN_TT, PID_FIRST_SAMPLE,
          PID_DERIVATIVE_FILTER, PD_WITHOUT_INTEGRAL, BUMPLESS_START, GAIN_CHANGE, TWO_LOOPS,
          SETPOINT_WEIGHT, DERIVATIVE_ON_MEASUREMENT, MEASUREMENT_FILTER_FIRST_ORDER, MEASUREMENT_FILTER_SECOND_ORDER,
-         BUMPLESS_SETPOINT_WEIGHT, TWO_LOOPS_STRUCTURE)
+         BUMPLESS_SETPOINT_WEIGHT, TWO_LOOPS_STRUCTURE, PRESET_SETPOINT_STEP, PRESET_ZERO_START, RATE_LIMIT_CLAMPING,
+         RATE_LIMIT_BACK_CALCULATION)

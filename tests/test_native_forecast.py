@@ -5,7 +5,8 @@ and the FMU through the standard FMI calls. Every comparison is `==` on floats (
 mean reward, every step's reward, every predicted measurement and the prior's full serialized state
 afterwards. States, gains, setpoints and overrides are random; the anti-windup modes, the derivative
 filter, the 2-DOF structure (setpoint weights b, c, the measurement filter Tf of order 1 and 2, changed by
-set_structure between calls), the coupled PID, divergence, a discarded step and the error paths are all covered.
+set_structure between calls), the output rate limit (per loop, from the preset's output, from no previous output
+and from a warmed-up one), the coupled PID, divergence, a discarded step and the error paths are all covered.
 """
 import dataclasses
 import math
@@ -101,7 +102,7 @@ def _warm_up(plant, pid, spec, rng, steps, coupling=None):
 def _pid_state(pid):
     s = pid.get_state()
     return (s.integral.tolist(), s.last_error.tolist(), s.derivative.tolist(), s.initialized, s.filtered.tolist(),
-            s.filter_stage.tolist())
+            s.filter_stage.tolist(), str(s.last_output.tolist()))  # str: NaN == NaN
 
 
 def _compare(plant, prior, native, fmi, args):
@@ -278,6 +279,124 @@ def test_loop_core_forecast_with_a_tuned_structure(fmi_version, scenario, struct
     assert runs[0] == runs[1]
     assert [r for e, r, _ in runs[0] if e == 0] == [r for e, r, _ in runs[0] if e == 2]
     assert [r for e, r, _ in runs[0] if e == 0] != [r for e, r, _ in runs[0] if e == 1]
+
+
+def _rate_limits(spec, n):
+    """Per loop, a rate limit that binds for the spec's gains: 5 % of the control span per sample; the middle loop
+    of three without one."""
+    span = spec.u_limits[1] - spec.u_limits[0]
+    return [math.inf if n == 3 and i == 1 else 0.05 * span / TS for i in range(n)]
+
+
+def _rate_bound(pid, spec):
+    """Wrap pid.step_values (the FMI path's Python PID): record per step whether some rate-limited loop's output sat
+    on its rate band inside the limits (the rate limit, not saturation, clipped it)."""
+    core = pid.pid if isinstance(pid, CoupledPID) else pid
+    rates, step_values, bound = core.u_rate_limit.tolist(), pid.step_values, []
+
+    def counting(*args):
+        previous = list(core.last_output)
+        u = step_values(*args)
+        bound.append(any(r != math.inf and p == p and u[i] not in spec.u_limits and u[i] in (p - r * TS, p + r * TS)
+                         for i, (r, p) in enumerate(zip(rates, previous))))
+        return u
+
+    pid.step_values = counting
+    return bound
+
+
+@pytest.mark.parametrize("anti_windup", ["clamping", "back_calculation", "none"])
+@pytest.mark.parametrize("name", PLANTS)
+def test_rate_limit_native_equals_fmi_path_bit_for_bit(name, fmi_version, anti_windup):
+    """The rate limit (control/pid.py): native == FMI path from a fresh PID with no previous output (the first
+    sample not rate limited), from the bumpless preset (the band around u0), and from warmed-up PIDs; the band
+    binds inside the limits on both paths."""
+    spec = SPECS[name]
+    n = len(spec.inputs)
+    rng = np.random.default_rng([PLANTS.index(name), fmi_version, len(anti_windup), 17])
+    rates = _rate_limits(spec, n)
+    pid = PID(TS, n, spec.u_limits[0], spec.u_limits[1], anti_windup, setpoint_weight=0.6,
+              derivative_filter_N=8.0 if anti_windup == "back_calculation" else None, u_rate_limit=rates)
+    assert pid.u_rate_limit.tolist() == rates
+    plant, prior, native, fmi = _pair(name, fmi_version, pid, 10, RewardWeights(control_variation_weight=0.3))
+    with plant, prior:
+        for extra, value in spec.extra_inputs:
+            plant.set({extra: value})
+        y = plant.step_values(rng.uniform(*spec.input_range, n).tolist())
+        r, Kp, Ti, Td, _, u_prev = _random_call(rng, spec, n)
+        assert all(v != v for v in pid.last_output)  # NaN: no previous output yet
+        _compare(plant, prior, native, fmi, (r, y, Kp, Ti, Td, None, u_prev))
+        u0 = rng.uniform(*spec.u_limits, n).tolist()
+        pid.preset_output(u0, y, Kp, Ti)  # as LoopCore before its first step: the band starts around u0
+        assert pid.last_output == u0
+        _compare(plant, prior, native, fmi, (r, y, Kp, Ti, Td, None, u0))
+        y = _warm_up(plant, pid, spec, rng, 5)
+        bound = _rate_bound(pid, spec)
+        for call in range(6):
+            r, Kp, Ti, Td, _, u_prev = _random_call(rng, spec, n)
+            if call == 0:
+                Ti = [math.inf] * n
+            _compare(plant, prior, native, fmi, (r, y, Kp, Ti, Td, None, u_prev))
+            y = _warm_up(plant, pid, spec, rng, 1)
+        assert any(bound)  # the rate limit clipped u in the roll-outs
+
+
+@pytest.mark.parametrize("anti_windup", ["clamping", "back_calculation"])
+def test_quadrotor_coupled_pid_with_rate_limits(fmi_version, anti_windup):
+    """Eq. 26-27 with rate limits on roll and yaw (none on pitch), b != 1 and a measurement filter on one loop."""
+    spec = SPECS["QuadrotorAttitude"]
+    rng = np.random.default_rng([19, fmi_version, len(anti_windup)])
+    rates = _rate_limits(spec, 3)
+    pid = CoupledPID(TS, -2.0, 2.0, anti_windup, derivative_filter_N=10.0, setpoint_weight=[0.5, 1.0, 0.8],
+                     derivative_weight=0.0, measurement_filter_s=[2 * TS, 0.0, 0.0], u_rate_limit=rates)
+    plant, prior, native, fmi = _pair("QuadrotorAttitude", fmi_version, pid, 10,
+                                      RewardWeights(control_variation_weight=1.0))
+    with plant, prior:
+        y = plant.step_values(rng.uniform(*spec.input_range, 3).tolist())
+        r, Kp, Ti, Td, coupling, u_prev = _random_call(rng, spec, 3, coupled=True)
+        pid.preset_output(u_prev, y, Kp, Ti)
+        _compare(plant, prior, native, fmi, (r, y, Kp, Ti, Td, coupling, u_prev))  # from the preset
+        y = _warm_up(plant, pid, spec, rng, 4, coupling)
+        bound = _rate_bound(pid, spec)
+        for _ in range(8):
+            r, Kp, Ti, Td, coupling, u_prev = _random_call(rng, spec, 3, coupled=True)
+            _compare(plant, prior, native, fmi, (r, y, Kp, Ti, Td, coupling, u_prev))
+            y = _warm_up(plant, pid, spec, rng, 1, coupling)
+        assert any(bound)
+
+
+@pytest.mark.parametrize("scenario, rates, gains", [
+    ("first_order", (5.0,), ([8.0], [1.0], [0.05])),
+    ("two_tank", (10.0,), ([4.0], [40.0], [1.0])),
+    ("quadrotor", (3.0, math.inf, 2.0), ([2.0] * 3, [5.0] * 3, [0.3] * 3)),
+], ids=["first_order", "two_tank", "quadrotor"])
+def test_loop_core_forecast_with_rate_limits(fmi_version, scenario, rates, gains):
+    """The scenario's plant.loops[i].u_rate_limit through make_pid: the loop's forecast rewards, native and FMI path,
+    equal over an episode that starts with the bumpless preset (LoopCore always presets, the band around u0)."""
+    config = preset(scenario)
+    config = dataclasses.replace(config, fmi_version=fmi_version, episode_steps=40, tuned_structure=None,
+                                 loops=tuple(dataclasses.replace(l, u_rate_limit=r) for l, r in zip(config.loops, rates)))
+    coupling = [0.1, -0.05, 0.2, 0.0, -0.1, 0.15] if config.coupled else None
+    cores = LoopCore(config), LoopCore(config, forecast_path="fmi")
+    assert isinstance(cores[0].forecast, NativeForecast) and isinstance(cores[1].forecast, FmiForecast)
+    runs, bound = [], 0
+    try:
+        for core in cores:
+            pid = core.pid.pid if config.coupled else core.pid
+            assert pid.u_rate_limit.tolist() == list(rates)
+            runs.append([])
+            core.reset(np.random.default_rng(7))
+            for _ in range(25):
+                previous = list(core.pid_output)
+                core.step(*gains, coupling)
+                runs[-1].append((core.forecast_reward, list(core.measurement), list(core.pid_output)))
+                steps = [abs(u - p) for u, p in zip(core.pid_output, previous)]
+                assert all(s <= r * TS * (1 + 1e-12) for s, r in zip(steps, rates))
+                bound += sum(r != math.inf and math.isclose(s, r * TS, rel_tol=1e-9) for s, r in zip(steps, rates))
+    finally:
+        for core in cores:
+            core.close()
+    assert runs[0] == runs[1] and bound > 0  # the rate limit moved u at its most in some samples
 
 
 def test_fresh_pid_and_no_overrides_and_zero_control_weight(fmi_version):

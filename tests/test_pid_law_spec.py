@@ -5,14 +5,15 @@ in exact rational arithmetic without prlpid_fmi). Compared: exactly (`==`) when 
 numbers are dyadic, so that no implementation rounds; otherwise to 1e-12 relative (1e-12 absolute
 near zero).
 
-1. Python: prlpid_fmi.control.PID with the case's structure (b, c, Tf per loop, the filter order),
-   driven open loop with the case's r, y and per-sample gains (preset_output before the first step for
-   a bumpless start, as LoopCore does). Every case.
+1. Python: prlpid_fmi.control.PID with the case's structure (b, c, Tf per loop, the filter order) and
+   rate limits R, driven open loop with the case's r, y and per-sample gains (preset_output at y(0)
+   with u_start before the first step, always, as LoopCore does). Every case.
 2. The exported C controller (formats.render(..., "c") of export.controller.from_schedule), compiled
    once per module with gcc into one driver for all cases, driven open loop through stdin. The case
    becomes a gain table: one row for constant gains, or, when the gains change with the setpoint of
    loop 1, a row per setpoint value (the table is then looked up exactly at its breakpoints); the
-   table carries the case's b, c, Tf and filter order, which the export turns into constants.
+   table carries the case's b, c, Tf, filter order and rate limits, which the export turns into
+   constants; the block is reset with the case's u_start (its first sample presets from it).
    Skipped, with the reason: Ti = inf (from_schedule refuses non-finite gains) and a given Tt (the
    exports always use the default rule); `test_the_export_skip_reasons_still_hold` fails once either
    reason goes away.
@@ -28,8 +29,8 @@ near zero).
    its u(0..n-1) from y(0). Only those cases (single loop, constant r and gains) are checked this
    way; the others are skipped with the reason. FMI 2.0 build only (forecast.c is the same code
    under every FMI version, and tests/test_native_forecast.py compares native and FMI paths bit for
-   bit for both versions). The native forecast is skipped, with the reason, while its binding
-   predates the 2-DOF law (ABI version 1, which carries no b, c, Tf nor the filter's state).
+   bit for both versions). The PID is preset (at y(0), from u_start) before the forecast is called,
+   as LoopCore does; the forecast itself rolls out from the state it is given.
 
 `test_each_mutation_of_the_law_is_caught` shows the cases can fail: each deliberately wrong law of
 pid_law_cases.MUTATIONS (a derivative kick on the first sample, clamping that never holds the sum,
@@ -62,7 +63,7 @@ STATIC_VALVE = Path(__file__).parent / "plants" / "StaticValve"
 def _numbers(case) -> list:
     values = [case.dt] + ([case.N] if case.N is not None else [])
     for loop in case.loops:
-        values += [*loop.r, *loop.y, *loop.u, loop.u_min, loop.u_max, loop.u_start, loop.b, loop.c, loop.Tf]
+        values += [*loop.r, *loop.y, *loop.u, loop.u_min, loop.u_max, loop.u_start, loop.b, loop.c, loop.Tf, loop.R]
         values += [g for gains in loop.gains for g in gains] + ([loop.Tt] if loop.Tt is not None else [])
     return [v for v in values if math.isfinite(v)]
 
@@ -141,6 +142,23 @@ def test_the_cases_cover_what_they_claim():
     assert start.b != 1 and start.r[0] == start.y[0] != 0 and start.u[0] == start.u_start
     two = by["two_loops_structure"].loops
     assert two[0].Tf > 0 and two[1].Tf == 0 and two[0].b != two[1].b and two[0].c != two[1].c
+    # the preset at y(0): a setpoint step at t = 0 from a steady start acts through b; a zero start is preset too
+    step = by["preset_setpoint_step"]
+    (loop,) = step.loops
+    assert loop.b != 1 and loop.r[0] != loop.y[0] and loop.u_start != 0 and loop.y[0] == step.static_gain * loop.u_start
+    assert loop.u[0] == loop.u_start + loop.gains[0][0] * loop.b * (loop.r[0] - loop.y[0]) \
+        + loop.gains[0][0] / loop.gains[0][1] * (loop.r[0] - loop.y[0]) * step.dt
+    (loop,) = by["preset_zero_start"].loops
+    assert loop.u_start == 0 and loop.b != 1 and loop.r[0] == loop.y[0] != 0 and loop.u[0] == 0
+    # the rate limit binds inside the limits (the band, not u_min/u_max, saturates), under both anti-windups
+    for name, mode in (("rate_limit_clamping", "clamping"), ("rate_limit_back_calculation", "back_calculation")):
+        case = by[name]
+        (loop,) = case.loops
+        assert case.anti_windup == mode and loop.R < INF and case.static_gain is not None
+        steps = [abs(u - v) for u, v in zip(loop.u, (loop.u_start,) + loop.u[:-1])]
+        assert max(steps) == loop.R * case.dt and all(s <= loop.R * case.dt for s in steps)
+        assert all(loop.u_min < u < loop.u_max for u in loop.u)
+    assert by["rate_limit_back_calculation"].loops[0].u_start != 0  # the band starts around u_start
 
 
 CAUGHT_BY = {"derivative_kick": "pid_first_sample", "integrate_while_saturated": "pi_clamping",
@@ -150,7 +168,9 @@ CAUGHT_BY = {"derivative_kick": "pid_first_sample", "integrate_while_saturated":
              "sum_without_current_error": "pi_clamping", "proportional_on_error": "setpoint_weight",
              "derivative_on_error": "derivative_on_measurement", "unfiltered_measurement": "measurement_filter_first_order",
              "integral_on_filtered": "measurement_filter_first_order", "one_filter_section": "measurement_filter_second_order",
-             "filter_from_zero": "measurement_filter_first_order", "kick_at_start": "bumpless_setpoint_weight"}
+             "filter_from_zero": "measurement_filter_first_order", "kick_at_start": "bumpless_setpoint_weight",
+             "preset_at_setpoint": "preset_setpoint_step", "preset_only_with_u_start": "preset_zero_start",
+             "no_rate_limit": "rate_limit_clamping", "anti_windup_ignores_rate": "rate_limit_back_calculation"}
 
 
 @pytest.mark.parametrize("mutation", MUTATIONS)
@@ -171,17 +191,16 @@ def _python_pid(case):
     return PID(case.dt, case.n_loops, [l.u_min for l in case.loops], [l.u_max for l in case.loops],
                case.anti_windup, Tt=None if Tts[0] is None else Tts, derivative_filter_N=case.N,
                setpoint_weight=[l.b for l in case.loops], derivative_weight=[l.c for l in case.loops],
-               measurement_filter_s=[l.Tf for l in case.loops], measurement_filter_order=case.filter_order)
+               measurement_filter_s=[l.Tf for l in case.loops], measurement_filter_order=case.filter_order,
+               u_rate_limit=[l.R for l in case.loops])
 
 
 @pytest.mark.parametrize("name", IDS)
 def test_python_pid(name):
     case = BY_NAME[name]
     pid = _python_pid(case)
-    u_start = [loop.u_start for loop in case.loops]
-    if any(u_start):  # LoopCore's rule: preset when any start output is non-zero
-        r, _, Kp, Ti, _ = _per_sample(case, 0)
-        pid.preset_output(u_start, r, Kp, Ti)
+    _, y, Kp, Ti, _ = _per_sample(case, 0)
+    pid.preset_output([loop.u_start for loop in case.loops], y, Kp, Ti)  # LoopCore's rule: always, at y(0)
     out = []
     for k in range(case.steps):
         out.append(pid.step(*_per_sample(case, k)).tolist())
@@ -223,7 +242,8 @@ def _schedule(case):
         u_max=np.array([l.u_max for l in case.loops], float), derivative_filter_N=case.N,
         setpoint_weight=np.array([l.b for l in case.loops], float),
         derivative_weight=np.array([l.c for l in case.loops], float),
-        measurement_filter_s=np.array([l.Tf for l in case.loops], float), measurement_filter_order=case.filter_order)
+        measurement_filter_s=np.array([l.Tf for l in case.loops], float), measurement_filter_order=case.filter_order,
+        u_rate_limit=np.array([l.R for l in case.loops], float))
 
 
 def _controller(case):
@@ -386,13 +406,11 @@ def test_forecast_predicts_the_closed_loop(name, path, static_valve):
     """The forecast's predicted measurements on the prior q = Kv*opening (Kv = g) are g*u(0..n-1)."""
     from prlpid_fmi.control import RewardWeights
     from prlpid_fmi.fmu import FmuPlant
-    from prlpid_fmi.loop.forecast import make_forecast, native
+    from prlpid_fmi.loop.forecast import make_forecast
     from prlpid_fmi.loop.forecast.fmi import FmiForecast
     from prlpid_fmi.loop.forecast.native import NativeForecast
 
     case = BY_NAME[name]
-    if path == "native" and native.ABI_VERSION < 2:
-        pytest.skip("native forecast predates the 2-DOF law (forecast ABI version 1: no b, c, Tf, no filter state)")
     if case.static_gain is None:
         pytest.skip(f"{name}: not a closed loop through a static plant (open-loop inputs, changing setpoint "
                     "or gains, or more loops than the one-input valve): the forecast cannot be fed its y")
@@ -400,8 +418,7 @@ def test_forecast_predicts_the_closed_loop(name, path, static_valve):
     g = case.static_gain
     pid = _python_pid(case)
     Kp, Ti, Td = loop.gains[0]
-    if loop.u_start:
-        pid.preset_output([loop.u_start], [loop.r[0]], [Kp], [Ti])
+    pid.preset_output([loop.u_start], [loop.y[0]], [Kp], [Ti])  # as LoopCore, before the forecast
     parameters = {"Kv": g}
     with FmuPlant(static_valve, ["opening"], ["q"], case.dt, parameters, "plant") as plant, \
             FmuPlant(static_valve, ["opening"], ["q"], case.dt, parameters, "prior") as prior:

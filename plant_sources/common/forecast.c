@@ -9,6 +9,7 @@
 typedef struct {
     double integral[PRLPID_MAX_LOOPS], last_error[PRLPID_MAX_LOOPS], derivative[PRLPID_MAX_LOOPS];
     double filtered[PRLPID_MAX_LOOPS], stage[PRLPID_MAX_LOOPS];
+    double last_output[PRLPID_MAX_LOOPS];
     int initialized;
 } PidState;
 
@@ -23,8 +24,8 @@ size_t prlpid_forecast_struct_size(int which) {
     }
 }
 
-/* One sample on the integral, proportional and derivative errors e, ep, ed (pid.py PID.step_weighted);
- * writes saturated u. */
+/* One sample on the integral, proportional and derivative errors e, ep, ed (pid.py PID.step_weighted),
+ * clipped to the limits, or to the rate limit's band within them; writes saturated u. */
 static int pid_step(const PrlpidForecastSetup *s, const PrlpidForecastInput *in, PidState *st,
                     const double *errors, const double *p_errors, const double *d_errors, double *u_out) {
     const double dt = s->pid_sample_time;
@@ -49,6 +50,14 @@ static int pid_step(const PrlpidForecastSetup *s, const PrlpidForecastInput *in,
         u_unsat = kp * (p_errors[i] + td * d) + ki * integral;
         lo = s->u_min[i];
         hi = s->u_max[i];
+        if (s->u_rate_limit[i] != HUGE_VAL && st->last_output[i] == st->last_output[i]) {
+            /* the rate limit: a band around the previous output; max(lo, down) and min(hi, up) as Python's
+             * max and min (the first argument unless the second is strictly beyond it) */
+            double step = s->u_rate_limit[i] * dt;
+            double down = st->last_output[i] - step, up = st->last_output[i] + step;
+            lo = down > lo ? down : lo;
+            hi = up < hi ? up : hi;
+        }
         u = u_unsat < lo ? lo : (u_unsat > hi ? hi : u_unsat); /* NaN passes through */
         if (u != u_unsat) { /* saturated */
             if (s->anti_windup == PRLPID_CLAMPING) {
@@ -71,6 +80,7 @@ static int pid_step(const PrlpidForecastSetup *s, const PrlpidForecastInput *in,
         st->integral[i] = integral;
         st->last_error[i] = ed;
         st->derivative[i] = d;
+        st->last_output[i] = u; /* Python keeps it only when a loop is rate limited; it is read only then */
         u_out[i] = u;
     }
     return PRLPID_OK;
@@ -187,6 +197,7 @@ int prlpid_forecast_core(Instance *plant, Instance *prior, const PrlpidForecastS
     memcpy(st.derivative, in->derivative, sizeof(st.derivative));
     memcpy(st.filtered, in->filtered, sizeof(st.filtered));
     memcpy(st.stage, in->filter_stage, sizeof(st.stage));
+    memcpy(st.last_output, in->last_output, sizeof(st.last_output));
     st.initialized = in->initialized;
     for (i = 0; i < n; i++) {
         previous_error[i] = (in->setpoint[i] - in->measurement[i]) / s->scale[i];

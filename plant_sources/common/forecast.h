@@ -3,11 +3,12 @@
  *
  * prlpid_forecast(plant, prior, setup, input, result) copies the plant instance's full state into the
  * prior, sets the overrides on the prior, and rolls the prior `horizon` samples ahead with a copy of
- * the PID state and fixed gains: u = PID (the 2-DOF law of pid.py: setpoint weights b, c and the
- * measurement filter Tf; eq. 2 when b = c = 1, Tf = 0; optionally the coupled errors of eq. 27) on the last
- * measurement, prior inputs := u, doStep, measurement := prior outputs, reward (eq. 10-11 plus the
- * control-variation term) on the normalised error. A discarded step or an error beyond the divergence
- * bound adds the divergence penalty and ends the roll-out. The result is the mean reward.
+ * the PID state and fixed gains: u = PID (the 2-DOF law of pid.py: setpoint weights b, c, the
+ * measurement filter Tf and the output rate limit R; eq. 2 when b = c = 1, Tf = 0, R = inf; optionally the
+ * coupled errors of eq. 27) on the last measurement, prior inputs := u, doStep, measurement := prior
+ * outputs, reward (eq. 10-11 plus the control-variation term) on the normalised error. A discarded step or an error beyond the divergence
+ * bound adds the divergence penalty and ends the roll-out. The result is the mean reward. The roll-out starts
+ * from the PID state copied in (the bumpless preset, if any, happened before the call; none happens here).
  *
  * The arithmetic is that of prlpid_fmi (control/pid.py PID.filter_measurement, PID.weighted_errors,
  * PID.step_weighted and CoupledPID.step_values; control/reward.py _loop_reward; loop/forecast/fmi.py
@@ -25,7 +26,7 @@
 #include <stddef.h>
 #include "instance.h"
 
-#define PRLPID_FORECAST_ABI 2
+#define PRLPID_FORECAST_ABI 3
 #define PRLPID_MAX_LOOPS 3
 
 #if defined(_WIN32)
@@ -67,6 +68,9 @@ typedef struct {
     double setpoint_weight[PRLPID_MAX_LOOPS];     /* b: ep = b*r - yf */
     double derivative_weight[PRLPID_MAX_LOOPS];   /* c: ed = c*r - yf */
     double measurement_filter[PRLPID_MAX_LOOPS];  /* Tf, s (0: yf = y) */
+    double u_rate_limit[PRLPID_MAX_LOOPS];  /* R [u units / s] (HUGE_VAL: none): u moves at most R*dt from
+                                               last_output per sample, and the anti-windup treats that band as the
+                                               limits */
     double u_min[PRLPID_MAX_LOOPS], u_max[PRLPID_MAX_LOOPS];
     double scale[PRLPID_MAX_LOOPS];   /* measurement scale: error = (setpoint - y) / scale */
     double bound[PRLPID_MAX_LOOPS];   /* divergence bound on |error| */
@@ -87,6 +91,8 @@ typedef struct {
     double u_prev[PRLPID_MAX_LOOPS];  /* control signal of the previous sample */
     double integral[PRLPID_MAX_LOOPS], last_error[PRLPID_MAX_LOOPS], derivative[PRLPID_MAX_LOOPS];  /* PID state */
     double filtered[PRLPID_MAX_LOOPS], filter_stage[PRLPID_MAX_LOOPS];  /* PID state: measurement filter */
+    double last_output[PRLPID_MAX_LOOPS];  /* PID state: its previous output u(k-1), the rate limit's origin
+                                              (NaN: none yet, no rate limit at that sample) */
     int initialized;                /* PID state: 0 until its first step after reset */
 } PrlpidForecastInput;
 

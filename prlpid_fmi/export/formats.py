@@ -24,12 +24,15 @@ docs/deploy.md describes), sample by sample:
 4. errors (PID.weighted_errors): e = setpoint - measurement (integral), ep = b*setpoint - yf
    (proportional), ed = c*setpoint - yf (derivative), or for the coupled PID each through eq. 27, summed
    left to right;
-5. first sample after a reset: ed(-1) := ed(0); when any clipped start output u0 is non-zero, the error
-   sum is preset to (u0 - Kp*((b - 1)*setpoint))/(Kp/Ti) (bumpless start with no kick from b, as LoopCore
-   does through PID.preset_output);
+5. first sample after a reset, always: ed(-1) := ed(0), and the error sum is preset to
+   (u0 - Kp*((b - 1)*measurement))/(Kp/Ti) (0 when Kp/Ti = 0) from the clipped start output u0 and the first
+   measurement (bumpless start with no kick from b, and a setpoint step at that sample acts through b, as
+   LoopCore does through PID.preset_output); u0 is also the previous output the rate limit moves from;
 6. the 2-DOF positional PID u = Kp*(ep + Td*D) + (Kp/Ti)*I, D = (ed - ed_prev)/Ts, I = I_prev + e*Ts, with
-   the configured derivative filter and anti-windup, operation by operation as PID.step_weighted (eq. 2
-   exactly when b = c = 1 and Tf = 0).
+   the configured derivative filter and anti-windup, clipped to [lo, hi] = [max(u_min, u_prev - R*Ts),
+   min(u_max, u_prev + R*Ts)] for a loop with a rate limit R (else [u_min, u_max]), which the anti-windup
+   treats as the limits; operation by operation as PID.step_weighted (eq. 2 exactly when b = c = 1, Tf = 0
+   and no rate limit). The block keeps its previous output u_prev as state.
 
 Back-calculation's tracking time Tt = sqrt(Ti*Td) is computed every sample from the interpolated
 Ti and Td: ST calls the standard SQRT; C has its own correctly rounded square root without libm (x scaled
@@ -95,6 +98,12 @@ def st_real(x: float) -> str:
     return "LREAL#" + ("-" if math.copysign(1.0, x) < 0 else "") + mantissa + (f"E{int(exponent)}" if exponent else "")
 
 
+def st_rate(x: float) -> str:
+    """A rate limit as an LREAL literal: ST has no infinity, so no rate limit (inf) is written as 0 (a rate limit
+    is > 0), which the block reads as none."""
+    return st_real(0.0 if math.isinf(x) else x)
+
+
 def st_comment(text: str) -> str:
     """Text safe inside an ST/Pascal comment (* ... *)."""
     return text.replace("(*", "( *").replace("*)", "* )")
@@ -108,7 +117,7 @@ def _environment():
     env = jinja2.Environment(loader=jinja2.PackageLoader("prlpid_fmi.export", "templates"),
                              undefined=jinja2.StrictUndefined, keep_trailing_newline=True,
                              trim_blocks=True, lstrip_blocks=True, autoescape=False)
-    env.filters.update(c=c_real, st=st_real, st_comment=st_comment)
+    env.filters.update(c=c_real, st=st_real, st_rate=st_rate, st_comment=st_comment)
     return env
 
 

@@ -8,7 +8,8 @@ slice assignment and makes one foreign call per forecast.
 
 The PID's structure (setpoint weights b, c and measurement filter Tf, control.pid) can change between
 episodes (PID.set_structure, the fixed-PID search), so each call copies it into the setup together with the
-PID's state (filter state included); the measurement filter's order is fixed at the PID's construction.
+PID's state (filter state included); the measurement filter's order and the rate limits are fixed at the PID's
+construction. The rate limit's previous output (PID.last_output, NaN: none yet) is part of the state copied in.
 
 The C call moves the prior inside the library; FmuPlant keeps the prior's communication time in
 `prior.time`, so the binding writes the prior's time after the roll-out back to it (the FMI path
@@ -24,7 +25,7 @@ from prlpid_fmi.control.pid import ANTI_WINDUP_MODES
 from prlpid_fmi.errors import PlantError
 from prlpid_fmi.loop.forecast.base import Forecast
 
-ABI_VERSION = 2
+ABI_VERSION = 3
 MAX_LOOPS = 3
 ANTI_WINDUP_CODES = {"clamping": 0, "back_calculation": 1, "none": 2}
 assert set(ANTI_WINDUP_CODES) == set(ANTI_WINDUP_MODES)
@@ -41,7 +42,8 @@ class ForecastSetup(ctypes.Structure):
                 ("input_vr", c_uint * _L), ("output_vr", c_uint * _L),
                 ("pid_sample_time", c_double), ("step_size", c_double), ("derivative_filter_N", c_double),
                 ("Tt", c_double * _L), ("setpoint_weight", c_double * _L), ("derivative_weight", c_double * _L),
-                ("measurement_filter", c_double * _L), ("u_min", c_double * _L), ("u_max", c_double * _L),
+                ("measurement_filter", c_double * _L), ("u_rate_limit", c_double * _L),
+                ("u_min", c_double * _L), ("u_max", c_double * _L),
                 ("scale", c_double * _L), ("bound", c_double * _L), ("u_scale", c_double * _L),
                 ("penalty", c_double),
                 ("alpha", c_double), ("beta", c_double), ("v_clip", c_double), ("e_clip", c_double),
@@ -54,7 +56,7 @@ class ForecastSetup(ctypes.Structure):
 # PrlpidForecastInput: these double arrays in this order, then `int initialized`.
 _INPUT_ARRAYS = (("setpoint", _L), ("measurement", _L), ("Kp", _L), ("Ti", _L), ("Td", _L), ("coupling", 6),
                  ("u_prev", _L), ("integral", _L), ("last_error", _L), ("derivative", _L), ("filtered", _L),
-                 ("filter_stage", _L))
+                 ("filter_stage", _L), ("last_output", _L))
 
 
 class ForecastInput(ctypes.Structure):
@@ -120,7 +122,6 @@ class NativeForecast(Forecast):
         s = self._setup = ForecastSetup()
         s.n_loops, s.horizon, s.coupled = n, N, int(self.coupled)
         s.anti_windup = ANTI_WINDUP_CODES[core.anti_windup]
-        self._core = core
         s.measurement_filter_order = core.measurement_filter_order
         s.has_derivative_filter = int(core.derivative_filter_N is not None)
         s.derivative_filter_N = core.derivative_filter_N if core.derivative_filter_N is not None else math.nan
@@ -132,6 +133,8 @@ class NativeForecast(Forecast):
         s.output_vr[:n] = [vr(name) for name in prior.outputs]
         s.pid_sample_time, s.step_size = core.sample_time_s, prior.sample_time_s
         s.u_min[:n], s.u_max[:n] = core.u_min.tolist(), core.u_max.tolist()
+        s.u_rate_limit[:n] = core.u_rate_limit.tolist()  # inf (HUGE_VAL in C): none
+        self._core = core  # the PID holding last_output (CoupledPID's inner PID)
         s.scale[:n], s.bound[:n], s.u_scale[:n] = self.scale, self.bound, self.u_scale
         s.penalty = self.penalty
         w = weights
@@ -168,7 +171,7 @@ class NativeForecast(Forecast):
         """As FmiForecast.mean_reward, in one C call."""
         n = self.n_loops
         (v_setpoint, v_measurement, v_Kp, v_Ti, v_Td, v_coupling, v_u_prev, v_integral, v_last_error, v_derivative,
-         v_filtered, v_filter_stage) = self._views
+         v_filtered, v_filter_stage, v_last_output) = self._views
         v_setpoint[:n] = setpoint
         v_measurement[:n] = measurement
         v_Kp[:n] = Kp
@@ -183,11 +186,13 @@ class NativeForecast(Forecast):
         v_derivative[:n] = derivative
         v_filtered[:n] = filtered
         v_filter_stage[:n] = filter_stage
+        v_last_output[:n] = self._core.last_output  # replaced (not mutated) by every step: read it each call
         self._input.initialized = initialized
-        core, s = self._core, self._setup  # the structure in force now (set_structure may have changed it)
-        s.setpoint_weight[:n] = core.setpoint_weight.tolist()
-        s.derivative_weight[:n] = core.derivative_weight.tolist()
-        s.measurement_filter[:n] = core.measurement_filter_s.tolist()
+        s = self._setup  # the structure in force now (set_structure may have changed it)
+        b, c, tf = self.pid.raw_structure()
+        s.setpoint_weight[:n] = b
+        s.derivative_weight[:n] = c
+        s.measurement_filter[:n] = tf
         if (self.plant.component, self.prior.component) != self._components:  # re-instantiated (reset fallback)
             self._components = (self.plant.component, self.prior.component)
             self._args[0].value, self._args[1].value = self._components

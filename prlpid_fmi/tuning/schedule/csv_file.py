@@ -6,11 +6,15 @@ b, c, Tf (setpoint weight, derivative weight, measurement filter [s]; control.pi
 scheduled: every row holds the same b, c, Tf for a loop, and a file whose rows disagree is refused. The
 metadata line measurement_filter_order gives the filter's order. A file written before the 2-DOF law has
 neither: it is read as b = c = 1, Tf = 0, order 1, the law (paper eq. 2) it was written with.
+
+The metadata line u_rate_limit[<loop>] gives each loop's output rate limit [input units / s], inf for none; a
+file written before the rate limit has no such line and is read as inf (no rate limit).
 """
 from __future__ import annotations
 
 import csv
 import io
+import math
 from pathlib import Path
 
 import numpy as np
@@ -19,9 +23,11 @@ from prlpid_fmi.control import COUPLING_NAMES
 from prlpid_fmi.errors import PrlPidError
 from prlpid_fmi.rundir import write_atomic
 from prlpid_fmi.tuning.schedule.table import (
+    BUMPLESS_START,
     INTERPOLATION,
     MEASUREMENT_FILTER_EQUATION,
     PID_EQUATION,
+    RATE_LIMIT_BAND,
     STRUCTURE_COLUMNS,
     GainSchedule,
 )
@@ -45,14 +51,14 @@ def _metadata(s: GainSchedule) -> list[tuple[str, str]]:
         ("format", "prlpid-fmi gain schedule 1"),
         ("tool", f"prlpid-fmi {__version__}"),
         ("pid_form", "positional ideal (ISA) 2-DOF PID, paper eq. 2 with setpoint weights b (proportional), "
-                     "c (derivative) and a measurement filter Tf feeding P and D (b = c = 1, Tf = 0: eq. 2 exactly); "
-                     "r = setpoint, y = measurement"
+                     "c (derivative), a measurement filter Tf feeding P and D and an output rate limit R per loop "
+                     "(b = c = 1, Tf = 0, R = inf: eq. 2 exactly); r = setpoint, y = measurement"
                      + ("; coupled errors (r - y) + C*y, paper eq. 27, for e, ep (b*r, yf) and ed (c*r, yf)"
                         if s.coupling is not None else "")),
         ("pid_equation", (f"{PID_EQUATION}; yf = y through the measurement filter: {MEASUREMENT_FILTER_EQUATION}; "
                           "I includes the current e; ed_prev = ed at the first sample (no derivative kick); "
-                          "u then clipped to [u_min, u_max]; Ti = inf means no integral action; "
-                          "b, c, Tf per loop in the b, c, Tf columns")),
+                          f"u then clipped to {RATE_LIMIT_BAND}; Ti = inf means no integral action; "
+                          "b, c, Tf per loop in the b, c, Tf columns, R in u_rate_limit[<loop>]")),
         ("equivalent_parallel", "u = Kp*ep + Ki*I + Kd*D with Ki = Kp/Ti, Kd = Kp*Td"),
         ("sample_time_s", _f(s.sample_time_s)),
         ("scheduling_variable", s.variable),
@@ -62,14 +68,15 @@ def _metadata(s: GainSchedule) -> list[tuple[str, str]]:
         ("anti_windup_method", _ANTI_WINDUP_TEXT.get(s.anti_windup, s.anti_windup)),
         ("derivative_filter_N", "none" if s.derivative_filter_N is None else _f(s.derivative_filter_N)),
         ("measurement_filter_order", str(s.measurement_filter_order)),
-        ("bumpless_start", ("I_prev = (u0 - Kp*((b - 1)*r))/Ki before the first sample, from the actuator's "
-                            "value u0 (any u0 != 0), so that u = u0 when r = y: no kick from b")),
+        ("bumpless_start", BUMPLESS_START),
         ("excluded_operating_points", "none" if not s.excluded else
          " ".join(_f(v) for v in s.excluded) + " (held setpoints where the closed loop diverged)"),
     ]
     for i, name in enumerate(s.loop_names):
         meta.append((f"loop[{name}]", f"input={s.loop_inputs[i]}; u_min={_f(s.u_min[i])}; u_max={_f(s.u_max[i])}; "
                                       f"output_unit={s.output_units[i]}; input_unit={s.input_units[i]}"))
+    for i, name in enumerate(s.loop_names):  # [input units / s]; inf: none
+        meta.append((f"u_rate_limit[{name}]", _f(s.u_rate_limit[i])))
     meta.append(("units", "; ".join(f"{c}={units[c]}" for c in s.columns())))
     return meta
 
@@ -135,10 +142,27 @@ def _structure(path, table: np.ndarray, col: dict, loops: list) -> list[np.ndarr
     return out
 
 
+def _rate_limits(path, meta: dict, loops: list) -> np.ndarray:
+    """u_rate_limit per loop from the u_rate_limit[<loop>] lines (missing: inf, a file written before the rate
+    limit). Raises PrlPidError for a value that is not a number > 0."""
+    out = []
+    for name in loops:
+        text = meta.get(f"u_rate_limit[{name}]", "inf")
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not value > 0:
+            raise PrlPidError(f"{path}: u_rate_limit[{name}]: (got {text!r}; expected a number > 0 "
+                              "[input units / s], or inf: none)")
+        out.append(value)
+    return np.array(out, float)
+
+
 def read_schedule_csv(path) -> GainSchedule:
     """Parse a CSV written by write_schedule_csv (exact round trip). Checks Ki/Kd against Kp, Ti, Td, and that
     every row has the same b, c, Tf per loop; a file without those columns (written before the 2-DOF law)
-    reads as b = c = 1, Tf = 0, measurement_filter_order 1."""
+    reads as b = c = 1, Tf = 0, measurement_filter_order 1, and one without u_rate_limit[<loop>] as inf (none)."""
     meta = read_schedule_metadata(path)
     try:
         with open(path, newline="") as f:
@@ -179,7 +203,7 @@ def read_schedule_csv(path) -> GainSchedule:
         excluded=tuple(float(v) for v in meta.get("excluded_operating_points", "none").split(" (")[0].split()
                        if v != "none"),
         setpoint_weight=weight_b, derivative_weight=weight_c, measurement_filter_s=filter_tf,
-        measurement_filter_order=int(order))
+        measurement_filter_order=int(order), u_rate_limit=_rate_limits(path, meta, loops))
     if np.any(np.diff(s.breakpoints) <= 0):
         raise PrlPidError(f"{path}: breakpoints ({variable}) must be strictly increasing")
     if not (np.allclose(get("Ki"), s.Ki, rtol=1e-9, atol=0) and np.allclose(get("Kd"), s.Kd, rtol=1e-9, atol=0)):

@@ -39,8 +39,8 @@ def replay_schedule(schedule: GainSchedule, config: TuningConfig, seed: int = 0,
     The table drives the loop core (prlpid_fmi.loop.core.LoopCore, or its isolated twin) as one of its
     three drivers, through prlpid_fmi.loop.evaluation.evaluate_gains: the config's (evaluation) setpoint
     schedule, noise and disturbances, the forecast off; the PID's structure (b, c, Tf per loop and the measurement
-    filter's order) is the table's, not the config's, so that a table read from its CSV replays the controller it
-    was tuned as. Before each step the scheduling variable is read
+    filter's order) and the loops' output rate limits are the table's, not the config's, so that a table read from
+    its CSV replays the controller it was tuned as (and exported). Before each step the scheduling variable is read
     (setpoint, measurement, error or an FMU variable: prlpid_fmi.tuning.schedule.variable), the table gives
     Kp, Ti, Td (and coupling) there, and the core's PID, saturation, anti-windup and plant use them. No
     action smoothing and no action <-> gain map is involved, so a table with constant gains reproduces a
@@ -61,8 +61,9 @@ def replay_schedule(schedule: GainSchedule, config: TuningConfig, seed: int = 0,
     from prlpid_fmi.loop.evaluation import evaluate_gains
     from prlpid_fmi.loop.isolated import make_core
 
+    loops = tuple(dataclasses.replace(l, u_rate_limit=float(r)) for l, r in zip(config.loops, schedule.u_rate_limit))
     config = dataclasses.replace(config, forecast_horizon=0, tuned_structure=schedule.structure,
-                                 measurement_filter_order=schedule.measurement_filter_order)
+                                 measurement_filter_order=schedule.measurement_filter_order, loops=loops)
     core = make_core(config)
     try:
         probe = SchedulingVariable(schedule.variable, core)

@@ -16,7 +16,8 @@ them. No neural network is needed to run the result.
 
 The PID structure (setpoint weight b, derivative weight c, measurement filter Tf per loop, and the filter's
 order; prlpid_fmi.control.pid) is not scheduled: a table carries one (b, c, Tf) per loop, the values the gains
-were tuned with (loop.core.pid_structure of the config), and every consumer runs the table with them.
+were tuned with (loop.core.pid_structure of the config), and every consumer runs the table with them. So is
+each loop's output rate limit (u_rate_limit, the config's LoopConfig.u_rate_limit; inf: none).
 
 Scheduling variables are named ``setpoint[<loop>]``, ``measurement[<loop>]``, ``error[<loop>]``
 (the loop's output name) or an FMU variable name. At every step the value seen by the table lookup
@@ -46,12 +47,19 @@ PID_EQUATION = ("u = Kp*(ep + Td*D) + (Kp/Ti)*I; I = I_prev + e*Ts; D = (ed - ed
 MEASUREMENT_FILTER_EQUATION = ("yf = x[n]; x[j] = (T*x_prev[j] + Ts*x[j-1])/(T + Ts) for j = 1..n, x[0] = y, "
                                "T = Tf/n (n = measurement_filter_order); x[j] = y at the first sample; "
                                "Tf = 0: yf = y exactly")
+RATE_LIMIT_BAND = ("[lo, hi] = [max(u_min, u_prev - R*Ts), min(u_max, u_prev + R*Ts)] (R: the loop's output rate "
+                   "limit; R = inf: [u_min, u_max]; u_prev: the previous output, u0 at the first sample), which the "
+                   "anti-windup treats as the limits")
+BUMPLESS_START = ("I_prev = (u0 - Kp*((b - 1)*y0))/Ki before every first sample (Ki = 0: I_prev = 0), from the "
+                  "actuator's value u0 (also u0 = 0) and the first measurement y0, so that u = u0 when r = y (no kick "
+                  "from b) and a setpoint step at the start acts through b; u_prev := u0")
 INTERPOLATION = "linear between breakpoints, held constant outside"
 LOOP_SIGNALS = ("setpoint", "measurement", "error")  # scheduling variables read from a loop, not the FMU
 LOOP_VARIABLE = re.compile(r"^(setpoint|measurement|error)\[(.+)\]$")  # <signal>[<loop output>]
 
 __all__ = ["GainSchedule", "schedule_from_rows", "fixed_schedule", "table_meta", "exact_mean", "LOOP_SIGNALS",
-           "LOOP_VARIABLE", "PID_EQUATION", "MEASUREMENT_FILTER_EQUATION", "INTERPOLATION", "STRUCTURE_COLUMNS"]
+           "LOOP_VARIABLE", "PID_EQUATION", "MEASUREMENT_FILTER_EQUATION", "INTERPOLATION", "STRUCTURE_COLUMNS",
+           "RATE_LIMIT_BAND", "BUMPLESS_START"]
 
 STRUCTURE_COLUMNS = ("b", "c", "Tf")  # per loop, after the gains: setpoint weight, derivative weight, filter [s]
 
@@ -70,6 +78,8 @@ class GainSchedule:
     setpoint_weight b, derivative_weight c, measurement_filter_s Tf [s] (n_loops,) and
     measurement_filter_order (1 | 2): the PID's structure, the same for every row (None: b = c = 1, Tf = 0,
     the law of paper eq. 2, which tables written before the 2-DOF law were tuned with).
+    u_rate_limit (n_loops,): the PID's output rate limit per loop [input units / s], inf = none (None: none,
+    as in tables written before the rate limit).
     """
 
     variable: str
@@ -93,10 +103,12 @@ class GainSchedule:
     derivative_weight: Optional[np.ndarray] = None
     measurement_filter_s: Optional[np.ndarray] = None
     measurement_filter_order: int = 1
+    u_rate_limit: Optional[np.ndarray] = None
 
     def __post_init__(self):
         n = len(self.loop_names)
-        for name, default in (("setpoint_weight", 1.0), ("derivative_weight", 1.0), ("measurement_filter_s", 0.0)):
+        for name, default in (("setpoint_weight", 1.0), ("derivative_weight", 1.0), ("measurement_filter_s", 0.0),
+                              ("u_rate_limit", math.inf)):
             value = getattr(self, name)
             value = np.full(n, default) if value is None else np.array(value, dtype=float).reshape(-1)
             if value.shape != (n,):
@@ -181,12 +193,13 @@ def _group(unit: str) -> str:
 
 
 def structure_fields(config: TuningConfig) -> dict:
-    """The config's PID structure (loop.core.pid_structure) as GainSchedule fields."""
+    """The config's PID structure (loop.core.pid_structure) and the loops' rate limits as GainSchedule fields."""
     from prlpid_fmi.loop.core import pid_structure
 
     b, c, tf = pid_structure(config)
     return dict(setpoint_weight=np.array(b, float), derivative_weight=np.array(c, float),
-                measurement_filter_s=np.array(tf, float), measurement_filter_order=int(config.measurement_filter_order))
+                measurement_filter_s=np.array(tf, float), measurement_filter_order=int(config.measurement_filter_order),
+                u_rate_limit=np.array([float(l.u_rate_limit) for l in config.loops], float))
 
 
 def table_meta(core, config: TuningConfig) -> dict:
