@@ -55,6 +55,7 @@ class LoopConfig:
     setpoint_range: tuple[float, float] = _d(_m.LoopModel, "setpoint_range")
     u_min: float = _d(_m.LoopModel, "u_limits")[0]
     u_max: float = _d(_m.LoopModel, "u_limits")[1]
+    u_rate_limit: float = float("inf")  # [input units / s]; LoopModel.u_rate_limit null = inf (none)
     Kp: GainRange = _gain("Kp")
     Ti: GainRange = _gain("Ti")
     Td: GainRange = _gain("Td")

@@ -230,8 +230,9 @@ REPLAY_CASES = {
 @pytest.mark.parametrize("name", list(REPLAY_CASES))
 def test_forecast_reward_equals_hand_replay(name, horizon):
     overrides, schedule = REPLAY_CASES[name]
+    # the paper's law (b = c = 1, no filter: eq. 2, what HandPID computes)
     env = prlpid_fmi.make_env(name, forecast_horizon=horizon, smoothing="none", setpoint_schedule=schedule,
-                              **overrides)
+                              setpoint_weight=1.0, derivative_weight=1.0, measurement_filter=0.0, **overrides)
     c = env.config
     assert c.n_loops == 1 and not c.disturbances
     loop = c.loops[0]
@@ -305,7 +306,7 @@ def test_forecast_reward_equals_hand_replay(name, horizon):
 @pytest.mark.parametrize("name", ALL_PRESETS)
 def test_duplicate_prior_one_step_forecast_equals_step_reward(name):
     env = prlpid_fmi.make_env(name, forecast_horizon=1, measurement_noise_std=0.0, actuator_noise_std=0.0,
-                              disturbances=())
+                              disturbances=(), load_disturbance=0.0)  # the prior sees no disturbance
     assert env.prior is not None and env.prior is not env.plant
     env.reset(seed=8)
     n = 0

@@ -29,9 +29,14 @@ With b = c = 1 and Tf = 0 this is paper eq. 2 exactly, bit for bit (1.0*r == r):
       Df(k) = (Tdf*Df(k-1) + dt*D(k)) / (Tdf + dt),   Tdf = Td/N
 
   Td = 0 gives Tdf = 0, i.e. no filtering (and no derivative action anyway).
-- Bumpless start (``preset_output``): before the first sample the error sum is set so that the whole
-  output at t = 0 is the actuator's value u0 when r(0) = y(0): I(-1) = (u0 - Kp*(ep(0) - e(0))) / Ki, so a
-  setpoint weight b != 1 gives no kick either (with b = 1 this is I(-1) = u0 / Ki).
+- Bumpless start (``preset_output``): before the first sample the PID is balanced at the first measurement
+  y(0) with the actuator's output u0, as if it had tracked setpoint = measurement in manual:
+  I(-1) = (u0 - Kp*((b - 1)*y(0))) / Ki. So u(0) = u0 when r(0) = y(0) (no kick from b either), and a
+  setpoint step at t = 0 acts through b like any later one (with b = 1 this is I(-1) = u0 / Ki).
+- Rate limit (``u_rate_limit`` R [u units / s], per loop, inf = none): the output moves at most R*dt per
+  sample from the previous output (u0 after the preset): the clip band of the sample is
+  [max(u_min, u(k-1) - R*dt), min(u_max, u(k-1) + R*dt)], and the anti-windup below treats that band as the
+  limits. The first sample after a reset without a preset is not rate limited.
 
 Anti-windup (``anti_windup``), with u_try = u computed from I(k-1) + e(k)*dt:
 
@@ -90,7 +95,8 @@ class PIDState:
     integral: error sum I [error units * s]; last_error: ed(k-1), the derivative error of the last sample
     [error units]; derivative: last (filtered) derivative D [error units / s]; filtered: the measurement
     filter's output yf(k-1) [measurement units]; filter_stage: the first section's output of a second-order
-    filter (equal to filtered for order 1); initialized: False until the first step after reset.
+    filter (equal to filtered for order 1); initialized: False until the first step after reset; last_output:
+    the previous output u(k-1) the rate limit moves from (NaN: none yet).
     """
 
     integral: np.ndarray
@@ -99,11 +105,11 @@ class PIDState:
     initialized: bool
     filtered: np.ndarray | None = None
     filter_stage: np.ndarray | None = None
+    last_output: np.ndarray | None = None
 
     def copy(self) -> "PIDState":
         return PIDState(self.integral.copy(), self.last_error.copy(), self.derivative.copy(), self.initialized,
-                        None if self.filtered is None else self.filtered.copy(),
-                        None if self.filter_stage is None else self.filter_stage.copy())
+                        *(None if a is None else a.copy() for a in (self.filtered, self.filter_stage, self.last_output)))
 
 
 def _per_loop(value, n_loops: int, name: str) -> list:
@@ -145,7 +151,7 @@ class PID:
     def __init__(self, sample_time_s: float, n_loops: int = 1, u_min=-np.inf, u_max=np.inf,
                  anti_windup: str = "clamping", Tt=None, derivative_filter_N: float | None = None,
                  setpoint_weight=1.0, derivative_weight=1.0, measurement_filter_s=0.0,
-                 measurement_filter_order: int = 1):
+                 measurement_filter_order: int = 1, u_rate_limit=math.inf):
         if not (np.isfinite(sample_time_s) and sample_time_s > 0):
             raise ValueError(f"sample_time_s must be a finite number > 0, got {sample_time_s!r}")
         if isinstance(n_loops, bool) or int(n_loops) != n_loops or n_loops < 1:
@@ -163,6 +169,10 @@ class PID:
         if any(not lo <= hi for lo, hi in zip(self._u_min, self._u_max)):
             raise ValueError(f"u_min must be <= u_max (and not NaN), got u_min={u_min!r}, u_max={u_max!r}")
         self.anti_windup = anti_windup
+        rate = _per_loop(u_rate_limit, n, "u_rate_limit")
+        if not all(r > 0 for r in rate):
+            raise ValueError(f"u_rate_limit must be > 0 (inf: none), got {u_rate_limit!r}")
+        self._rate = None if all(r == math.inf for r in rate) else rate
         self._Tt = None if Tt is None else _per_loop(Tt, n, "Tt")
         if self._Tt is not None and not all(t > 0 for t in self._Tt):
             raise ValueError(f"Tt must be > 0, got {Tt!r}")
@@ -199,6 +209,16 @@ class PID:
         return np.array(self._tf)
 
     @property
+    def u_rate_limit(self) -> np.ndarray:
+        """|u(k) - u(k-1)| / Ts at most [u units / s] per loop (inf: none)."""
+        return np.full(self.n_loops, math.inf) if self._rate is None else np.array(self._rate)
+
+    @property
+    def last_output(self) -> list:
+        """The previous output per loop (NaN before the first, unless preset_output gave u0); live, never mutate."""
+        return self._last_u
+
+    @property
     def u_min(self) -> np.ndarray:
         return np.array(self._u_min)
 
@@ -222,19 +242,25 @@ class PID:
         self._derivative = [0.0] * n
         self._filtered = [0.0] * n
         self._stage = [0.0] * n
+        self._last_u = [math.nan] * n  # the previous output (NaN: none yet, the rate limit waits)
         self._initialized = False
         self._unsaturated_u = [0.0] * n
 
     def get_state(self) -> PIDState:
         """A copy of the internal state (later steps do not change it)."""
         return PIDState(np.array(self._integral), np.array(self._last_error), np.array(self._derivative),
-                        self._initialized, np.array(self._filtered), np.array(self._stage))
+                        self._initialized, np.array(self._filtered), np.array(self._stage), np.array(self._last_u))
 
     def raw_state(self) -> tuple[list, list, list, bool, list, list]:
         """(integral, last_error, derivative, initialized, filtered, filter_stage) WITHOUT copying: the live
         lists of n_loops floats. For readers that copy the values out at once (the C forecast); never mutate them.
         """
         return self._integral, self._last_error, self._derivative, self._initialized, self._filtered, self._stage
+
+    def raw_structure(self) -> tuple[list, list, list]:
+        """(b, c, Tf) WITHOUT copying: the live lists of n_loops floats (set_structure replaces them, never
+        mutates them). For the C forecast, which copies them at every call; never mutate them."""
+        return self._b, self._c, self._tf
 
     def set_state(self, state: PIDState) -> None:
         """Restore a state from ``get_state`` (copied in, so ``state`` stays reusable)."""
@@ -247,6 +273,8 @@ class PID:
                                    "PIDState.filtered")
         self._stage = _per_loop(np.asarray(zeros if state.filter_stage is None else state.filter_stage, dtype=float),
                                 n, "PIDState.filter_stage")
+        self._last_u = _per_loop(np.asarray(np.full(n, math.nan) if state.last_output is None else state.last_output,
+                                            dtype=float), n, "PIDState.last_output")
         self._initialized = bool(state.initialized)
 
     def copy(self) -> "PID":
@@ -315,6 +343,7 @@ class PID:
             self._last_error = list(d_errors)
             self._initialized = True
         integrals, last_errors, derivatives = self._integral, self._last_error, self._derivative
+        rates, last_u = self._rate, self._last_u
         u_out = [0.0] * n
         u_unsat_out = [0.0] * n
 
@@ -329,6 +358,9 @@ class PID:
             integral = integrals[i] + e * dt
             u_unsat = kp * (p_errors[i] + td * d) + ki * integral
             lo, hi = self._u_min[i], self._u_max[i]
+            if rates is not None and rates[i] != math.inf and last_u[i] == last_u[i]:  # rate limit: a moving band
+                step = rates[i] * dt
+                lo, hi = max(lo, last_u[i] - step), min(hi, last_u[i] + step)
             u = lo if u_unsat < lo else hi if u_unsat > hi else u_unsat  # NaN passes through
             if u != u_unsat:  # saturated
                 if mode == "clamping":
@@ -346,19 +378,25 @@ class PID:
             u_unsat_out[i] = u_unsat
 
         self._unsaturated_u = u_unsat_out
+        if rates is not None:
+            self._last_u = list(u_out)
         return u_out
 
-    def preset_output(self, u0: list, setpoints: list, Kps: list, Tis: list) -> None:
-        """Bumpless start: before the first step, set the error sum so that the output at t = 0 is u0 when
-        r(0) = y(0) (module docstring): I = (u0 - Kp*(b - 1)*r(0)) / Ki.
+    def preset_output(self, u0: list, measurements: list, Kps: list, Tis: list) -> None:
+        """Bumpless start: before the first step, balance the PID at the first measurement y(0) with output u0,
+        as if it had been tracking setpoint = measurement (module docstring): I = (u0 - Kp*((b - 1)*y(0))) / Ki.
+        So u(0) = u0 when r(0) = y(0), and a setpoint step at t = 0 acts through b like any other.
 
-        u0, setpoints, Kps, Tis: lists of n_loops floats (u0 in control-signal units). Loops without integral
-        action (Ti = inf or Kp = 0) keep I = 0. Call after reset(), before the first step.
+        u0, measurements, Kps, Tis: lists of n_loops floats (u0 in control-signal units). Loops without integral
+        action (Ti = inf or Kp = 0) keep I = 0. u0 is also the previous output of the rate limit. Call after
+        reset(), before the first step.
         """
         for i in range(self.n_loops):
             ki = Kps[i] / Tis[i]
-            kick = Kps[i] * ((self._b[i] - 1.0) * setpoints[i])
+            kick = Kps[i] * ((self._b[i] - 1.0) * measurements[i])
             self._integral[i] = (u0[i] - kick) / ki if ki != 0 else 0.0
+        if self._rate is not None:
+            self._last_u = [float(u) for u in u0]
 
 
 def coupling_matrix(coupling) -> np.ndarray:
@@ -400,9 +438,9 @@ class CoupledPID:
 
     def __init__(self, sample_time_s: float, u_min=-np.inf, u_max=np.inf, anti_windup: str = "clamping",
                  Tt=None, derivative_filter_N: float | None = None, setpoint_weight=1.0, derivative_weight=1.0,
-                 measurement_filter_s=0.0, measurement_filter_order: int = 1):
+                 measurement_filter_s=0.0, measurement_filter_order: int = 1, u_rate_limit=math.inf):
         self.pid = PID(sample_time_s, 3, u_min, u_max, anti_windup, Tt, derivative_filter_N, setpoint_weight,
-                       derivative_weight, measurement_filter_s, measurement_filter_order)
+                       derivative_weight, measurement_filter_s, measurement_filter_order, u_rate_limit)
 
     @property
     def sample_time_s(self) -> float:
@@ -437,8 +475,8 @@ class CoupledPID:
         return pid.step_weighted(errors, _coupled_errors([b[i] * r[i] for i in range(3)], yf, c),
                                  _coupled_errors([cw[i] * r[i] for i in range(3)], yf, c), Kps, Tis, Tds)
 
-    def preset_output(self, u0: list, setpoints: list, Kps: list, Tis: list) -> None:
-        self.pid.preset_output(u0, setpoints, Kps, Tis)
+    def preset_output(self, u0: list, measurements: list, Kps: list, Tis: list) -> None:
+        self.pid.preset_output(u0, measurements, Kps, Tis)
 
     def reset(self) -> None:
         self.pid.reset()
@@ -448,6 +486,9 @@ class CoupledPID:
 
     def raw_state(self) -> tuple:
         return self.pid.raw_state()
+
+    def raw_structure(self) -> tuple[list, list, list]:
+        return self.pid.raw_structure()
 
     def set_state(self, state: PIDState) -> None:
         self.pid.set_state(state)

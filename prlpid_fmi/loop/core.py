@@ -12,10 +12,10 @@ One step k (sample time Ts), all signals plain Python lists of n_loops floats:
   -> PID (eq. 2 / 26-27) on (setpoint_k, measurement_k) -> + actuator offsets and noise -> clip
   -> plant step -> measurement_{k+1} (+ offsets, noise) -> reward (eq. 10-11 + control-variation term).
 
-Bumpless start: before the first PID step the error sum is preset so that the PID's output equals
-the plant's input at t = 0 (its start value, clipped to the limits) when the plant starts at the
-setpoint, i.e. the input that holds an initial steady state (the two-tank needs 25 cm3/s); a setpoint
-weight b != 1 adds no kick (control.pid.PID.preset_output). The control-variation term of the first step
+Bumpless start: before the first PID step the PID is balanced at the first measurement with the plant's
+input at t = 0 (its start value, clipped to the limits), i.e. the input that holds an initial steady state
+(the two-tank needs 25 cm3/s): the output equals it when the plant starts at the setpoint, a setpoint weight
+b != 1 adds no kick, and the rate limit moves from it (control.pid.PID.preset_output). The control-variation term of the first step
 is taken against that input too.
 """
 from __future__ import annotations
@@ -104,7 +104,8 @@ def make_pid(config: TuningConfig) -> PID | CoupledPID:
     args = dict(sample_time_s=config.sample_time_s, u_min=[float(l.u_min) for l in config.loops],
                 u_max=[float(l.u_max) for l in config.loops], anti_windup=config.anti_windup,
                 derivative_filter_N=config.derivative_filter_N, setpoint_weight=b, derivative_weight=c,
-                measurement_filter_s=tf, measurement_filter_order=config.measurement_filter_order)
+                measurement_filter_s=tf, measurement_filter_order=config.measurement_filter_order,
+                u_rate_limit=[float(l.u_rate_limit) for l in config.loops])
     if config.coupled:
         if n != 3:
             raise PlantError(f"the cross-axis coupled PID needs 3 loops (roll, pitch, yaw), got {n}")
@@ -301,8 +302,7 @@ class LoopCore(LoopConstants):
         setpoint, measurement = self.setpoint, self.measurement
         if self._bumpless:
             self._bumpless = False
-            if any(self.pid_output):
-                self.pid.preset_output(self.pid_output, setpoint, Kp, Ti)
+            self.pid.preset_output(self.pid_output, measurement, Kp, Ti)
         self.forecast_reward = None
         if self.forecast is not None:
             self.forecast_reward = self.forecast.mean_reward(setpoint, measurement, Kp, Ti, Td, coupling,

@@ -175,8 +175,7 @@ class ClosedLoopRig:
         y0 = self.plant.reset()
         self.pid.reset()
         u0 = np.clip(self.plant.get(list(self.plant.inputs)), self.u_min, self.u_max)
-        if np.any(u0 != 0):
-            self.pid.preset_output(u0.tolist(), self._ramp(y0, 0).tolist(), list(self.Kp), list(self.Ti))
+        self.pid.preset_output(u0.tolist(), y0.tolist(), list(self.Kp), list(self.Ti))
         return y0, u0
 
     def _ramp(self, y0: np.ndarray, k: int) -> np.ndarray:

@@ -11,6 +11,11 @@ new experiment (Astrom & Hagglund's loop-shaping view of PID design):
   sqrt((1/pi) * integral_0^pi |C S(e^{j theta})|^2 d theta), theta = w Ts, by the trapezoid rule on that
   grid (below the lowest measured frequency |C S| is taken as flat at its lowest value).
 
+- stability: a bounded |S| on the unit circle does not make the loop stable (a huge gain keeps |S| small
+  and still destabilises a sampled loop). By Nyquist, the closed loop of C is stable when 1 + C P winds around
+  0 as often as it does for a PID known to stabilise the plant (the one the response was measured with): the
+  open-loop unstable poles are the plant's, the same for both. `winding` gives the phase change to compare.
+
 Both hold for the feedback part of the PID (robustness.margins.pid_frequency_response); the setpoint
 weights b, c do not enter. They are estimates for the search: a deployed controller's margins are measured
 with that controller in the loop (robustness.margins.loop_margins).
@@ -67,3 +72,30 @@ class MeasuredPlant:
         if theta[-1] < np.pi:  # the grid stops short of Nyquist: |C S| flat from there
             integral += cs2[-1] * (np.pi - theta[-1])
         return float(np.sqrt(integral / np.pi))
+
+    def winding(self, controller) -> float:
+        """The phase change [rad] of 1 + C P from the lowest grid frequency to Nyquist (unwrapped): twice it over
+        2 pi is the Nyquist encirclement count, up to the arc at w = 0 that PIDs with the same integrator share."""
+        w, P = self.grid()
+        return float(np.diff(np.unwrap(np.angle(1.0 + controller(w) * P))[[0, -1]])[0])
+
+    def scan(self, gains: np.ndarray, shape, noise: bool = True) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
+        """(Ms, noise gain, winding) of the PIDs K * shape(w) for every K in `gains` (m,) at once: shape(w) is the
+        feedback response of the PID with Kp = 1 (Kp scales C as a whole). Arrays of shape (m,); the noise gain
+        None unless `noise`."""
+        w, P = self.grid()
+        G = shape(w)
+        C = np.asarray(gains, float)[:, None] * G[None, :]
+        S = 1.0 / (1.0 + C * P[None, :])
+        ms = np.max(np.abs(S), axis=1)
+        phase = np.unwrap(np.angle(1.0 + C * P[None, :]), axis=1)
+        winding = phase[:, -1] - phase[:, 0]
+        if not noise:
+            return ms, None, winding
+        cs2 = np.abs(C * S) ** 2
+        theta = w * self.sample_time_s
+        integral = cs2[:, 0] * theta[0] + np.sum(0.5 * (cs2[:, 1:] + cs2[:, :-1]) * np.diff(theta)[None, :], axis=1)
+        if theta[-1] < np.pi:
+            integral = integral + cs2[:, -1] * (np.pi - theta[-1])
+        return ms, np.sqrt(integral / np.pi), winding
+

@@ -126,6 +126,7 @@ def _randomize(spec: dict) -> dict:
 def _loop(l: m.LoopModel) -> LoopConfig:
     return LoopConfig(input=l.input, output=l.output, setpoint_range=tuple(l.setpoint_range),
                       u_min=l.u_limits[0], u_max=l.u_limits[1],
+                      u_rate_limit=float("inf") if l.u_rate_limit is None else float(l.u_rate_limit),
                       **{g: GainRange(*getattr(l.gains, g)) for g in GAIN_NAMES},
                       measurement_scale=l.measurement_scale, divergence_bound=l.divergence_bound,
                       control_scale=l.control_scale)
@@ -197,6 +198,7 @@ def scenario_model(s: Scenario) -> ScenarioModel:
     t, e = s.tuning, s.evaluation
     asdict = dataclasses.asdict
     loops = [{"input": l.input, "output": l.output, "u_limits": [l.u_min, l.u_max],
+              "u_rate_limit": None if l.u_rate_limit == float("inf") else l.u_rate_limit,
               "setpoint_range": list(l.setpoint_range), "measurement_scale": l.measurement_scale,
               "divergence_bound": l.divergence_bound, "control_scale": l.control_scale,
               "gains": {g: [getattr(l, g).low, getattr(l, g).high, getattr(l, g).scale] for g in GAIN_NAMES}}

@@ -174,6 +174,9 @@ class LoopModel(Section):
         (-math.inf, math.inf), json_schema_extra=_no_default_in_schema,
         description="[min, max] saturation of the control signal [input units]; default [-.inf, .inf]; "
                     "the only numbers that may be infinite")
+    u_rate_limit: Optional[Positive] = Field(
+        None, description="|du/dt| limit of the control signal [input units / s] that the PID honours (its anti-windup "
+                          "treats the limit like saturation), the search and every export too; null: none")
     setpoint_range: Range = Field((0.0, 1.0), description="[low, high] training setpoints are drawn from "
                                                           "[output units]")
     measurement_scale: Positive = Field(1.0, description="typical setpoint step [output units]; errors are divided "
@@ -730,8 +733,8 @@ class BaselineModel(Section):
                           "and Td's high end, so that the optimum of a plant lies inside; 1: the scenario's ranges "
                           "exactly (the paper's sweeps)")
     episodes: Count = Field(3, description="seeded training episodes per cost evaluation")
-    maxiter: Count = Field(30, description="generations of differential evolution")
-    popsize: Count = Field(15, description="population = popsize x number of gains searched")
+    maxiter: Count = Field(20, description="generations of differential evolution")
+    popsize: Count = Field(10, description="population = popsize x number of gains searched")
 
 
 ScheduleBy = Literal["auto", "setpoint", "measurement", "error"]  # deploy.schedule_by (prlpid_fmi.tuning.schedule.trajectories)

@@ -249,26 +249,35 @@ def _load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, pops
                 try:
                     second = trade.search(np.append(vector, 2.0 * weight - 1.0), seed, maxiter, popsize,
                                           callback=advance(popsize * trade.n))
-                    vector = np.asarray(second.x)
-                    gains, tf = design.gains(vector[:-1]), design.filters(vector[:-1])
-                    b = [trade.weight(vector)] * config.n_loops
-                    load, ise, overshoot = trade.evaluate(vector)
-                    traded = {"load_cost": load, "ISE": ise, "Overshoot": overshoot,
-                              "feasible": bool(getattr(second, "constr_violation", 0) <= 0),
+                    feasible = bool(np.max(trade.constraint_values(second.x)) <= 0)
+                    load, ise, overshoot = trade.evaluate(second.x)
+                    traded = {"load_cost": load, "ISE": ise, "Overshoot": overshoot, "feasible": feasible,
                               "evaluations": int(second.nfev)}
+                    if feasible:  # else the load optimum stays, with the b of least overshoot
+                        vector = np.asarray(second.x)
+                        gains, tf = design.gains(vector[:-1]), design.filters(vector[:-1])
+                        b = [trade.weight(vector)] * config.n_loops
                 finally:
                     trade.close()
         structure = (b, c, tf)
         tuned = dataclasses.replace(design.search_config, tuned_structure=tuple(zip(b, c, tf)))
+        fallback = None
         if max_sensitivity is not None:
             points = setpoint_range_points(config)
             repaired = detune_over(tuned, gains, points, max_sensitivity)
-            gains = repaired if repaired is not None else gains
+            if repaired is None:  # the design's estimate misled it (several coupled loops, a nonlinear plant):
+                # the setpoint search's robust PID, as before the load design, rather than an undeployable one
+                fallback = _setpoint_pid(config, seed, episodes, maxiter, popsize, None, max_sensitivity)
+                gains, structure = fallback.gains.values(), fallback.structure
+                tf = list(structure[2])
+            else:
+                gains = repaired
         cost = design.load_cost(gains, tf)
         info = {"objective": "load", "load_cost": cost, "load_optimum": best_load, "load_step": baseline.load_step,
                 "traded_for_overshoot": traded,
                 "estimates": design.estimates(gains, tf), "setpoint_weights": choices,
-                "stabilising_gains": first.gains.as_dict(), "feasible": bool(getattr(result, "constr_violation", 0) <= 0)}
+                "stabilising_gains": first.gains.as_dict(), "feasible": bool(getattr(result, "constr_violation", 0) <= 0),
+                "fell_back_to_setpoint_search": fallback is not None}
     finally:
         design.close()
     return FixedPid(vector, gains_from_values(*gains), cost, first.evaluations + int(result.nfev), structure, info)

@@ -15,8 +15,10 @@ Astrom & Hagglund's design, on the FMU (baseline.objective "load"):
    deterministic. A diverging episode costs DIVERGED_COST.
 2. Subject to, at every point, Ms <= deploy.max_sensitivity and std(u) from the scenario's measurement noise
    <= deploy.max_noise_gain x the control span, both from the plant's frequency response measured at that point
-   (robustness.plant_response; measured once, with a stabilising PID, `plant_responses`). DE's feasibility rules
-   (scipy's NonlinearConstraint) keep infeasible candidates out; their load cost is never simulated.
+   (robustness.plant_response; measured once, with a stabilising PID, `plant_responses`), and u reversing on at
+   most MAX_CHATTER of the load experiment's samples (a saturating limit cycle, which the linear Ms cannot see).
+   DE's feasibility rules (scipy's NonlinearConstraint) keep infeasible candidates out; where the frequency-
+   response limits fail, the load experiment is never simulated.
 3. Then b (controller.setpoint_weight "tuned"): on noise-free training episodes (setpoint steps), the b in
    B_GRID with the lowest ISE among those with overshoot <= deploy.max_overshoot. b changes neither Ms nor the
    load response (robustness.margins.pid_transfer_function), so it comes second.
@@ -39,6 +41,7 @@ from prlpid_fmi.loop.actions import ActionMap
 from prlpid_fmi.loop.core import LoopCore, control_scales, pid_structure
 from prlpid_fmi.loop.evaluation import gains_rollout
 from prlpid_fmi.loop.isolated import make_core
+from prlpid_fmi.metrics import chatter_fraction
 from prlpid_fmi.robustness.margins import margins_of, pid_frequency_response, setpoint_range_points
 from prlpid_fmi.robustness.plant_response import MeasuredPlant
 
@@ -46,7 +49,11 @@ DIVERGED_COST = 1e6
 B_GRID = tuple(i / 20 for i in range(21))  # setpoint weights tried
 TF_RANGE = (0.1, 100.0)  # measurement filter search range [sample times], log
 INIT_SPREAD = 0.15  # std of SetpointDesign's initial population around its start [search coordinates]
-POLISH_EVALUATIONS = 60  # Nelder-Mead evaluations per searched parameter after differential evolution
+POLISH_EVALUATIONS = 60
+MAX_CHATTER = 0.05  # fraction of samples where u may reverse in the load experiment (metrics.chatter_fraction)
+CHATTER_PENALTY = 10.0  # the load cost grows by this x the chatter above MAX_CHATTER (relative to it)
+KP_SCAN = 48  # |Kp| values scanned for the interval that meets the limits
+KP_REFINE = 24  # |Kp| values on the finer grid at each end of that interval  # Nelder-Mead evaluations per searched parameter after differential evolution
 
 
 def widened(config: TuningConfig, factor: float) -> TuningConfig:
@@ -147,11 +154,83 @@ class LoadDesign:
         self.spans = control_scales(self.config)
         self.cores: list[LoopCore] = []
         self.plants: list = []
+        self._seen: dict = {}
+        self._intervals: dict = {}
+        self.reference: list = []
 
     # -- the structure a vector stands for -------------------------------------------------------------------
     def gains(self, vector) -> tuple:
-        """(Kp, Ti, Td, coupling) lists of a search vector."""
-        return self.gain_map.values(list(vector)[:self.gain_map.size])
+        """(Kp, Ti, Td, coupling) lists of a search vector. Ti, Td (and coupling) map like the absolute gain map over
+        the widened ranges; each loop's Kp entry is a position in [-1, 1] within the Kp interval where that loop
+        meets the Ms and noise limits for its Ti, Td, Tf (`kp_interval`, log-spaced), so every candidate with an
+        interval meets them by construction. Without one, Kp maps over the whole widened range."""
+        head = list(vector)[:self.gain_map.size]
+        Kp, Ti, Td, coupling = self.gain_map.values(head)
+        tf = self.filters(vector)
+        for i in range(self.config.n_loops):
+            found = self.kp_interval(i, Ti[i], Td[i], tf[i])
+            if found is not None:
+                sign, lo, hi = found
+                frac = (min(max(float(head[3 * i]), -1.0), 1.0) + 1.0) / 2.0
+                Kp[i] = sign * lo * (hi / lo) ** frac
+        return Kp, Ti, Td, coupling
+
+    def feasible(self, vector) -> bool:
+        """Every loop has a Kp interval for the vector's Ti, Td, Tf (no measured response: always)."""
+        Kp, Ti, Td, _ = self.gain_map.values(list(vector)[:self.gain_map.size])
+        tf = self.filters(vector)
+        return all(self.kp_interval(i, Ti[i], Td[i], tf[i]) is not None for i in range(self.config.n_loops))
+
+    def kp_interval(self, loop: int, Ti: float, Td: float, tf: float):
+        """(sign, |Kp| low, |Kp| high) of the Kp range where loop `loop` meets Ms <= limit and the noise bound at every
+        point, for these Ti, Td, Tf: a scan of KP_SCAN log-spaced |Kp| over the widened range (robustness.
+        plant_response.MeasuredPlant.scan, Nyquist stability included), the feasible run with the largest |Kp|, its
+        ends refined on a finer grid (KP_REFINE); None when no Kp meets them. The whole range where nothing was measured."""
+        r = self.search_config.loops[loop].Kp
+        sign = -1.0 if r.high <= 0 else 1.0
+        lo, hi = (abs(r.high), abs(r.low)) if sign < 0 else (r.low if r.low > 0 else r.high * 1e-3, r.high)
+        plants = [(p[loop], ref[loop]) for p, ref in zip(self.plants, self.reference) if p is not None]
+        if not plants or (self.limit is None and not self.config.measurement_noise_std > 0):
+            return sign, lo, hi
+        key = (loop, Ti, Td, tf)
+        if key in self._intervals:
+            return self._intervals[key]
+        c = self.config
+        shape = lambda w: pid_frequency_response(1.0, Ti, Td, c.sample_time_s, w, c.derivative_filter_N, tf,  # noqa: E731
+                                                 c.measurement_filter_order)
+        limit = self.limit if self.limit is not None else math.inf
+        sigma = c.measurement_noise_std
+
+        def ok(mags: np.ndarray) -> np.ndarray:
+            good = np.ones(len(mags), bool)
+            for plant, reference in plants:
+                ms, noise, winding = plant.scan(sign * mags, shape, noise=sigma > 0)
+                good &= (ms <= limit) & (np.abs(winding - reference) < 0.5 * math.pi)  # stable: Nyquist
+                if sigma > 0:
+                    good &= sigma * noise / self.spans[loop] <= self.max_noise
+            return good
+
+        grid = np.geomspace(lo, hi, KP_SCAN)
+        good = ok(grid)
+        found = None
+        if good.any():
+            j_hi = int(np.flatnonzero(good)[-1])
+            j_lo = j_hi
+            while j_lo > 0 and good[j_lo - 1]:
+                j_lo -= 1
+            low, high = grid[j_lo], grid[j_hi]
+            if j_lo > 0:  # the edges once more, on a finer grid between the last failing and first passing |Kp|
+                fine = np.geomspace(grid[j_lo - 1], grid[j_lo], KP_REFINE)
+                low = fine[int(np.argmax(ok(fine)))]
+            if j_hi + 1 < KP_SCAN:
+                fine = np.geomspace(grid[j_hi], grid[j_hi + 1], KP_REFINE)
+                passing = np.flatnonzero(ok(fine))
+                high = fine[int(passing[-1])] if passing.size else grid[j_hi]
+            found = (sign, float(low), float(max(high, low)))
+        if len(self._intervals) > 65536:
+            self._intervals.clear()
+        self._intervals[key] = found
+        return found
 
     def filters(self, vector) -> list[float]:
         """Tf per loop [s] of a search vector (the fixed ones when Tf is not searched)."""
@@ -202,34 +281,57 @@ class LoadDesign:
         """Measure the plant responses with `gains` in the loop and open one load-experiment core per point, the
         load signed away from the actuator limit nearer to u at the point (as `gains` hold it)."""
         self.plants = plant_responses(self.config, gains, self.points)
+        # the windings of the PID that was measured stable there, the reference of every candidate's (kp_interval)
+        self.reference = [None if plants is None else
+                          [pl.winding(self.controller(gains, list(self.tf), i)) for i, pl in enumerate(plants)]
+                          for plants in self.plants]
         for p in self.points:
             probe = gains_rollout(lambda c: gains, _load_config(self.config, p, [0.0] * self.config.n_loops), seed=0)
             self.cores.append(make_core(_load_config(self.config, p, signed_loads(self.config, probe, self.load_step))))
 
-    def load_cost(self, gains: tuple, tf: list[float]) -> float:
-        """J_load (module docstring) of constant gains with measurement filter tf."""
-        total = 0.0
+    def load_response(self, gains: tuple, tf: list[float]) -> tuple[float, float]:
+        """(J_load, worst chatter) of constant gains with measurement filter tf: the load cost of the module
+        docstring and the largest fraction of samples where a loop's u reverses (metrics.chatter_fraction)."""
+        total, chatter = 0.0, 0.0
         for core in self.cores:
             core.set_structure(self.b, self.c, tf)
-            total += load_iae(gains_rollout(lambda c: gains, core.config, seed=0, core=core), core.config)
-        return total / max(len(self.cores), 1)
+            traj = gains_rollout(lambda c: gains, core.config, seed=0, core=core)
+            total += load_iae(traj, core.config)
+            if not traj.terminated:
+                chatter = max(chatter, max(chatter_fraction(traj.pid_output[:, i], self.spans[i])
+                                           for i in range(self.config.n_loops)))
+        return total / max(len(self.cores), 1), chatter
+
+    def load_cost(self, gains: tuple, tf: list[float]) -> float:
+        """J_load (module docstring) of constant gains with measurement filter tf."""
+        return self.load_response(gains, tf)[0]
+
+    def evaluate(self, vector) -> tuple[float, float]:
+        """load_response of a vector, simulated once per vector (the objective and the chatter constraint ask)."""
+        key = tuple(float(v) for v in vector)
+        found = self._seen.get(key)
+        if found is None:
+            found = self._seen[key] = self.load_response(self.gains(vector), self.filters(vector))
+            if len(self._seen) > 4096:
+                self._seen.pop(next(iter(self._seen)))
+        return found
 
     def cost(self, vector) -> float:
-        return self.load_cost(self.gains(vector), self.filters(vector))
-
-    def penalised(self, vector) -> float:
-        """The load cost where the constraints hold, else DIVERGED_COST x (1 + the largest violation)."""
-        violation = float(np.max(self.constraint_values(vector))) if any(self.plants) else 0.0
-        return self.cost(vector) if violation <= 0 else DIVERGED_COST * (1.0 + violation)
+        """The load cost of a vector: DIVERGED_COST when a loop has no Kp interval (not simulated); J_load x
+        (1 + CHATTER_PENALTY x the chatter above MAX_CHATTER, relative) otherwise: a saturating limit cycle,
+        which the linear Ms cannot see, chatters."""
+        if not self.feasible(vector):
+            return DIVERGED_COST
+        load, chatter = self.evaluate(vector)
+        return load * (1.0 + CHATTER_PENALTY * max(0.0, chatter - MAX_CHATTER) / MAX_CHATTER)
 
     def search(self, seed: int, maxiter: int, popsize: int, callback=None):
-        """Differential evolution of the load cost under the constraints, then a Nelder-Mead polish of the penalised
-        cost from its result (POLISH_EVALUATIONS per parameter at most); scipy's OptimizeResult of the better."""
-        constraints = NonlinearConstraint(self.constraint_values, -np.inf, 0.0) if any(self.plants) else ()
+        """Differential evolution of `cost`, then a Nelder-Mead polish from its result (POLISH_EVALUATIONS per
+        parameter at most); scipy's OptimizeResult of the better."""
         result = differential_evolution(self.cost, [(-1.0, 1.0)] * self.n, maxiter=maxiter, popsize=popsize,
-                                        seed=seed, polish=False, tol=1e-6, callback=callback, constraints=constraints)
-        if self.penalised(result.x) < DIVERGED_COST:
-            polished = minimize(self.penalised, result.x, method="Nelder-Mead", bounds=[(-1.0, 1.0)] * self.n,
+                                        seed=seed, polish=False, tol=1e-6, callback=callback)
+        if result.fun < DIVERGED_COST:
+            polished = minimize(self.cost, result.x, method="Nelder-Mead", bounds=[(-1.0, 1.0)] * self.n,
                                 options={"maxfev": POLISH_EVALUATIONS * self.n, "xatol": 1e-4, "fatol": 1e-7})
             if polished.fun < result.fun:
                 result.x, result.fun = polished.x, float(polished.fun)

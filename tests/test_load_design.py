@@ -1,0 +1,147 @@
+"""The fixed PID's load design against an independent optimum of the same cost (numpy, scipy, python-control).
+
+The cost is re-implemented here from its definition (tuning.load_design's docstring), not from the code: the
+bundled plant 1/(s - a) sampled exactly with a zero-order hold, the 2-DOF PID law of control/pid.py's docstring
+(b = 1 while b is untuned, c = 0, no filter, clamping at the actuator limits), the load experiment at the low
+end, middle and high end of the setpoint range, and Ms from python-control's frequency response of the same
+sampled loop.
+"""
+from __future__ import annotations
+
+import math
+
+import control
+import numpy as np
+import pytest
+from scipy.optimize import differential_evolution, minimize
+
+from prlpid_fmi.config import BaselineConfig
+from prlpid_fmi.scenario.presets import preset
+from prlpid_fmi.tuning.load_design import LoadDesign, widened
+
+TS = 0.1
+U_LIMIT = 10.0      # first_order: u_limits [-10, 10]
+HOLD = 100          # training.setpoint_hold_steps
+LOAD = 0.1 * 20.0   # baseline.load_step x the control span
+POINTS = (-1.0, 0.0, 1.0)
+
+
+def simulate(a: float, Kp: float, Ti: float, Td: float, r: float, load: float) -> tuple[np.ndarray, np.ndarray]:
+    """(y, applied u) over 2 * HOLD samples: x(k+1) = e^(a Ts) x + (e^(a Ts) - 1)/a u(k), y = x, from x = 0; u
+    by the 2-DOF law with b = 1, c = 0; from sample HOLD on `load` is added to u, then clipped to the limits."""
+    phi = math.exp(a * TS)
+    gamma = (phi - 1.0) / a
+    x, integral, last_d = 0.0, 0.0, None
+    ys, us = [], []
+    for k in range(2 * HOLD + 1):
+        y = x
+        ys.append(y)
+        e, ed = r - y, -y
+        if last_d is None:
+            last_d = ed
+        d = (ed - last_d) / TS
+        last_d = ed
+        trial = integral + e * TS
+        u_try = Kp * (e + Td * d) + Kp / Ti * trial
+        u = min(max(u_try, -U_LIMIT), U_LIMIT)
+        if u == u_try or not (u_try - u) * (Kp * e) > 0:
+            integral = trial
+        applied = min(max(u + (load if k >= HOLD else 0.0), -U_LIMIT), U_LIMIT)
+        us.append(applied)
+        x = phi * x + gamma * applied
+    return np.array(ys), np.array(us)
+
+
+def load_cost(a: float, Kp: float, Ti: float, Td: float) -> float:
+    """Mean over POINTS of Ts * sum_{k >= HOLD} |r - y(k)| / |d|, d signed away from the nearer limit."""
+    total = 0.0
+    for r in POINTS:
+        _, u = simulate(a, Kp, Ti, Td, r, 0.0)
+        d = -LOAD if u[HOLD - 1] <= 0.0 else LOAD
+        y, _ = simulate(a, Kp, Ti, Td, r, d)
+        if not np.all(np.abs(y - r) <= 5.0):  # the scenario's divergence bound
+            return 1e6
+        total += TS * float(np.sum(np.abs(r - y[HOLD:]))) / LOAD
+    return total / len(POINTS)
+
+
+_GRID = np.geomspace(1e-3, math.pi / TS, 4000)
+_PLANT: dict = {}
+
+
+def sensitivity_peak(a: float, Kp: float, Ti: float, Td: float) -> float:
+    """max |1/(1 + C P)| on a dense grid to Nyquist; P from python-control's ZOH sampling of 1/(s - a), C the law's
+    feedback part Kp (1 + Ts/Ti z/(z - 1) + Td/Ts (z - 1)/z)."""
+    if a not in _PLANT:
+        P = control.c2d(control.tf([1.0], [1.0, -a]), TS, "zoh")
+        _PLANT[a] = np.squeeze(control.frequency_response(P, _GRID).complex)
+    z = np.exp(1j * _GRID * TS)
+    C = Kp * (1 + TS / Ti * z / (z - 1) + Td / TS * (z - 1) / z)
+    return float(np.max(np.abs(1 / (1 + C * _PLANT[a]))))
+
+
+def independent_optimum(a: float, ranges) -> tuple[float, tuple[float, float, float]]:
+    """Min load_cost subject to Ms <= 2 over the ranges (log Kp, log Ti, Td): DE with a penalty, then Nelder-Mead."""
+    (kp_lo, kp_hi), (ti_lo, ti_hi), (td_lo, td_hi) = ranges
+
+    def gains(v):
+        return math.exp(v[0]), math.exp(v[1]), v[2]
+
+    def penalised(v):
+        g = gains(v)
+        ms = sensitivity_peak(a, *g)
+        return load_cost(a, *g) if ms <= 2.0 else 1e6 * (1 + ms - 2.0)
+
+    bounds = [(math.log(kp_lo), math.log(kp_hi)), (math.log(ti_lo), math.log(ti_hi)), (td_lo, td_hi)]
+    de = differential_evolution(penalised, bounds, seed=1, maxiter=60, popsize=20, tol=1e-8, polish=False)
+    nm = minimize(penalised, de.x, method="Nelder-Mead", bounds=bounds,
+                  options={"xatol": 1e-6, "fatol": 1e-9, "maxfev": 2000})
+    best = nm if nm.fun < de.fun else de
+    return float(best.fun), gains(best.x)
+
+
+def _ranges(config):
+    l = config.loops[0]
+    return (l.Kp.low, l.Kp.high), (l.Ti.low, l.Ti.high), (l.Td.low, l.Td.high)
+
+
+def test_the_independent_cost_is_the_tools_cost():
+    """The same gains, both implementations: the tool on the FMU, this file on the exact ZOH model."""
+    config = preset("first_order")
+    design = LoadDesign(config, 0.1, 2.0, 0.02, 4.0)
+    try:
+        design.prepare(([6.0], [1.0], [0.0], None))
+        for g in ((6.0, 1.0, 0.0), (7.4, 0.15, 0.002), (3.0, 2.0, 0.05)):
+            tool = design.load_cost(([g[0]], [g[1]], [g[2]], None), [0.0])
+            assert tool == pytest.approx(load_cost(1.0, *g), rel=2e-3), g
+    finally:
+        design.close()
+
+
+@pytest.mark.parametrize("name, a", [("first_order", 1.0)])
+def test_the_searchs_optimum_is_within_2_percent_of_an_independent_optimum(name, a):
+    config = preset(name)
+    design = LoadDesign(config, 0.1, 2.0, 0.02, 4.0)
+    try:
+        design.prepare(([6.0], [1.0], [0.0], None))
+        result = design.search(seed=0, maxiter=20, popsize=10)
+        Kp, Ti, Td, _ = design.gains(result.x)
+    finally:
+        design.close()
+    best, _ = independent_optimum(a, _ranges(widened(config, 4.0)))
+    found = (Kp[0], Ti[0], Td[0])
+    assert sensitivity_peak(a, *found) <= 2.0 * 1.01  # the tool's Ms estimate is from its measured response
+    assert load_cost(a, *found) <= 1.02 * best, (found, load_cost(a, *found), best)
+
+
+@pytest.mark.parametrize("name, a", [("first_order", 1.0), ("first_order_1p5", 1.5)])
+def test_the_search_ranges_contain_the_optimum(name, a):
+    """The Ms <= 2 load optimum within the search's ranges (the scenario's widened by baseline.widen_ranges) lies
+    inside them, not at an edge, on the bundled linear scenarios; on 1/(s - 1) it needs a Ti below the scenario's
+    own range (0.2 s), which is why the ranges are widened."""
+    config = preset(name)
+    kp, ti, td = _ranges(widened(config, BaselineConfig().widen_ranges))
+    _, (Kp, Ti, Td) = independent_optimum(a, (kp, ti, td))
+    assert kp[0] * 1.05 < Kp < kp[1] / 1.05 and ti[0] * 1.05 < Ti < ti[1] / 1.05 and Td < td[1] * 0.95, (Kp, Ti, Td)
+    if name == "first_order":
+        assert Ti < config.loops[0].Ti.low
