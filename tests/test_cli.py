@@ -182,22 +182,35 @@ def test_bring_your_own_fmi3_fmu(tmp_path, capsys):
     lines = table.read_text().splitlines()
     assert lines[0].startswith("#") and any("Ti" in line for line in lines if not line.startswith("#"))
 
-    # The CSV is a plain PID anyone can run: eq. 2 written here from the CSV's metadata, table lookup
-    # by setpoint, on a fresh instance of the user's FMU, reproduces the tool's no-NN replay.
+    # The CSV is a plain PID anyone can run: the 2-DOF law written here from the CSV's columns (b, c, Tf) and
+    # metadata, table lookup by setpoint, on a fresh instance of the user's FMU, reproduces the tool's no-NN replay.
     _, replayed = replay_schedule(schedule, load_scenario(scenario).evaluation_config())
-    plant = FmuPlant(fmu, inputs=["power"], outputs=["temperature"], sample_time_s=schedule.sample_time_s)
-    y, integral, e_prev = plant.reset()[0], 0.0, None
+    b, c, tf = (float(np.ravel(v)[0]) for v in (schedule.setpoint_weight, schedule.derivative_weight,
+                                                schedule.measurement_filter_s))
+    order, ts = schedule.measurement_filter_order, schedule.sample_time_s
+    plant = FmuPlant(fmu, inputs=["power"], outputs=["temperature"], sample_time_s=ts)
+    y = plant.reset()[0]
+    u0 = min(max(float(plant.get(["power"])[0]), 0.0), 1000.0)  # the bumpless start: balanced at y0 with u0
+    integral, ed_prev, stages = None, None, [y] * order
     measured = [y]
     for k in range(200):
         r = 40.0 if k < 100 else 55.0
         kp, ti, td = (float(np.ravel(g)[0]) for g in schedule.gains_at(r)[:3])
-        e = r - y
-        e_prev = e if e_prev is None else e_prev
-        u_try = kp * (e + (integral + e * schedule.sample_time_s) / ti + td * (e - e_prev) / schedule.sample_time_s)
+        if integral is None:
+            integral = (u0 - kp * ((b - 1.0) * y)) / (kp / ti)
+        yf = y
+        if tf > 0 and k > 0:
+            x = y
+            for j in range(order):
+                stages[j] = x = (tf / order * stages[j] + ts * x) / (tf / order + ts)
+            yf = x
+        e, ep, ed = r - y, b * r - yf, c * r - yf
+        ed_prev = ed if ed_prev is None else ed_prev
+        u_try = kp * (ep + td * (ed - ed_prev) / ts) + kp / ti * (integral + e * ts)
         if 0.0 <= u_try <= 1000.0 or (u_try > 1000.0) != (kp * e > 0):
-            integral += e * schedule.sample_time_s
+            integral += e * ts
         u = min(max(u_try, 0.0), 1000.0)
-        e_prev = e
+        ed_prev = ed
         y = plant.step([u])[0]
         measured.append(y)
     plant.close()

@@ -333,7 +333,11 @@ def test_tune_progress_goes_to_stderr_and_never_passes_the_target(tmp_path, caps
     assert training[0] == "prlpid-fmi: training: 0/200 steps (0 %)"  # ... the progress does not
     assert training[-1].startswith("prlpid-fmi: training: 200 steps in ")
     assert all(int(line.split(": ")[2].split("/")[0].replace(",", "")) <= 200 for line in training[:-1])
-    budget = 2 * 2 * 3  # (maxiter + 1) * popsize * (Kp, Ti, Td) of the small baseline
+    from prlpid_fmi.tuning.fixed_pid import STABILISING_GENERATIONS
+
+    # the load design's two searches with the small baseline (maxiter 1, popsize 2) over (Kp, Ti, Td): the
+    # stabilising setpoint search's generations, then the load search's, (generations + 1) * popsize * 3 each
+    budget = (STABILISING_GENERATIONS + 1) * 2 * 3 + (1 + 1) * 2 * 3
     assert f"prlpid-fmi: fixed-PID search: {budget}/{budget} evaluations (100 %)" in err
     assert "prlpid-fmi: training" not in out and "fixed-PID search:" not in out
     after = [line for line in err.splitlines() if line.startswith(("prlpid-fmi: gain schedule", "prlpid-fmi: evaluation",

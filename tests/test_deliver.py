@@ -11,12 +11,15 @@ def metrics(ise, tv=10.0, overshoot=5.0, terminated=False):
             "terminated": terminated}
 
 
-def margins(ms, reliable=True):
-    return SimpleNamespace(Ms=ms, reliable=reliable)
+def margins(ms, reliable=True, problems=None):
+    """A margin estimate; an unreliable one is "varying" (impossible to measure) unless `problems` says otherwise."""
+    problems = () if reliable else ("varying",) if problems is None else problems
+    return SimpleNamespace(Ms=ms, reliable=reliable, problems=problems, note="; ".join(problems))
 
 
-def cand(name, ise, ms=1.5, reliable=True, tv=10.0, terminated=False, mc=()):
-    return Candidate(name, metrics(ise, tv, terminated=terminated), list(mc), [margins(ms, reliable)], [0.0])
+def cand(name, ise, ms=1.5, reliable=True, tv=10.0, terminated=False, mc=(), problems=None):
+    return Candidate(name, metrics(ise, tv, terminated=terminated), list(mc), [margins(ms, reliable, problems)],
+                     [0.0])
 
 
 def test_the_better_robust_schedule_is_deployed():
@@ -41,14 +44,20 @@ def test_nothing_is_deployed_when_neither_meets_the_limit_and_the_verdict_says_s
     assert "Nothing here is safe to deploy" in text
 
 
-def test_unreliable_finite_margins_neither_qualify_nor_disqualify_but_divergence_does():
+def test_impossible_margins_neither_qualify_nor_disqualify_but_failed_ones_do():
+    """robustness.status: a plant varying faster than the experiment ("varying") cannot be judged; a loop that
+    diverged, sat at a limit or was too lightly damped to settle has failed, whatever its estimate says."""
     unreliable = cand("gain schedule", 0.9, ms=40.0, reliable=False)
     fixed = cand("fixed PID", 1.0, ms=20.0, reliable=False)
     d = choose(unreliable, fixed, 2.0)
     assert d.deploy == "gain schedule" and unreliable.unverified and math.isnan(unreliable.worst_Ms)
     assert "could not be verified" in verdict(d, unreliable, fixed, 2.0)
-    diverged = cand("gain schedule", 0.9, ms=math.inf, reliable=False)
+    diverged = cand("gain schedule", 0.9, ms=math.inf, reliable=False, problems=())
     assert choose(diverged, fixed, 2.0).deploy == "fixed PID"
+    for kind in ("lightly_damped", "saturated"):  # failed even with an estimate inside the limit
+        failed = cand("gain schedule", 0.9, ms=1.5, reliable=False, problems=(kind,))
+        d = choose(failed, fixed, 2.0)
+        assert d.deploy == "fixed PID" and "fails the robustness check" in d.reasons[0], kind
 
 
 def test_the_advice_after_a_lost_schedule_names_a_setting_of_the_runs_gain_map():
@@ -97,6 +106,6 @@ def test_a_win_on_the_evaluation_that_does_not_carry_over_to_held_out_episodes_i
 def test_an_infinite_ms_is_said_in_words():
     d = choose(cand("gain schedule", 0.5, ms=math.inf), cand("fixed PID", 1.0), 2.0)
     assert d.deploy == "fixed PID"
-    assert d.reasons == ("The gain schedule is not deployed: its loop is not robustly stable at every operating point: "
-                         "in the margin measurement it diverged or was held at an actuator limit (Ms = infinity; "
-                         "limit 2).",)
+    assert d.reasons == ("The gain schedule is not deployed: its loop fails the robustness check at 1 of 1 operating "
+                         "points (at 0, failed: in the margin measurement the loop diverged or was held at an actuator "
+                         "limit (Ms = infinity)).",)

@@ -20,19 +20,37 @@ def exact_ms(gains):
     return reference_margins(loop)[0]
 
 
-@pytest.mark.parametrize("keep_ti", [False, True])
-def test_detuned_gains_meet_the_limit_by_a_small_margin(keep_ti):
-    assert exact_ms(AGGRESSIVE) > 2.5  # the starting point violates the limit, so the check can fail
-    Kp, Ti, Td, _ = detuned = detune(CONFIG, AGGRESSIVE, operating_point(CONFIG), 2.0, keep_ti=keep_ti)
-    lam = AGGRESSIVE[0][0] / Kp[0]
-    assert lam > 1.0 and Td == AGGRESSIVE[2]
-    assert Ti[0] == pytest.approx(AGGRESSIVE[1][0] * (1.0 if keep_ti else lam))
+TOGETHER = ([12.0], [0.2], [0.01], None)  # Ms about 7.6; the together rule meets the limit from here
+
+
+@pytest.mark.parametrize("start, keep_ti", [(TOGETHER, False), (AGGRESSIVE, True)])
+def test_detuned_gains_meet_the_limit_by_a_small_margin(start, keep_ti):
+    """Kp / lambda with Ti and Td * lambda (the same controller, lambda times slower), or with keep_ti Kp / lambda
+    alone; either way the smallest lambda that meets Ms <= 2 on the exact loop."""
+    assert exact_ms(start) > 2.5  # the starting point violates the limit, so the check can fail
+    Kp, Ti, Td, _ = detuned = detune(CONFIG, start, operating_point(CONFIG), 2.0, keep_ti=keep_ti)
+    lam = start[0][0] / Kp[0]
+    factor = 1.0 if keep_ti else lam
+    assert lam > 1.0
+    assert Ti[0] == pytest.approx(start[1][0] * factor) and Td[0] == pytest.approx(start[2][0] * factor)
     assert exact_ms(detuned) <= 2.0 * 1.01
     # the smallest detuning found (bisection on k of lambda = DETUNE_STEP**k, resolution <= 1/16 of a scan
     # interval): a clearly smaller lambda still violates the limit
     less = lam / DETUNE_STEP ** 0.5
-    fewer = ([AGGRESSIVE[0][0] / less], [AGGRESSIVE[1][0] * (1.0 if keep_ti else less)], AGGRESSIVE[2], None)
+    factor = 1.0 if keep_ti else less
+    fewer = ([start[0][0] / less], [start[1][0] * factor], [start[2][0] * factor], None)
     assert exact_ms(fewer) > 2.0
+
+
+def test_the_together_rule_keeps_the_high_frequency_gain_so_kp_alone_must_cure_it():
+    """Kp / lambda with Td * lambda keeps Kp * Td, the sampled loop's gain near Nyquist: on 1/(s - 1) with Td = 0.05 s
+    (Ts = 0.1 s) no lambda meets Ms <= 2 (a small one keeps the high-frequency gain, a large one leaves Kp < 1
+    and the unstable pole), while Kp / lambda alone does; detune_over (the load design's check) tries both."""
+    from prlpid_fmi.tuning.fixed_pid import detune_over
+
+    assert detune(CONFIG, AGGRESSIVE, operating_point(CONFIG), 2.0) is None
+    repaired = detune_over(CONFIG, AGGRESSIVE, [operating_point(CONFIG)], 2.0)
+    assert repaired is not None and repaired[2] == AGGRESSIVE[2] and exact_ms(repaired) <= 2.0 * 1.01
 
 
 def test_range_points_are_the_ends_and_middle_of_every_loops_range():
@@ -53,7 +71,8 @@ def test_a_fixed_pid_is_detuned_until_it_meets_the_limit_at_every_operating_poin
 
     import prlpid_fmi.tuning.fixed_pid as fixed_pid
 
-    monkeypatch.setattr(fixed_pid, "margins_of", lambda config, g, p: types.SimpleNamespace(Ms=g[0][0] * (1 + p[0]) / 4))
+    monkeypatch.setattr(fixed_pid, "margins_of", lambda config, g, p: types.SimpleNamespace(
+        Ms=g[0][0] * (1 + p[0]) / 4, reliable=True, problems=()))
     points = [[-1.0], [0.0], [1.0]]
     start = ([8.0], [1.0], [0.0], None)  # Ms 0, 2, 4 at the three points
     at_mid = fixed_pid.detune(CONFIG, start, [0.0], 2.0)

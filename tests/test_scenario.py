@@ -122,8 +122,9 @@ def test_evaluation_config_substitutes_everything(tmp_path):
     assert c.disturbances == (Disturbance("actuator", "y", 50, 1.5), Disturbance("measurement", "y", 60, 0.1, 65),
                               Disturbance("fmu", "a", 200, 1.2))
     assert s.evaluation.seed == 7
+    assert c.load_disturbance == 0.0 and s.tuning.load_disturbance == 0.05  # the evaluation's disturbances only
     assert dataclasses.replace(c, setpoint_schedule=None, episode_steps=200, disturbances=(),
-                               measurement_noise_std=0.1) == s.tuning
+                               measurement_noise_std=0.1, load_disturbance=0.05) == s.tuning
 
 
 def test_init_scenario_loads_back(tmp_path):

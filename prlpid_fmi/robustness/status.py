@@ -52,5 +52,8 @@ def why(margins, limit: float) -> str:
         text = f"verified: Ms {margins.Ms:.2f} " + ("within" if margins.Ms <= limit else "above") + f" the limit {limit:g}"
         return text + (f" (caveat: {margins.note})" if margins.note else "")
     if state == Robustness.FAILED:
-        return f"failed: {margins.note or 'no margins'}"
+        if not math.isfinite(margins.Ms):
+            return ("failed: in the margin measurement the loop diverged or was held at an actuator limit (Ms = "
+                    "infinity" + (f"; {margins.note}" if margins.note else "") + ")")
+        return f"failed: {margins.note}"
     return f"impossible: {margins.note}"

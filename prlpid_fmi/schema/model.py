@@ -12,7 +12,7 @@ validation context (checks.py), in section order, so that one pass reports every
 from __future__ import annotations
 
 import math
-from typing import Annotated, Any, Literal, Optional, Union
+from typing import Annotated, Any, Literal, Optional
 
 from pydantic import (
     AfterValidator,
@@ -52,6 +52,7 @@ from prlpid_fmi.schema.types import (
     as_number,
     number,
     problem,
+    tuned_or_number,
 )
 
 _REWARD = RewardWeights()
@@ -349,14 +350,14 @@ class ControllerModel(Section):
     anti_windup: AntiWindup = Field("clamping", description="clamping | back_calculation | none")
     derivative_filter_N: Optional[Positive] = Field(
         None, description="null: unfiltered derivative; N > 0: first-order filter with time constant Td / N")
-    setpoint_weight: Union[Literal["tuned"], Fraction] = Field(
+    setpoint_weight: tuned_or_number(0.0, 1.0) = Field(
         "tuned", description="b in [0, 1], the setpoint's weight in the proportional term (1: the paper's eq. 2); "
                              "tuned: chosen after the feedback gains, the fastest setpoint response within "
                              "deploy.max_overshoot (b changes neither Ms nor the load response)")
     derivative_weight: Fraction = Field(
         0.0, description="c in [0, 1], the setpoint's weight in the derivative term; 0: derivative on the measurement "
                          "(no derivative kick), 1: on the error (the paper's eq. 2)")
-    measurement_filter: Union[Literal["tuned"], NonNegative] = Field(
+    measurement_filter: tuned_or_number(0.0) = Field(
         "tuned", description="Tf [s] of the low pass on the measurement that feeds P and D (0: none); tuned: searched "
                              "with the feedback gains when the scenario has measurement noise, else 0")
     measurement_filter_order: Literal[1, 2] = Field(

@@ -12,9 +12,9 @@ from __future__ import annotations
 
 import math
 import re
-from typing import Annotated, Any, Literal, Optional, get_args
+from typing import Annotated, Any, Literal, Optional, Union, get_args
 
-from pydantic import BeforeValidator, Field, Strict
+from pydantic import BeforeValidator, Field, PlainValidator, Strict, WithJsonSchema
 from pydantic_core import PydanticCustomError
 
 from prlpid_fmi.control.pid import ANTI_WINDUP_MODES
@@ -76,6 +76,27 @@ def as_integer(value: Any) -> Any:
 def number(infinite: bool = False, **bounds: float) -> Any:
     """A float type with pydantic bounds (gt, ge, lt, le); finite unless `infinite`."""
     return Annotated[float, Field(allow_inf_nan=infinite, **bounds), BeforeValidator(as_number)]
+
+
+def tuned_or_number(low: float, high: float = math.inf) -> Any:
+    """The word "tuned" or a finite number in [low, high]: one value type with one message either way (a Union
+    would report one failure per member)."""
+    expected = f"tuned, or a number in [{low:g}, {high:g}]" if math.isfinite(high) else f"tuned, or a number >= {low:g}"
+
+    def check(value: Any) -> Any:
+        if value == "tuned":
+            return value
+        try:
+            v = float(as_number(value))
+        except PydanticCustomError:
+            raise problem("neither 'tuned' nor a number", expected) from None
+        if not (math.isfinite(v) and low <= v <= high):
+            raise problem("out of range", expected)
+        return v
+
+    return Annotated[Union[str, float], PlainValidator(check), WithJsonSchema(
+        {"anyOf": [{"const": "tuned"}, {"type": "number", "minimum": low,
+                                         **({"maximum": high} if math.isfinite(high) else {})}]})]
 
 
 def integer(**bounds: int) -> Any:

@@ -133,9 +133,14 @@ def detune(config: TuningConfig, gains: tuple, point: list[float], limit: float,
 
 
 def detune_over(config: TuningConfig, gains: tuple, points: list[list[float]], limit: float,
-                keep_ti: bool = False) -> tuple | None:
+                keep_ti: bool | None = None) -> tuple | None:
     """`gains` detuned (`detune`) until Ms <= limit at every operating point: each pass detunes at the worst
-    failing point, which usually settles the others too. None when a point cannot be met."""
+    failing point, which usually settles the others too. None when a point cannot be met. keep_ti None: the
+    together rule (Ti and Td * lambda), else, where it cannot meet the limit, Kp / lambda alone (the together
+    rule keeps Kp * Td, the sampled loop's gain near Nyquist, which is sometimes what breaks the limit)."""
+    if keep_ti is None:
+        together = detune_over(config, gains, points, limit, keep_ti=False)
+        return together if together is not None else detune_over(config, gains, points, limit, keep_ti=True)
     for _ in points:
         failing = [(margins_of(config, gains, p).Ms, p) for p in points if not _meets(config, gains, p, limit)]
         if not failing:
@@ -161,8 +166,8 @@ def _robust(config: TuningConfig, gain_map: ActionMap, population, energies, lim
             return population[i], g
     best = population[order[0]]
     g = gain_map.values(best.tolist())
-    repairs = [r for r in (detune_over(config, g, points, limit), detune_over(config, g, points, limit, keep_ti=True))
-               if r]
+    repairs = [r for r in (detune_over(config, g, points, limit, keep_ti=False),
+                           detune_over(config, g, points, limit, keep_ti=True)) if r]
     return best, min(repairs, key=lambda r: _cost_of(r, core, seeds)) if repairs else g
 
 
@@ -230,11 +235,19 @@ def _load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, pops
                 callback(min(done[0], expected), expected)
         return step
 
+    def reached(count):  # a stage ended (DE may stop before its last generation): its whole share is done
+        done[0] = count
+        if callback is not None:
+            callback(count, expected)
+
+    reached(popsize * n_first)  # the initial population of the first search
     first = _setpoint_pid(config, seed, episodes, STABILISING_GENERATIONS, popsize, None, None,
                           progress=advance(popsize * n_first))
+    reached((STABILISING_GENERATIONS + 1) * popsize * n_first + popsize * design.n)
     try:
         design.prepare(first.gains.values())
         result = design.search(seed, maxiter, popsize, callback=advance(popsize * design.n))
+        reached(expected)
         vector = np.asarray(result.x)
         gains, tf = design.gains(vector), design.filters(vector)
         best_load = float(result.fun)
@@ -248,7 +261,7 @@ def _load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, pops
                 trade = SetpointDesign(design, best_load, baseline.load_tolerance, deploy.max_overshoot, seeds)
                 try:
                     second = trade.search(np.append(vector, 2.0 * weight - 1.0), seed, maxiter, popsize,
-                                          callback=advance(popsize * trade.n))
+                                          callback=None)  # within the 100 % of the load search
                     feasible = bool(np.max(trade.constraint_values(second.x)) <= 0)
                     load, ise, overshoot = trade.evaluate(second.x)
                     traded = {"load_cost": load, "ISE": ise, "Overshoot": overshoot, "feasible": feasible,

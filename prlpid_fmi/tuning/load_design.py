@@ -13,12 +13,15 @@ Astrom & Hagglund's design, on the FMU (baseline.objective "load"):
    loops are loaded one after another, setpoint_hold_steps apart. Points: the low end, the middle and the high end
    of the setpoint range (robustness.margins.setpoint_range_points). No noise, no randomisation: the cost is
    deterministic. A diverging episode costs DIVERGED_COST.
-2. Subject to, at every point, Ms <= deploy.max_sensitivity and std(u) from the scenario's measurement noise
-   <= deploy.max_noise_gain x the control span, both from the plant's frequency response measured at that point
-   (robustness.plant_response; measured once, with a stabilising PID, `plant_responses`), and u reversing on at
-   most MAX_CHATTER of the load experiment's samples (a saturating limit cycle, which the linear Ms cannot see).
-   DE's feasibility rules (scipy's NonlinearConstraint) keep infeasible candidates out; where the frequency-
-   response limits fail, the load experiment is never simulated.
+2. Subject to, at every point, Ms <= deploy.max_sensitivity, a stable closed loop and std(u) from the scenario's
+   measurement noise <= deploy.max_noise_gain x the control span, all from the plant's frequency response
+   measured at that point (robustness.plant_response; measured once, with a stabilising PID, `plant_responses`;
+   stability by Nyquist: the same winding as that PID's). The search keeps every candidate inside them by
+   construction: Ti, Td (Tf) are searched, and Kp as a position inside the interval of Kp that meets the limits
+   for them (`LoadDesign.kp_interval`, a vectorised scan: Kp scales C as a whole). A loop whose u reverses on more
+   than MAX_CHATTER of the load experiment's samples (a saturating limit cycle, which the linear Ms cannot see)
+   has its cost raised (CHATTER_PENALTY). A point without a verified estimate (robustness.status) gives no
+   constraint; the final Ms check on the FMU (tuning.fixed_pid) covers it.
 3. Then b (controller.setpoint_weight "tuned"): on noise-free training episodes (setpoint steps), the b in
    B_GRID with the lowest ISE among those with overshoot <= deploy.max_overshoot. b changes neither Ms nor the
    load response (robustness.margins.pid_transfer_function), so it comes second.
@@ -44,6 +47,7 @@ from prlpid_fmi.loop.isolated import make_core
 from prlpid_fmi.metrics import chatter_fraction
 from prlpid_fmi.robustness.margins import margins_of, pid_frequency_response, setpoint_range_points
 from prlpid_fmi.robustness.plant_response import MeasuredPlant
+from prlpid_fmi.robustness.status import Robustness, status
 
 DIVERGED_COST = 1e6
 B_GRID = tuple(i / 20 for i in range(21))  # setpoint weights tried
@@ -71,12 +75,14 @@ def widened(config: TuningConfig, factor: float) -> TuningConfig:
 
 def plant_responses(config: TuningConfig, gains: tuple, points: list[list[float]]) -> list[list[MeasuredPlant] | None]:
     """Per point, each loop's measured plant response (with `gains` in the loop; the others closed), or None where
-    the experiment gave none (the loop diverged or sat at a limit there)."""
+    the estimate is not verified (robustness.status: the loop diverged or sat at a limit, or the plant varies
+    faster than the experiment): no constraint comes from that point, the final check on the FMU still applies."""
     out = []
     for p in points:
         m = margins_of(config, gains, p)
         loops = m.per_loop or (m,)
-        if any(len(x.frequencies_rad_s) < 2 or not np.all(np.isfinite(x.plant_response)) for x in loops):
+        if any(len(x.frequencies_rad_s) < 2 or not np.all(np.isfinite(x.plant_response)) or
+               status(x) != Robustness.VERIFIED for x in loops):  # no linear response to design on
             out.append(None)
             continue
         out.append([MeasuredPlant(x.frequencies_rad_s, x.plant_response, config.sample_time_s, tuple(p), ())
@@ -93,6 +99,17 @@ def _load_config(config: TuningConfig, point: list[float], loads: list[float]) -
     return dataclasses.replace(config, setpoint_schedule=((0, tuple(point)),), disturbances=disturbances,
                                episode_steps=hold * (config.n_loops + 1), measurement_noise_std=0.0,
                                actuator_noise_std=0.0, randomize={}, forecast_horizon=0, load_disturbance=0.0)
+
+
+def _open_core(config: TuningConfig):
+    """A loop core for `config`, in a worker process when the FMU may be instantiated only once per process (the
+    design holds several cores open at once: one per operating point)."""
+    from prlpid_fmi.fmu import describe_fmu
+    from prlpid_fmi.fmu.resolve import resolve_fmu
+
+    if config.isolation != "process" and describe_fmu(resolve_fmu(config.fmu, config.fmi_version)).once_per_process:
+        config = dataclasses.replace(config, isolation="process")
+    return make_core(config)
 
 
 def signed_loads(config: TuningConfig, probe, load_step: float) -> list[float]:
@@ -286,8 +303,13 @@ class LoadDesign:
                           [pl.winding(self.controller(gains, list(self.tf), i)) for i, pl in enumerate(plants)]
                           for plants in self.plants]
         for p in self.points:
-            probe = gains_rollout(lambda c: gains, _load_config(self.config, p, [0.0] * self.config.n_loops), seed=0)
-            self.cores.append(make_core(_load_config(self.config, p, signed_loads(self.config, probe, self.load_step))))
+            quiet = _load_config(self.config, p, [0.0] * self.config.n_loops)
+            core = _open_core(quiet)
+            try:
+                probe = gains_rollout(lambda c: gains, quiet, seed=0, core=core)
+            finally:
+                core.close()
+            self.cores.append(_open_core(_load_config(self.config, p, signed_loads(self.config, probe, self.load_step))))
 
     def load_response(self, gains: tuple, tf: list[float]) -> tuple[float, float]:
         """(J_load, worst chatter) of constant gains with measurement filter tf: the load cost of the module
@@ -391,7 +413,7 @@ class SetpointDesign:
         self.seeds = seeds
         quiet = dataclasses.replace(design.config, measurement_noise_std=0.0, actuator_noise_std=0.0,
                                     load_disturbance=0.0)
-        self.core = make_core(quiet)
+        self.core = _open_core(quiet)
         self.n = design.n + 1
         self._seen: dict = {}
 
@@ -448,7 +470,7 @@ def setpoint_weight(config: TuningConfig, gains: tuple, structure: tuple[list, l
     Overshoot in percent of the step, worst over the episodes' setpoint steps)."""
     quiet = dataclasses.replace(config, measurement_noise_std=0.0, actuator_noise_std=0.0, forecast_horizon=0,
                                 load_disturbance=0.0)
-    core = make_core(quiet)
+    core = _open_core(quiet)
     rows = []
     try:
         for b in B_GRID:
