@@ -145,3 +145,30 @@ def test_the_search_ranges_contain_the_optimum(name, a):
     assert kp[0] * 1.05 < Kp < kp[1] / 1.05 and ti[0] * 1.05 < Ti < ti[1] / 1.05 and Td < td[1] * 0.95, (Kp, Ti, Td)
     if name == "first_order":
         assert Ti < config.loops[0].Ti.low
+
+
+def test_randomized_parameters_constrain_the_kp_interval_too():
+    """With training.randomize, the limits must hold on the parameter draws as well: the Kp interval for the same
+    Ti, Td lies inside the nominal plant's, and a draw with a faster unstable pole (a up to 1.3) needs more gain."""
+    import dataclasses as dc
+
+    from prlpid_fmi.tuning.load_design import MC_SAMPLES, parameter_samples
+
+    nominal = preset("first_order")
+    uncertain = dc.replace(nominal, randomize={"a": (0.8, 1.3)})
+    samples = parameter_samples(uncertain)
+    assert len(samples) == MC_SAMPLES and samples == parameter_samples(uncertain)  # seeded: the same draws
+    assert all(0.8 <= s.plant_parameters["a"] <= 1.3 and not s.randomize for s in samples)
+    intervals = []
+    for config in (nominal, uncertain):
+        design = LoadDesign(config, 0.1, 2.0, 0.02, 4.0)
+        try:
+            design.prepare(([6.0], [1.0], [0.0], None))
+            intervals.append(design.kp_interval(0, 0.5, 0.0, 0.0))
+        finally:
+            design.close()
+    (_, lo, hi), (_, lo_u, hi_u) = intervals
+    assert lo <= lo_u < hi_u <= hi and (lo_u > lo * 1.01 or hi_u < hi / 1.01)
+    # the nominal interval's ends are where the exact loop's Ms reaches 2 (1 % of grid interpolation)
+    assert sensitivity_peak(1.0, lo * 1.02, 0.5, 0.0) <= 2.0 < sensitivity_peak(1.0, lo / 1.02, 0.5, 0.0)
+    assert sensitivity_peak(1.0, hi / 1.02, 0.5, 0.0) <= 2.0 < sensitivity_peak(1.0, hi * 1.02, 0.5, 0.0)

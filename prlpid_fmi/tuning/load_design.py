@@ -20,8 +20,9 @@ Astrom & Hagglund's design, on the FMU (baseline.objective "load"):
    construction: Ti, Td (Tf) are searched, and Kp as a position inside the interval of Kp that meets the limits
    for them (`LoadDesign.kp_interval`, a vectorised scan: Kp scales C as a whole). A loop whose u reverses on more
    than MAX_CHATTER of the load experiment's samples (a saturating limit cycle, which the linear Ms cannot see)
-   has its cost raised (CHATTER_PENALTY). A point without a verified estimate (robustness.status) gives no
-   constraint; the final Ms check on the FMU (tuning.fixed_pid) covers it.
+   has its cost raised (CHATTER_PENALTY). With training.randomize set, the limits hold on MC_SAMPLES parameter
+   draws too (`parameter_samples`, their responses measured at the same points). A point without a verified
+   estimate (robustness.status) gives no constraint; the final Ms check on the FMU (tuning.fixed_pid) covers it.
 3. Then b (controller.setpoint_weight "tuned"): on noise-free training episodes (setpoint steps), the b in
    B_GRID with the lowest ISE among those with overshoot <= deploy.max_overshoot. b changes neither Ms nor the
    load response (robustness.margins.pid_transfer_function), so it comes second.
@@ -41,7 +42,7 @@ from scipy.optimize import NonlinearConstraint, differential_evolution, minimize
 
 from prlpid_fmi.config import Disturbance, GainRange, TuningConfig
 from prlpid_fmi.loop.actions import ActionMap
-from prlpid_fmi.loop.core import LoopCore, control_scales, pid_structure
+from prlpid_fmi.loop.core import LoopCore, control_scales, pid_structure, randomized_parameters
 from prlpid_fmi.loop.evaluation import gains_rollout
 from prlpid_fmi.loop.isolated import make_core
 from prlpid_fmi.metrics import chatter_fraction
@@ -88,6 +89,22 @@ def plant_responses(config: TuningConfig, gains: tuple, points: list[list[float]
         out.append([MeasuredPlant(x.frequencies_rad_s, x.plant_response, config.sample_time_s, tuple(p), ())
                     for x in loops])
     return out
+
+
+MC_SAMPLES = 4  # parameter draws of training.randomize whose responses the design also meets the limits on
+MC_SEED = 20_000  # their seed (used for nothing else)
+
+
+def parameter_samples(config: TuningConfig) -> list[TuningConfig]:
+    """With training.randomize set, MC_SAMPLES configs of the plant with parameters drawn uniformly from its ranges
+    (seeded: the same draws every run), their other randomisation off; else none."""
+    ranges = randomized_parameters(config)
+    if not ranges:
+        return []
+    rng = np.random.default_rng(MC_SEED)
+    return [dataclasses.replace(config, randomize={}, plant_parameters={
+        **config.plant_parameters, **{name: float(rng.uniform(lo, hi)) for name, lo, hi in ranges}})
+        for _ in range(MC_SAMPLES)]
 
 
 def _load_config(config: TuningConfig, point: list[float], loads: list[float]) -> TuningConfig:
@@ -284,7 +301,7 @@ class LoadDesign:
     def estimates(self, gains: tuple, tf: list[float]) -> list[dict]:
         """Per point: {"point", "Ms", "noise_gain"} estimated from the measured plant responses (None: none)."""
         out = []
-        for p, plants in zip(self.points, self.plants):
+        for p, plants in zip(self.points, self.plants):  # the nominal plant's points (the samples' follow them)
             if plants is None:
                 out.append({"point": p, "Ms": None, "noise_gain": None})
                 continue
@@ -298,6 +315,8 @@ class LoadDesign:
         """Measure the plant responses with `gains` in the loop and open one load-experiment core per point, the
         load signed away from the actuator limit nearer to u at the point (as `gains` hold it)."""
         self.plants = plant_responses(self.config, gains, self.points)
+        for sample in parameter_samples(self.config):  # the Monte-Carlo plants constrain Kp too (not in `estimates`)
+            self.plants += plant_responses(sample, gains, self.points)
         # the windings of the PID that was measured stable there, the reference of every candidate's (kp_interval)
         self.reference = [None if plants is None else
                           [pl.winding(self.controller(gains, list(self.tf), i)) for i, pl in enumerate(plants)]
