@@ -241,7 +241,9 @@ def _load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, pops
             callback(count, expected)
 
     reached(popsize * n_first)  # the initial population of the first search
-    first = _setpoint_pid(config, seed, episodes, STABILISING_GENERATIONS, popsize, None, None,
+    # robust too (its Ms checked and detuned as the setpoint search does): a lightly damped loop does not settle in
+    # the frequency-response experiment, and an unverified response gives the design no constraint
+    first = _setpoint_pid(config, seed, episodes, STABILISING_GENERATIONS, popsize, None, max_sensitivity,
                           progress=advance(popsize * n_first))
     reached((STABILISING_GENERATIONS + 1) * popsize * n_first + popsize * design.n)
     try:
