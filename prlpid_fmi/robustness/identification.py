@@ -240,7 +240,7 @@ class ClosedLoopRig:
         y (n_loops, len(d)) the measurements they were computed from (u_k from y_k); saturated: some
         u reached a limit (then it is clipped there); diverged: the loop left the divergence bound.
         """
-        n, K = self.n_loops, len(d)
+        n = self.n_loops
         us, ys = [], []
         lo, hi = self.u_min.tolist(), self.u_max.tolist()
         r, scale, bound = self.setpoint.tolist(), self.scale.tolist(), self.bound.tolist()
