@@ -8,6 +8,7 @@ per N·m; holding any speed needs -10 N·m) and a room with an hour-long time co
 gain R = 0.01 K/W, starting at 16 °C, 5 °C outside, the outside temperature being its first input), and a
 valve without dynamics (q = 2.5 x opening: the output follows the input within one step).
 """
+import dataclasses
 from pathlib import Path
 
 import matplotlib.image as mpimg
@@ -128,10 +129,9 @@ def _settles(text: str, path: Path) -> None:
     path.write_text(text)
     s = load_scenario(path)
     b = s.baseline                                  # the scenario's own search budget, as `tune` runs it
-    fixed = tune_fixed_pid(s.tuning, episodes=b.episodes, maxiter=b.maxiter, popsize=b.popsize,
-                           max_sensitivity=s.deploy.max_sensitivity)
-    metrics, traj = evaluate_gains(lambda core: fixed.gains_values(), s.evaluation_config(),
-                                   intervals=s.evaluation.intervals)
+    fixed = tune_fixed_pid(s.tuning, max_sensitivity=s.deploy.max_sensitivity, baseline=b, deploy=s.deploy)
+    tuned = dataclasses.replace(s.evaluation_config(), tuned_structure=tuple(zip(*fixed.structure)))  # b, c, Tf too
+    metrics, traj = evaluate_gains(lambda core: fixed.gains_values(), tuned, intervals=s.evaluation.intervals)
     assert not metrics["terminated"]
     y, r = traj["measurement"][:, 0], traj["setpoint"][:, 0]
     for start, end in s.evaluation.intervals:

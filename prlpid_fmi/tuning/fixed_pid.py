@@ -171,16 +171,20 @@ def _robust(config: TuningConfig, gain_map: ActionMap, population, energies, lim
     return best, min(repairs, key=lambda r: _cost_of(r, core, seeds)) if repairs else g
 
 
-def tune_fixed_pid(config: TuningConfig, seed: int = 0, episodes: int = 3, maxiter: int = 20,
-                   popsize: int = 8, callback=None, max_sensitivity: float | None = None,
+def tune_fixed_pid(config: TuningConfig, seed: int = 0, episodes: int | None = None, maxiter: int | None = None,
+                   popsize: int | None = None, callback=None, max_sensitivity: float | None = None,
                    baseline: BaselineConfig = BaselineConfig(), deploy: DeployConfig = DeployConfig()) -> FixedPid:
     """The fixed PID of baseline.objective: "load" (tuning.load_design: load IAE under the Ms and noise limits,
     then the setpoint weight) or "setpoint" (J of the module docstring over `episodes` seeded training episodes).
 
     callback(evaluations_done, evaluations_expected): progress, called after every generation.
     max_sensitivity: the Ms limit the result must meet (None: no robustness requirement).
-    baseline: objective, load_step and widen_ranges; deploy: max_overshoot and max_noise_gain.
+    baseline: objective, load_step, load_tolerance, widen_ranges, and the budget (episodes, maxiter, popsize) where
+    those arguments are None; deploy: max_overshoot and max_noise_gain.
     """
+    episodes = baseline.episodes if episodes is None else episodes
+    maxiter = baseline.maxiter if maxiter is None else maxiter
+    popsize = baseline.popsize if popsize is None else popsize
     if baseline.objective == "load":
         return _load_pid(config, seed, episodes, maxiter, popsize, callback, max_sensitivity, baseline, deploy)
     return _setpoint_pid(config, seed, episodes, maxiter, popsize, callback, max_sensitivity)
