@@ -169,8 +169,9 @@ class LoadDesign:
     """The load cost, its constraints and the setpoint-weight choice for one tuning problem (module docstring).
 
     Args: config (the scenario's tuning problem, forecast off), load_step (fraction of the control span),
-    max_sensitivity, max_noise_gain (fraction of the span), widen (factor on the gain ranges), tune_filter
-    (search Tf too). Call `prepare(gains)` with a stabilising PID first; `close()` at the end.
+    max_sensitivity, max_noise_gain (fraction of the span), widen (factor on the gain ranges). Tf is searched
+    (`tune_filter`) when controller.measurement_filter is "tuned" and the scenario has measurement noise. Call
+    `prepare(gains)` with a stabilising PID first; `close()` at the end.
     """
 
     def __init__(self, config: TuningConfig, load_step: float, max_sensitivity: float | None, max_noise_gain: float,
