@@ -172,3 +172,41 @@ def test_randomized_parameters_constrain_the_kp_interval_too():
     # the nominal interval's ends are where the exact loop's Ms reaches 2 (1 % of grid interpolation)
     assert sensitivity_peak(1.0, lo * 1.02, 0.5, 0.0) <= 2.0 < sensitivity_peak(1.0, lo / 1.02, 0.5, 0.0)
     assert sensitivity_peak(1.0, hi / 1.02, 0.5, 0.0) <= 2.0 < sensitivity_peak(1.0, hi * 1.02, 0.5, 0.0)
+
+
+def test_the_deliverable_checks_the_fixed_pid_on_the_monte_carlo_draws_of_the_design():
+    """With training.randomize, the fixed PID's evidence holds an Ms estimate at the low, middle and high setpoint on
+    every parameter draw the design met its limits on (labelled by draw), each equal to the exact Ms of 1/(s - a)
+    for that draw's a (python-control), and the rule counts them: a draw with a faster pole fails a tighter limit
+    that the nominal plant meets."""
+    import dataclasses as dc
+
+    from prlpid_fmi.bundled import data_dir
+    from prlpid_fmi.deliver.evidence import assess_fixed
+    from prlpid_fmi.loop.gains import gains_from_values
+    from prlpid_fmi.robustness.margins import setpoint_range_points
+    from prlpid_fmi.scenario.load import load_scenario
+    from prlpid_fmi.tuning.load_design import MC_SAMPLES, parameter_samples
+
+    scenario = load_scenario(data_dir("scenarios") / "first_order.yaml")
+    scenario = dc.replace(scenario, tuning=dc.replace(scenario.tuning, randomize={"a": (0.8, 1.3)}))
+    Kp, Ti, Td = 3.0, 1.5, 0.0
+    fixed = assess_fixed(scenario, gains_from_values([Kp], [Ti], [Td], None))
+    draws = [s.plant_parameters["a"] for s in parameter_samples(scenario.tuning)]
+    points = len(setpoint_range_points(scenario.tuning))
+    assert points == 3 and len(fixed.margins) == len(fixed.breakpoints) == points * (MC_SAMPLES + 1)
+    nominal = sensitivity_peak(1.0, Kp, Ti, Td)
+    for m in fixed.margins[:points]:
+        assert m.Ms == pytest.approx(nominal, rel=0.02)
+    for n, a in enumerate(draws, start=1):
+        block = slice(points * n, points * (n + 1))
+        assert all(label.endswith(f", draw {n}") for label in fixed.breakpoints[block])
+        for m in fixed.margins[block]:
+            assert m.Ms == pytest.approx(sensitivity_peak(a, Kp, Ti, Td), rel=0.02), a
+    worst = max(sensitivity_peak(a, Kp, Ti, Td) for a in draws)
+    assert worst > nominal * 1.02
+    limit = 0.5 * (nominal + worst)
+    assert fixed.problems(limit) and "exceeds" in fixed.problems(limit)[0]
+    plain = assess_fixed(dc.replace(scenario, tuning=dc.replace(scenario.tuning, randomize={})),
+                         gains_from_values([Kp], [Ti], [Td], None))
+    assert not plain.problems(limit)

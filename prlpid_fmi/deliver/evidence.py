@@ -6,8 +6,12 @@ the gains the search returned, both on the evaluation schedule and on the Monte-
 evaluation.seed + 1, + 2, ...), and on the load experiment of the fixed PID's design (tuning.load_design:
 load steps at the plant input at the low end, middle and high end of the setpoint range). Robustness margins (prlpid_fmi.robustness.margins) are measured at every
 breakpoint of a setpoint schedule; for every row of an error schedule (and its gains at error 0) at
-the low end, middle and high end of the setpoint range (range_points); and at the middle of the
-setpoint range for the fixed PID and any other table.
+the low end, middle and high end of the setpoint range (range_points); at the low end, middle and high end
+for the fixed PID; and at the middle of the setpoint range for any other table. With training.randomize set,
+every candidate's margins are also measured on the fixed-PID design's Monte-Carlo parameter draws
+(tuning.load_design.parameter_samples): the fixed PID at the same three points, a setpoint schedule at its
+breakpoints, every row of an error table and any other table at the middle of the range. Those estimates are
+labelled "<point>, draw <n>" and count in the rule like the nominal ones.
 """
 from __future__ import annotations
 
@@ -20,7 +24,7 @@ from prlpid_fmi.loop.evaluation import constant_gains, evaluate_gains, gains_rol
 from prlpid_fmi.loop.gains import Gains
 from prlpid_fmi.robustness.margins import margins_of, operating_point, setpoint_range_points
 from prlpid_fmi.robustness.status import status
-from prlpid_fmi.tuning.load_design import load_experiment
+from prlpid_fmi.tuning.load_design import load_experiment, parameter_samples
 from prlpid_fmi.tuning.schedule.replay import replay_schedule, training_ise
 from prlpid_fmi.tuning.schedule.table import LOOP_VARIABLE, GainSchedule, fixed_schedule
 
@@ -36,6 +40,20 @@ def _margins_at(config, gains, points: list[list[float]]) -> list:
             warnings.simplefilter("ignore")
             out.append(margins_of(config, gains(point), point))
     return out
+
+
+def _on_draws(scenario, gains, points: list[list[float]], label) -> tuple[list, list]:
+    """(margins, labels) of gains(point) at each point on each Monte-Carlo parameter draw of the design
+    (parameter_samples of scenario.tuning; none without training.randomize). label(point) -> the point's label."""
+    margins, labels = [], []
+    for n, draw in enumerate(parameter_samples(scenario.tuning), start=1):
+        margins += _margins_at(draw, gains, points)
+        labels += [f"{_label(label(p))}, draw {n}" for p in points]
+    return margins, labels
+
+
+def _label(value) -> str:
+    return f"{value:.4g}" if isinstance(value, (int, float)) else str(value)
 
 
 def _monte_carlo(scenario) -> list:
@@ -58,9 +76,11 @@ def assess_fixed(scenario, gains: Gains) -> Candidate:
     mc = [evaluate_gains(fn, c, seed=s)[0] for c, s in _monte_carlo(scenario)]
     points = setpoint_range_points(scenario.tuning)
     margins = _margins_at(scenario.tuning, lambda p: fn(None), points)
+    drawn, labels = _on_draws(scenario, lambda p: fn(None), points, lambda p: p[0])
     load = load_experiment(scenario.tuning, scenario.baseline.load_step,
                            lambda cfg: gains_rollout(fn, cfg, seed=0))
-    return Candidate(Deployed.FIXED_PID.value, metrics, mc, margins, [p[0] for p in points], load_iae=load)
+    return Candidate(Deployed.FIXED_PID.value, metrics, mc, margins + drawn, [p[0] for p in points] + labels,
+                     load_iae=load, draws=len(parameter_samples(scenario.tuning)))
 
 
 def assess_schedule(scenario, schedule: GainSchedule) -> Candidate:
@@ -83,12 +103,20 @@ def assess_schedule(scenario, schedule: GainSchedule) -> Candidate:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             margins = [margins_of(scenario.tuning, row, point) for row, point in pairs]
-        return Candidate(Deployed.SCHEDULE.value, metrics, mc, margins, [point[loop] for _, point in pairs],
-                         load_iae=load)
+        labels = [point[loop] for _, point in pairs]
+        middle = [operating_point(config)]
+        for j, row in enumerate(rows):
+            drawn, names = _on_draws(scenario, lambda p, row=row: row, middle,
+                                     lambda p, j=j: f"row {j + 1} at {_label(p[loop])}" if j < len(rows) - 1
+                                     else f"error 0 at {_label(p[loop])}")
+            margins, labels = margins + drawn, labels + names
+        return Candidate(Deployed.SCHEDULE.value, metrics, mc, margins, labels, load_iae=load,
+                         draws=len(parameter_samples(scenario.tuning)))
     points = [operating_point(config, b) for b in schedule.breakpoints] \
         if schedule.variable.startswith("setpoint") else [operating_point(config)]
-    return Candidate(Deployed.SCHEDULE.value, metrics, mc, _margins_at(scenario.tuning, gains, points),
-                     [p[0] for p in points], load_iae=load)
+    drawn, labels = _on_draws(scenario, gains, points, lambda p: p[0])
+    return Candidate(Deployed.SCHEDULE.value, metrics, mc, _margins_at(scenario.tuning, gains, points) + drawn,
+                     [p[0] for p in points] + labels, load_iae=load, draws=len(parameter_samples(scenario.tuning)))
 
 
 def error_loop(schedule: GainSchedule) -> int | None:
@@ -145,7 +173,7 @@ def candidate_summary(c: Candidate) -> dict:
                          "phase_margin_deg": m.phase_margin_deg, "delay_margin_s": m.delay_margin_s,
                          "state": status(m).value, "reliable": m.reliable, "note": m.note}
                         for b, m in zip(c.breakpoints, c.margins)],
-            "worst_Ms": c.worst_Ms if math.isfinite(c.worst_Ms) else None,
+            "worst_Ms": c.worst_Ms if math.isfinite(c.worst_Ms) else None, "parameter_draws": c.draws,
             "load_iae": None if math.isnan(c.load_iae) else c.load_iae,
             "holdout_ise": None if math.isnan(c.holdout_ise) else c.holdout_ise if math.isfinite(c.holdout_ise)
             else "inf"}

@@ -68,6 +68,7 @@ class Candidate:
     breakpoints: list = field(default_factory=list)
     holdout_ise: float = math.nan  # ISE over held-out training-distribution episodes (NaN: not measured)
     load_iae: float = math.nan  # load IAE per unit load of tuning.load_design's experiment (NaN: not measured)
+    draws: int = 0  # Monte-Carlo parameter draws the margins were also measured on (labelled in words; deliver.evidence)
 
     @property
     def diverged(self) -> bool:

@@ -12,8 +12,9 @@ def _ms(c: Candidate) -> str:
 
 def _points(c: Candidate) -> str:
     """Where a candidate's margins were measured, in words."""
-    n = len(c.margins)
-    return "its operating point" if n == 1 else f"{n} operating points of the setpoint range"
+    n = sum(isinstance(b, (int, float)) for b in c.breakpoints)  # the draws' estimates are labelled in words
+    where = "its operating point" if n == 1 else f"{n} operating points of the setpoint range"
+    return where + (f", on the nominal plant and {c.draws} parameter draws" if c.draws else "")
 
 
 def _ratio(a: float, b: float) -> str:

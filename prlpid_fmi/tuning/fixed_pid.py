@@ -18,12 +18,13 @@ does not buy ISE with a chattering actuator. A diverging episode costs DIVERGED_
 Robustness: with `max_sensitivity` given, the result must have a peak sensitivity Ms (measured on the
 FMU, prlpid_fmi.robustness.margins) at most that limit at every operating point of the setpoint range: the
 low end, the middle and the high end (margins.setpoint_range_points; a fixed PID is used at every setpoint,
-and a nonlinear plant's Ms changes over the range). The cheapest few members of the final DE population are
+and a nonlinear plant's Ms changes over the range), and with training.randomize on each Monte-Carlo parameter
+draw of tuning.load_design.parameter_samples too (the deliverable checks the same draws). The cheapest few members of the final DE population are
 tried in order of cost; if none qualifies, the best one is detuned, at its worst failing point until every
 point meets the limit, by the smallest lambda there, in two ways: Kp / lambda with Ti and Td * lambda (the
 same controller on a time axis lambda times slower: the integral gain Kp/Ti falls by lambda^2, so the last part
 of a step can creep in) and Kp / lambda with Ti and Td kept; the one with the lower J is kept. The load design
-uses the first alone.
+uses the first, and the second only where the first cannot meet the limit.
 """
 from __future__ import annotations
 
@@ -41,7 +42,7 @@ from prlpid_fmi.loop.gains import Gains, gains_from_values
 from prlpid_fmi.loop.isolated import make_core
 from prlpid_fmi.robustness.margins import margins_of, setpoint_range_points
 from prlpid_fmi.robustness.status import meets_limit
-from prlpid_fmi.tuning.load_design import LoadDesign, SetpointDesign, setpoint_weight
+from prlpid_fmi.tuning.load_design import LoadDesign, SetpointDesign, parameter_samples, setpoint_weight
 
 DIVERGED_COST = 1e6
 
@@ -101,14 +102,16 @@ def _meets(config: TuningConfig, gains: tuple, point: list[float], limit: float)
 
 
 def detune(config: TuningConfig, gains: tuple, point: list[float], limit: float,
-           keep_ti: bool = False) -> tuple | None:
+           keep_ti: bool = False, plant: TuningConfig | None = None) -> tuple | None:
     """`gains` detuned (Kp / lambda, Ti * lambda and Td * lambda, or Ti and Td kept with keep_ti, lambda =
     DETUNE_STEP**k, clipped into the gain ranges) by the smallest k that gives Ms <= limit at `point`. Kp / lambda
     with Ti, Td * lambda is C(lambda s) / lambda, the same controller on a time axis lambda times slower, its zeros
     and crossover moved down together. A scan of k in DETUNE_SCAN,
     then bisection on k between the last failing and the first passing value. None when no k in the scan
-    passes (an unstable plant fails at both ends, so the scan starts small)."""
+    passes (an unstable plant fails at both ends, so the scan starts small). plant: the config whose FMU
+    parameters Ms is measured with (a Monte-Carlo draw; default `config`), the gain ranges are `config`'s."""
     Kp, Ti, Td, coupling = gains
+    plant = config if plant is None else plant
     ti_factor = 0.0 if keep_ti else 1.0
 
     def detuned(k):
@@ -119,11 +122,11 @@ def detune(config: TuningConfig, gains: tuple, point: list[float], limit: float,
 
     low = 0.0  # k known to fail (the gains themselves)
     for k in DETUNE_SCAN:
-        if _meets(config, detuned(k), point, limit):
+        if _meets(plant, detuned(k), point, limit):
             high = float(k)
             for _ in range(DETUNE_BISECTIONS):
                 mid = 0.5 * (low + high)
-                if _meets(config, detuned(mid), point, limit):
+                if _meets(plant, detuned(mid), point, limit):
                     high = mid
                 else:
                     low = mid
@@ -133,41 +136,46 @@ def detune(config: TuningConfig, gains: tuple, point: list[float], limit: float,
 
 
 def detune_over(config: TuningConfig, gains: tuple, points: list[list[float]], limit: float,
-                keep_ti: bool | None = None) -> tuple | None:
-    """`gains` detuned (`detune`) until Ms <= limit at every operating point: each pass detunes at the worst
-    failing point, which usually settles the others too. None when a point cannot be met. keep_ti None: the
-    together rule (Ti and Td * lambda), else, where it cannot meet the limit, Kp / lambda alone (the together
-    rule keeps Kp * Td, the sampled loop's gain near Nyquist, which is sometimes what breaks the limit)."""
+                keep_ti: bool | None = None, draws: list[TuningConfig] = ()) -> tuple | None:
+    """`gains` detuned (`detune`) until Ms <= limit at every operating point, on the nominal plant and on every
+    Monte-Carlo draw in `draws` (tuning.load_design.parameter_samples): each pass detunes at the worst failing
+    check, which usually settles the others too. None when a check cannot be met. keep_ti None: the together rule
+    (Ti and Td * lambda), else, where it cannot meet the limit, Kp / lambda alone (the together rule keeps
+    Kp * Td, the sampled loop's gain near Nyquist, which is sometimes what breaks the limit)."""
     if keep_ti is None:
-        together = detune_over(config, gains, points, limit, keep_ti=False)
-        return together if together is not None else detune_over(config, gains, points, limit, keep_ti=True)
-    for _ in points:
-        failing = [(margins_of(config, gains, p).Ms, p) for p in points if not _meets(config, gains, p, limit)]
+        together = detune_over(config, gains, points, limit, keep_ti=False, draws=draws)
+        return together if together is not None else detune_over(config, gains, points, limit, keep_ti=True,
+                                                                   draws=draws)
+    checks = [(plant, p) for plant in (config, *draws) for p in points]
+    for _ in checks:
+        failing = [(margins_of(plant, gains, p).Ms, i) for i, (plant, p) in enumerate(checks)
+                   if not _meets(plant, gains, p, limit)]
         if not failing:
             return gains
-        gains = detune(config, gains, max(failing, key=lambda x: x[0])[1], limit, keep_ti=keep_ti)
+        plant, point = checks[max(failing)[1]]
+        gains = detune(config, gains, point, limit, keep_ti=keep_ti, plant=plant)
         if gains is None:
             return None
-    return gains if all(_meets(config, gains, p, limit) for p in points) else None
+    return gains if all(_meets(plant, gains, p, limit) for plant, p in checks) else None
 
 
 def _robust(config: TuningConfig, gain_map: ActionMap, population, energies, limit: float,
             core: LoopCore, seeds: list[int]):
     """(vector, gains tuple) of the cheapest of the ROBUST_CANDIDATES cheapest population members with
-    Ms <= limit at every operating point of the setpoint range (setpoint_range_points); else the best member
-    detuned both ways (`detune_over`, with and without keep_ti; a loop in a limit cycle has Ms inf and a slower loop
+    Ms <= limit at every operating point of the setpoint range (setpoint_range_points), on the nominal plant and
+    the Monte-Carlo draws (parameter_samples, with training.randomize); else the best member detuned both ways (`detune_over`, with and without keep_ti; a loop in a limit cycle has Ms inf and a slower loop
     cures it), the one with the lower J on `seeds`; else the best member as it is (the deliverable then
     reports its Ms)."""
-    points = setpoint_range_points(config)
+    points, draws = setpoint_range_points(config), parameter_samples(config)
     order = np.argsort(energies)
     for i in order[:ROBUST_CANDIDATES]:
         g = gain_map.values(population[i].tolist())
-        if all(_meets(config, g, p, limit) for p in points):
+        if all(_meets(plant, g, p, limit) for plant in (config, *draws) for p in points):
             return population[i], g
     best = population[order[0]]
     g = gain_map.values(best.tolist())
-    repairs = [r for r in (detune_over(config, g, points, limit, keep_ti=False),
-                           detune_over(config, g, points, limit, keep_ti=True)) if r]
+    repairs = [r for r in (detune_over(config, g, points, limit, keep_ti=False, draws=draws),
+                           detune_over(config, g, points, limit, keep_ti=True, draws=draws)) if r]
     return best, min(repairs, key=lambda r: _cost_of(r, core, seeds)) if repairs else g
 
 
@@ -283,7 +291,7 @@ def _load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, pops
         fallback = None
         if max_sensitivity is not None:
             points = setpoint_range_points(config)
-            repaired = detune_over(tuned, gains, points, max_sensitivity)
+            repaired = detune_over(tuned, gains, points, max_sensitivity, draws=parameter_samples(tuned))
             if repaired is None:  # the design's estimate misled it (several coupled loops, a nonlinear plant):
                 # the setpoint search's robust PID, as before the load design, rather than an undeployable one
                 fallback = _setpoint_pid(config, seed, episodes, maxiter, popsize, None, max_sensitivity)
