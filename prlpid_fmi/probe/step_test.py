@@ -11,9 +11,20 @@ p > 0: unstable, growth rate λ = p, and the formal steady-state gain G(0) of th
 p ≈ 0: integrating, rate = dΔy/dt / du (output units per second per input unit). Dead time: the time Δy stays at zero (below 1e-6 of its scale), when it is at least two
 samples (a lag's slow start is not a dead time). The sampling grid adapts: 400 samples of T/40 (or 1/(40λ)), so a 2 ms motor and a room with an
 hour-long time constant are both resolved.
+
+Beyond the dominant pole: a lightly damped complex pair gives the oscillation's period (2π/ω_d, the fit of
+the oscillation itself, not of its decay envelope) and damping ratio; a stable response whose steady
+change is below ZERO_GAIN_FRACTION of its peak is a zero-gain pulse (a rate of what the input moves, e.g. a
+velocity under a spring), never a loop to close. `probe_outputs` records every output in each run (runs are
+cached by grid and input values, so the trim run and the other outputs cost nothing more) and marks an
+output whose response is the time derivative of another output's (`rate_of`: a velocity beside its
+position). `sweep_input` holds an input at several levels across its limits until the outputs settle: the
+range the plant can reach at steady state, and whether the input acts on/off (two output values, a jump
+between two neighbouring levels).
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -28,6 +39,10 @@ SAMPLES_PER_TIME_CONSTANT = 40  # the grid aims at T/40 (1/(40 λ) when unstable
 DISTURBANCE_WORDS = ("ambient", "outside", "outdoor", "load", "disturbance", "disturb", "weather", "environment")
 STEP_FRACTION = 0.01            # du: 1 % of the input's start value, nominal value or declared range
 MIN_DT_S, MAX_DT_S = 1e-6, 1e5
+ZERO_GAIN_FRACTION = 0.01      # steady |Δy| below this part of the peak |Δy|: a zero-gain pulse
+INTEGRATING_GROWTH = 0.02      # a dominant pole with |Re p| x horizon below this is an integrator's (p ≈ 0)
+OSCILLATORY_DAMPING = 0.7      # a complex pair damped less than this shows as an oscillation
+RATE_TOLERANCE = 0.02          # relative residual of Δy_B ≈ c dΔy_A/dt that makes B the rate of A
 
 
 def is_disturbance_like(name: str, description: str = "") -> bool:
@@ -62,6 +77,30 @@ class StepResponse:
     rate: Optional[float]
     dead_time_s: float
     disturbance_like: bool
+    period_s: Optional[float] = None         # oscillation period 2π/ω_d of the least damped complex pair
+    damping_ratio: Optional[float] = None    # its damping ratio ζ
+    rate_of: Optional[str] = None            # this output's response is the time derivative of that output's
+
+    @property
+    def peak(self) -> float:
+        """max |Δy| over the run."""
+        return float(np.max(np.abs(self.delta))) if len(self.delta) else 0.0
+
+    @property
+    def zero_gain(self) -> bool:
+        """A stable response that returns to where it started (steady change < ZERO_GAIN_FRACTION of its peak):
+        the output is a rate of what the input moves; no PID can hold it at a setpoint with this input."""
+        return self.kind == "stable" and abs(self.gain * self.du) < ZERO_GAIN_FRACTION * self.peak
+
+    @property
+    def time_scale_s(self) -> Optional[float]:
+        """The fastest time that matters to a loop on this response: the time constant, or the oscillation's
+        period / 2π where that is shorter (stable); 1/λ (unstable); None (integrating, static, none)."""
+        if self.kind == "stable":
+            return min(self.time_constant_s, self.period_s / (2 * math.pi)) if self.period_s else self.time_constant_s
+        if self.kind == "unstable":
+            return self.time_constant_s
+        return None
 
     @property
     def delta(self) -> np.ndarray:
@@ -72,6 +111,8 @@ class StepResponse:
     def output_change_per_unit(self) -> float:
         """How much one input unit moves the output: |gain| (stable, unstable), |rate| x 10 T_sample
         (integrating: the change over ten samples), 0 (none)."""
+        if self.zero_gain or self.rate_of:
+            return 0.0
         if self.kind in ("stable", "unstable", "static"):
             return abs(self.gain)
         if self.kind == "integrating":
@@ -80,11 +121,16 @@ class StepResponse:
 
     def summary(self) -> str:
         """One line for the probe table."""
-        if self.kind == "stable":
-            what = f"stable, gain {self.gain:.4g}, time constant {self.time_constant_s:.4g} s"
+        osc = (f", oscillates with period {self.period_s:.4g} s (damping ratio {self.damping_ratio:.3g})"
+               if self.period_s else "")
+        if self.kind == "stable" and self.zero_gain:
+            what = (f"stable, ZERO GAIN: a pulse of {self.peak:.4g} that dies out (steady gain {self.gain:.3g}; "
+                    f"this output is a rate of what {self.input} moves), time constant {self.time_constant_s:.4g} s{osc}")
+        elif self.kind == "stable":
+            what = f"stable, gain {self.gain:.4g}, time constant {self.time_constant_s:.4g} s{osc}"
         elif self.kind == "unstable":
             what = (f"UNSTABLE, grows as e^(λt) with λ = {self.growth_rate_per_s:.4g} 1/s "
-                    f"(time constant {self.time_constant_s:.4g} s), formal steady-state gain {self.gain:.4g}")
+                    f"(time constant {self.time_constant_s:.4g} s), formal steady-state gain {self.gain:.4g}{osc}")
         elif self.kind == "integrating":
             what = f"integrating, rate {self.rate:.4g} per s per input unit"
         elif self.kind == "static":
@@ -93,17 +139,23 @@ class StepResponse:
             return f"{self.input}: does not move {self.output}"
         dead = f", dead time {self.dead_time_s:.4g} s" if self.dead_time_s > 0 else ""
         flag = "  (looks like a disturbance input)" if self.disturbance_like else ""
+        if self.rate_of:
+            flag += f"  (the rate of {self.rate_of})"
         return f"{self.input} (step {self.du:+.4g} from {self.u0:.4g}): {what}{dead}{flag}"
 
 
 @dataclass(frozen=True)
 class ProbeResult:
-    """The probe of one output: its start value and every input's step response."""
+    """The probe of one output: its start value and every input's step response, and the operating point it
+    was taken at (every input's start value, the parameters set) so that further runs can start there."""
 
     fmu: Path
     output: str
     y0: float
     responses: tuple[StepResponse, ...]
+    inputs: tuple[str, ...] = ()
+    u0: tuple[float, ...] = ()
+    parameters: Mapping[str, float] = field(default_factory=dict)
 
     def response(self, name: str) -> StepResponse:
         return next(r for r in self.responses if r.input == name)
@@ -116,24 +168,49 @@ def snap_sample_time(dt: float) -> float:
     return max(m for m in (1, 2, 5, 10) if m * decade <= dt * (1 + 1e-9)) * decade
 
 
+class _Runs:
+    """Open-loop runs of one FMU from its start values, every output of interest recorded, cached by (grid,
+    input values, samples): the trim run is shared by every input and every output costs one run."""
+
+    def __init__(self, path, inputs: Sequence[str], outputs: Sequence[str], parameters: Mapping[str, float],
+                 u0: Sequence[float] = ()):
+        self.path, self.inputs, self.outputs, self.parameters = path, list(inputs), list(outputs), dict(parameters)
+        self.u0 = tuple(float(v) for v in u0)  # the start values of every input (the trim run's)
+        self._cache: dict = {}
+
+    def run(self, u: Sequence[float], dt: float, samples: int = SAMPLES) -> np.ndarray:
+        """Output samples, shape (n <= samples + 1, n_outputs), inputs held at u; stops at a rejected step or a
+        non-finite output."""
+        key = (float(dt), tuple(float(v) for v in u), int(samples))
+        if key not in self._cache:
+            self._cache[key] = self._simulate(u, dt, samples)
+        return self._cache[key]
+
+    def _simulate(self, u, dt, samples) -> np.ndarray:
+        from prlpid_fmi.fmu import FmuPlant
+        from prlpid_fmi.fmu.plant import StepRejected
+
+        with FmuPlant(self.path, inputs=self.inputs, outputs=self.outputs, sample_time_s=dt,
+                      parameters=self.parameters, instance_name="probe") as plant:
+            y = [np.array(plant.read_outputs(), dtype=float)]
+            values = [float(v) for v in u]
+            for _ in range(samples):
+                try:
+                    value = np.array(plant.step_values(values), dtype=float)
+                except (StepRejected, PlantError):
+                    break
+                if not np.all(np.isfinite(value)) or np.any(np.abs(value) > 1e150):
+                    break
+                y.append(value)
+        return np.array(y)
+
+    def column(self, u, dt, output: str, samples: int = SAMPLES) -> np.ndarray:
+        return self.run(u, dt, samples)[:, self.outputs.index(output)]
+
+
 def _simulate(path, inputs, u, output, dt, parameters) -> np.ndarray:
     """Output samples (n <= SAMPLES + 1,) holding inputs u; stops at a rejected step or a non-finite output."""
-    from prlpid_fmi.fmu import FmuPlant
-    from prlpid_fmi.fmu.plant import StepRejected
-
-    with FmuPlant(path, inputs=inputs, outputs=[output], sample_time_s=dt, parameters=parameters,
-                  instance_name="probe") as plant:
-        y = [float(plant.read_outputs()[0])]
-        values = [float(v) for v in u]
-        for _ in range(SAMPLES):
-            try:
-                value = plant.step_values(values)[0]
-            except (StepRejected, PlantError):
-                break
-            if not math.isfinite(value) or abs(value) > 1e150:
-                break
-            y.append(value)
-    return np.array(y)
+    return _Runs(path, inputs, [output], parameters).column(u, dt, output)
 
 
 MAX_ORDER = 4                   # ARX orders tried: the smallest that explains Δy to 1e-4 wins
@@ -149,20 +226,42 @@ def _arx(dy: np.ndarray, order: int):
     return coef[:order], float(coef[order]), residual
 
 
-def _analyse(t: np.ndarray, dy: np.ndarray, dt: float, du: float, y_scale: float, max_order: int = MAX_ORDER):
-    """(kind, gain, time constant, growth rate, rate, dead time) of a step response Δy sampled at t.
+@dataclass(frozen=True)
+class _Fit:
+    kind: str
+    gain: Optional[float] = None
+    tau: Optional[float] = None
+    growth: Optional[float] = None
+    rate: Optional[float] = None
+    dead: float = 0.0
+    period: Optional[float] = None
+    damping: Optional[float] = None
 
-    A discrete ARX model of the smallest order (<= max_order) that fits Δy gives the poles
-    s = ln(z)/dt; the dominant one (largest real part) decides the kind and the time scale."""
+
+def _oscillation(poles: np.ndarray, dominant: complex) -> tuple[Optional[float], Optional[float]]:
+    """(period 2π/ω_d, damping ratio) of the least damped complex pair that decays no more than five times
+    faster than the dominant pole (a relevant mode, not a fitting artefact); (None, None) when none oscillates."""
+    pairs = [p for p in poles if p.imag > 1e-12 and p.real >= 5 * min(dominant.real, 0.0) - 1e-300]
+    if not pairs:
+        return None, None
+    p = min(pairs, key=lambda p: -p.real / abs(p))
+    zeta = float(-p.real / abs(p))
+    if zeta >= OSCILLATORY_DAMPING:
+        return None, None
+    return float(2 * math.pi / p.imag), zeta
+
+
+def _fit(t: np.ndarray, dy: np.ndarray, dt: float, du: float, y_scale: float, max_order: int = MAX_ORDER) -> _Fit:
+    """The kind and numbers of a step response Δy sampled at t (see the module docstring)."""
     n = min(len(dy), len(t))
     t, dy = t[:n], dy[:n]
     scale = float(np.max(np.abs(dy))) if n else 0.0
     if n < 8 or scale <= 1e-12 * (1.0 + y_scale):
-        return "none", None, None, None, None, 0.0
+        return _Fit("none")
     nz = int(np.argmax(np.abs(dy) > 1e-6 * scale))           # a transport delay: Δy stays at zero
     dead = (nz - 1) * dt if nz - 1 >= 2 else 0.0
     if np.all(np.abs(dy[nz:] - dy[-1]) <= 1e-6 * scale):      # at its final value from the first step it moves
-        return "static", float(dy[-1] / du), None, None, None, dead
+        return _Fit("static", gain=float(dy[-1] / du), dead=dead)
     data = dy[max(nz - 1, 0):] / scale
     best = None
     for order in range(1, min(max_order, (len(data) - 2) // 3) + 1):
@@ -177,13 +276,20 @@ def _analyse(t: np.ndarray, dy: np.ndarray, dt: float, du: float, y_scale: float
     dominant = poles[np.argmax(poles.real)]
     near_one = np.abs(z - 1.0) < 1e-6
     horizon = max(t[-1], dt)
-    if abs(dominant.real) * horizon < 1e-3 or near_one.any():
+    if abs(dominant.real) * horizon < INTEGRATING_GROWTH or near_one.any():
         rate = float(np.mean(np.diff(dy[-max(3, n // 10):])) / dt / du)
-        return "integrating", None, None, None, rate, dead
+        return _Fit("integrating", rate=rate, dead=dead)
     gain = float(b * scale / (1.0 - np.sum(a)) / du)           # G(0): the model's steady state (formal if unstable)
+    period, damping = _oscillation(poles, dominant)
     if dominant.real > 0:
-        return "unstable", gain, 1.0 / float(dominant.real), float(dominant.real), None, dead
-    return "stable", gain, -1.0 / float(dominant.real), None, None, dead
+        return _Fit("unstable", gain, 1.0 / float(dominant.real), float(dominant.real), None, dead, period, damping)
+    return _Fit("stable", gain, -1.0 / float(dominant.real), None, None, dead, period, damping)
+
+
+def _analyse(t: np.ndarray, dy: np.ndarray, dt: float, du: float, y_scale: float, max_order: int = MAX_ORDER):
+    """(kind, gain, time constant, growth rate, rate, dead time) of a step response Δy sampled at t (`_fit`)."""
+    f = _fit(t, dy, dt, du, y_scale, max_order)
+    return f.kind, f.gain, f.tau, f.growth, f.rate, f.dead
 
 
 def _step_size(v, u0: float) -> float:
@@ -199,50 +305,130 @@ def _step_size(v, u0: float) -> float:
     return du
 
 
+def _next_grid(f: _Fit, dt: float, n: int) -> float:
+    """The grid the next run should use after a fit `f` on grid dt with n samples."""
+    if f.kind == "stable":
+        scale = min(f.tau, f.period / (2 * math.pi)) if f.period else f.tau
+        target = snap_sample_time(scale / SAMPLES_PER_TIME_CONSTANT)
+    elif f.kind == "unstable":
+        target = snap_sample_time(f.tau / SAMPLES_PER_TIME_CONSTANT)
+    else:  # integrating, none: too short to see it settle, or too slow to see it move
+        return snap_sample_time(dt * 10)
+    if n < SAMPLES // 2:  # blew up early: finer grid
+        target = snap_sample_time(dt / 10)
+    return target
+
+
+def _response(runs: _Runs, i: int, du: float, output: str, dt0: float, y0: float, v) -> StepResponse:
+    """The step response of input i on `output`, on a grid adapted to its time scale."""
+    u0 = [float(x) for x in runs.u0]
+    stepped_u = list(u0)
+    stepped_u[i] += du
+    dt, tried, result = snap_sample_time(dt0), set(), None
+
+    def measure(dt):
+        trim, stepped = runs.column(u0, dt, output), runs.column(stepped_u, dt, output)
+        n = min(len(trim), len(stepped))
+        t = dt * np.arange(n)
+        return dt, t, trim[:n], stepped[:n], _fit(t, stepped[:n] - trim[:n], dt, du, abs(y0))
+
+    for _ in range(8):
+        tried.add(dt)
+        result = measure(dt)
+        f = result[4]
+        if f.kind == "static":  # no time scale to resolve: a finer grid would show the same
+            break
+        target = _next_grid(f, dt, len(result[1]))
+        if target in tried or target == dt:
+            break
+        if f.kind in ("integrating", "none") and len(tried) >= 3:
+            break
+        dt = target
+    if result[4].kind == "integrating":  # report an integrator on the finest grid that showed it
+        result = measure(min(tried))
+    dt, t, trim, stepped, f = result
+    name = runs.inputs[i]
+    return StepResponse(name, output, u0[i], du, dt, t, trim, stepped, f.kind, f.gain, f.tau, f.growth, f.rate,
+                        f.dead, is_disturbance_like(name, v.description), f.period, f.damping)
+
+
 def probe_input(path, name: str, output: str, inputs: Sequence[str], u0: Sequence[float],
                 parameters: Mapping[str, float], dt0: float, y0: float) -> StepResponse:
     """The step response of input `name` on `output`, on a grid adapted to its time scale."""
     from prlpid_fmi.fmu import describe_fmu
 
-    d = describe_fmu(path)
-    v = d.variable(name)
+    v = describe_fmu(path).variable(name)
+    runs = _Runs(path, inputs, [output], parameters, u0)
     i = list(inputs).index(name)
-    du = _step_size(v, u0[i])
-    stepped_u = list(u0)
-    stepped_u[i] += du
-    dt, tried, result = snap_sample_time(dt0), set(), None
-    for _ in range(8):
-        tried.add(dt)
-        trim = _simulate(path, inputs, u0, output, dt, parameters)
-        stepped = _simulate(path, inputs, stepped_u, output, dt, parameters)
-        n = min(len(trim), len(stepped))
-        t = dt * np.arange(n)
-        kind, gain, tau, growth, rate, dead = _analyse(t, stepped[:n] - trim[:n], dt, du, abs(y0))
-        result = (dt, t, trim[:n], stepped[:n], kind, gain, tau, growth, rate, dead)
-        if kind == "static":  # no time scale to resolve: a finer grid would show the same
-            break
-        if kind in ("stable", "unstable"):
-            target = snap_sample_time(tau / SAMPLES_PER_TIME_CONSTANT)
-            if n < SAMPLES // 2:  # blew up early: finer grid
-                target = snap_sample_time(dt / 10)
-        elif kind in ("integrating", "none"):  # too short to see it settle, or too slow to see it move
-            target = snap_sample_time(dt * 10)
-        if target in tried or target == dt:
-            break
-        if kind in ("integrating", "none") and len(tried) >= 3:
-            break
-        dt = target
-    dt, t, trim, stepped, kind, gain, tau, growth, rate, dead = result
-    if kind == "integrating":  # report an integrator on the finest grid that showed it
-        dt = min(tried)
-        trim = _simulate(path, inputs, u0, output, dt, parameters)
-        stepped = _simulate(path, inputs, stepped_u, output, dt, parameters)
-        n = min(len(trim), len(stepped))
-        t = dt * np.arange(n)
-        kind, gain, tau, growth, rate, dead = _analyse(t, stepped[:n] - trim[:n], dt, du, abs(y0))
-        trim, stepped = trim[:n], stepped[:n]
-    return StepResponse(name, output, float(u0[i]), du, dt, t, trim, stepped, kind, gain, tau, growth, rate, dead,
-                        is_disturbance_like(name, v.description))
+    return _response(runs, i, _step_size(v, u0[i]), output, dt0, y0, v)
+
+
+def _is_rate(a: StepResponse, b_delta: np.ndarray) -> bool:
+    """True when Δy_B ≈ c dΔy_A/dt on A's grid (c != 0): B is the rate of A (a velocity beside its position).
+    Compared as ΔA_k - ΔA_(k-1) ≈ c dt (ΔB_(k-1) + ΔB_k)/2 from the third sample on."""
+    da = np.diff(a.delta)[1:]
+    mid = 0.5 * (b_delta[1:-1] + b_delta[2:])[:len(da)]
+    da = da[:len(mid)]
+    if len(mid) < 8 or not np.any(mid) or not np.any(da):
+        return False
+    c = float(mid @ da / (mid @ mid))
+    return c != 0 and float(np.linalg.norm(da - c * mid)) <= RATE_TOLERANCE * float(np.linalg.norm(da))
+
+
+def probe_outputs(fmu_path, outputs: Optional[Sequence[str]] = None, inputs: Optional[Sequence[str]] = None,
+                  start_values: Optional[Mapping[str, float]] = None) -> dict[str, ProbeResult]:
+    """Step and trim test of every real input (or `inputs`) on every output (or `outputs`): {output: ProbeResult}.
+
+    Each run records every output (one run per input and grid, shared). An output whose response to an input
+    is the time derivative of another output's response to it gets `rate_of` that output.
+    start_values {parameter or input: value}: the operating point (parameters applied before each run,
+    inputs held there). Raises PlantError for an FMU that cannot be a plant or an unknown variable."""
+    from prlpid_fmi.fmu import describe_fmu
+    from prlpid_fmi.fmu.archive import archive_problems
+
+    path = Path(fmu_path)
+    d = describe_fmu(path)
+    problems = archive_problems(path) or d.plant_problems()  # the archive first: no binary, unsafe names, ...
+    if problems:
+        raise PlantError(f"{path}: cannot be probed as a plant: {'; '.join(problems)}")
+    outputs = list(outputs) if outputs else list(d.output_names)
+    for name in outputs:
+        d.require(name, None, "the probed output")
+    all_inputs = list(d.input_names)
+    chosen = list(inputs) if inputs else all_inputs
+    for name in chosen:
+        d.require(name, ("input",), "a probed input")
+    start_values = dict(start_values or {})
+    for name in start_values:
+        d.require(name, ("parameter", "input"), "a start value")
+    u0 = tuple(float(start_values.get(n, _start(d.variable(n)))) for n in all_inputs)
+    parameters = {k: v for k, v in start_values.items() if k not in all_inputs}
+    dt0 = d.default_step_size_s or 0.1
+    runs = _Runs(path, all_inputs, outputs, parameters, u0)
+    y0s = runs.run(u0, snap_sample_time(dt0))[0]
+    table = {o: [] for o in outputs}
+    for name in chosen:
+        i = all_inputs.index(name)
+        v = d.variable(name)
+        du = _step_size(v, u0[i])
+        responses = {o: _response(runs, i, du, o, dt0, float(y0s[k]), v) for k, o in enumerate(outputs)}
+        for o, r in responses.items():
+            if r.kind == "none":
+                continue
+            stepped = list(u0)
+            stepped[i] += du
+            for a in responses.values():
+                if a.output == o or a.kind == "none" or a.rate_of:
+                    continue
+                b_delta = runs.column(stepped, a.sample_time_s, o) - runs.column(u0, a.sample_time_s, o)
+                if len(b_delta) >= len(a.delta) and _is_rate(a, b_delta[:len(a.delta)]):
+                    r = dataclasses.replace(r, rate_of=a.output)
+                    break
+            responses[o] = r
+        for o in outputs:
+            table[o].append(responses[o])
+    return {o: ProbeResult(path, o, float(y0s[k]), tuple(table[o]), tuple(all_inputs), u0, parameters)
+            for k, o in enumerate(outputs)}
 
 
 def probe(fmu_path, output: Optional[str] = None, inputs: Optional[Sequence[str]] = None,
@@ -253,28 +439,76 @@ def probe(fmu_path, output: Optional[str] = None, inputs: Optional[Sequence[str]
     inputs held there). Raises PlantError for an FMU that cannot be a plant or an unknown variable.
     """
     from prlpid_fmi.fmu import describe_fmu
-    from prlpid_fmi.fmu.archive import archive_problems
 
-    path = Path(fmu_path)
-    d = describe_fmu(path)
-    problems = archive_problems(path) or d.plant_problems()  # the archive first: no binary, unsafe names, ...
-    if problems:
-        raise PlantError(f"{path}: cannot be probed as a plant: {'; '.join(problems)}")
-    output = output or d.output_names[0]
-    d.require(output, None, "the probed output")
-    all_inputs = list(d.input_names)
-    chosen = list(inputs) if inputs else all_inputs
-    for name in chosen:
-        d.require(name, ("input",), "a probed input")
-    start_values = dict(start_values or {})
-    for name in start_values:
-        d.require(name, ("parameter", "input"), "a start value")
-    u0 = [float(start_values.get(n, _start(d.variable(n)))) for n in all_inputs]
-    parameters = {k: v for k, v in start_values.items() if k not in all_inputs}
-    dt0 = d.default_step_size_s or 0.1
-    y0 = float(_simulate(path, all_inputs, u0, output, dt0, parameters)[0])
-    responses = tuple(probe_input(path, n, output, all_inputs, u0, parameters, dt0, y0) for n in chosen)
-    return ProbeResult(path, output, y0, responses)
+    if output is None:
+        outputs = describe_fmu(Path(fmu_path)).output_names
+        output = outputs[0] if outputs else None
+    if output is None:
+        return next(iter(probe_outputs(fmu_path, None, inputs, start_values).values()))
+    return probe_outputs(fmu_path, [output], inputs, start_values)[output]
+
+
+@dataclass(frozen=True)
+class Sweep:
+    """An input held at several levels from the start point until the outputs settle (or as long as a run
+    lasts): the output's end value at each level, whether it settled, and what follows."""
+
+    input: str
+    output: str
+    levels: tuple[float, ...]
+    values: tuple[float, ...]         # the output at the end of each run
+    settled: tuple[bool, ...]         # the last tenth of the run moved less than 1e-3 of the values' spread
+    slopes: tuple[float, ...]         # dy/dt over the run's last tenth (output units per s)
+    duration_s: float
+
+    @property
+    def reach(self) -> tuple[float, float]:
+        """(lowest, highest) output value at the levels."""
+        return (min(self.values), max(self.values))
+
+    @property
+    def on_off(self) -> Optional[tuple[float, float]]:
+        """(level below, level above) the threshold when the input acts on/off: the settled outputs take two
+        values (equal to 1e-6 of the jump) and change between two neighbouring levels only; else None."""
+        y = np.array(self.values)
+        if len(y) < 4 or not all(self.settled):
+            return None
+        jumps = np.abs(np.diff(y))
+        big = float(np.max(jumps))
+        if big <= 1e-12 * (1 + float(np.max(np.abs(y)))):
+            return None
+        k = int(np.argmax(jumps))
+        if np.all(np.delete(jumps, k) <= 1e-6 * big):
+            return (self.levels[k], self.levels[k + 1])
+        return None
+
+
+def sweep_input(result: ProbeResult, r: StepResponse, levels: Sequence[float], samples: int = SAMPLES) -> Sweep:
+    """Hold input r.input at each level (the other inputs at their start values) from the start point on r's
+    grid, or a coarser one when the output has not settled after `samples` steps (up to two times x10 for a
+    stable response, whose time constant grows at other levels of a nonlinear plant)."""
+    runs = _Runs(result.fmu, result.inputs, [result.output], result.parameters)
+    i = list(result.inputs).index(r.input)
+    dt = r.sample_time_s
+    if r.kind == "stable" and r.time_constant_s:  # about 10 time constants at the probe's point
+        dt = max(dt, snap_sample_time(10 * r.time_constant_s / samples))
+    tries = 3 if r.kind in ("stable", "static") else 1
+    for attempt in range(tries):
+        ends, movement, slopes = [], [], []
+        for level in levels:
+            u = list(result.u0)
+            u[i] = float(level)
+            y = runs.column(u, dt, result.output, samples)
+            tail = y[-max(3, len(y) // 10):]
+            ends.append(float(y[-1]))
+            slopes.append(float((tail[-1] - tail[0]) / (dt * max(len(tail) - 1, 1))))
+            movement.append(float(np.ptp(tail)) if len(y) == samples + 1 else math.inf)  # a run cut short: unsettled
+        spread = max(float(np.ptp(ends)), 1e-12 * (1 + max(abs(e) for e in ends)))
+        ok = tuple(m <= 1e-3 * spread for m in movement)
+        if all(ok) or attempt == tries - 1:
+            break
+        dt = snap_sample_time(dt * 10)
+    return Sweep(r.input, result.output, tuple(float(v) for v in levels), tuple(ends), ok, tuple(slopes), dt * samples)
 
 
 def _start(v) -> float:

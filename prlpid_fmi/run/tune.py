@@ -56,6 +56,11 @@ def tune(scenario_path: str | Path, timesteps: int | None = None, seed: int | No
     if seed is not None and not 0 <= seed <= MAX_SEED:
         raise ArgumentError(f"{{seed}}: out of range (got {seed}; expected an integer from 0 to {MAX_SEED})")
     scenario = load_scenario(scenario_path)
+    if not resume:  # a loop that cannot be closed is refused before anything is written (probe.feasibility)
+        from prlpid_fmi.probe.feasibility import check_loops
+
+        for note in check_loops(scenario.tuning, scenario.path or scenario_path):
+            warnings.warn(note, stacklevel=2)
     run_dir, created = rd.prepare_run_dir(out, scenario.name, resume)
     crashed = rd.mark_active(run_dir)
     try:

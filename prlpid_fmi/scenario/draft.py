@@ -19,8 +19,8 @@ def _probed_loop(fmu_path: str | Path, output: Optional[str], start_values: dict
     """(the FMU's description, the loop its step and trim test proposes); ScenarioError with one line when the FMU
     cannot be read, cannot be a plant, or cannot be probed."""
     from prlpid_fmi.fmu import describe_fmu
-    from prlpid_fmi.probe.proposal import propose_loop
-    from prlpid_fmi.probe.step_test import probe
+    from prlpid_fmi.probe.proposal import choose_loop, propose_loop
+    from prlpid_fmi.probe.step_test import probe_outputs
 
     try:
         d = describe_fmu(Path(fmu_path))
@@ -31,17 +31,25 @@ def _probed_loop(fmu_path: str | Path, output: Optional[str], start_values: dict
         raise ScenarioError(f"{fmu_path}: cannot be a plant: {'; '.join(problems)} "
                             f"(got {d.model_name!r}; expected an FMU with scalar real inputs and outputs)")
     try:
-        return d, propose_loop(probe(Path(fmu_path), output=output, start_values=start_values))
+        results = probe_outputs(Path(fmu_path), outputs=[output] if output else None, start_values=start_values)
+        if output:
+            return d, propose_loop(results[output])
+        chosen, why = choose_loop(results)
+        return d, propose_loop(chosen, why)
     except PlantError as exc:
-        raise ScenarioError(f"{fmu_path}: the step and trim test failed: {exc}") from None
+        text = str(exc)
+        for prefix in (f"{fmu_path}: ", f"{Path(fmu_path)}: "):
+            text = text[len(prefix):] if text.startswith(prefix) else text
+        raise ScenarioError(f"{fmu_path}: no loop to tune: {text}") from None
 
 
 def init_scenario(fmu_path: str | Path, output: Optional[str] = None,
                   start_values: Optional[dict] = None) -> str:
     """YAML text of a ready-to-edit scenario for an FMU, from a step and trim test (prlpid_fmi.probe).
 
-    The loop's input is the one that moves `output` (default: the first output) most, never a
-    disturbance-like input while another one moves it; u_limits, setpoint range, sample time and gain
+    The measured output is `output`, else the one an engineer would pick (probe.proposal.choose_loop: a nonzero
+    steady effect, not the rate of another output); the loop's input is the one that moves it most, never a
+    disturbance-like input while another one moves it, never one that acts on/off; u_limits, setpoint range, sample time and gain
     ranges come from the probe and the FMU's declared min, max and nominal values, each with a comment
     saying where it came from. start_values {parameter or input: value}: the operating point to probe at
     (parameters are written to plant.parameters). Raises ScenarioError with one line when the FMU cannot
@@ -91,7 +99,7 @@ plant:
     # inputs not chosen (each held at its start value; a disturbance can be stepped in training.disturbances):
 {others}
     - input: {loop.input}   # FMU input the PID drives{unit(loop.input)}: {w['input']}
-      output: {loop.output}   # FMU output it measures{unit(loop.output)}
+      output: {loop.output}   # FMU output it measures{unit(loop.output)}{': ' + w['output'] if 'output' in w else ''}
       u_limits: [{loop.u_limits[0]!r}, {loop.u_limits[1]!r}]   # actuator saturation{unit(loop.input)}: {w['u_limits']}
       setpoint_range: [{lo!r}, {hi!r}]   # training setpoints{unit(loop.output)}: {w['setpoint_range']}
       measurement_scale: {loop.measurement_scale!r}   # typical setpoint step{unit(loop.output)}: half the setpoint range
