@@ -18,6 +18,7 @@ from prlpid_fmi.schema.types import (
     Algorithm,
     AntiWindup,
     DisturbanceKind,
+    GainChange,
     GainMapping,
     GainScale,
     Isolation,
@@ -123,6 +124,7 @@ class TuningConfig:
     prior: PriorConfig = PriorConfig()
     # controller
     anti_windup: AntiWindup = _d(_m.ControllerModel, "anti_windup")
+    gain_change: GainChange = _d(_m.ControllerModel, "gain_change")  # bumpless | positional (control.pid)
     derivative_filter_N: Optional[float] = _d(_m.ControllerModel, "derivative_filter_N")
     setpoint_weight: object = _d(_m.ControllerModel, "setpoint_weight")  # b in [0, 1] or "tuned"
     derivative_weight: float = _d(_m.ControllerModel, "derivative_weight")  # c in [0, 1]

@@ -52,6 +52,14 @@ filter order n per case, constant)::
 - Tracking time of back-calculation: Tt as given, else sqrt(Ti*Td), or Ti when Td = 0 (recomputed
   every sample from that sample's gains).
 - Loops are independent (no coupling here: eq. 26-27's coupled error is not part of these cases).
+- Gain change (the case's gain_change): "positional" (every case before the bumpless law: nothing happens) or
+  "bumpless": at a sample k > 0 whose (Kp, Ti, Td) differ from sample k-1's (Kp', Ti', Td') and whose
+  Ki != 0, first I(k-1) := (v - Kp*(ep(k-1) + Td*D(k-1))) / Ki with v = Kp'*(ep(k-1) + Td'*D(k-1)) + Ki'*I(k-1)
+  (D as kept: filtered with N); Ki = 0: I kept. Then the law above.
+- Imposed output (a loop's `imposed`, per sample None or a value; `imposed_by` names the exports' input, "manual"
+  or "track"): at such a sample, after the gain change, u(k) = clip(value, u_min, u_max) (no rate band) and
+  I(k) = (u(k) - Kp*(ep(k) + Td*D(k))) / Ki (Ki = 0: I kept); ed, D, the filter and u(k-1) of the rate limit
+  advance as at any sample.
 
 Case conventions: the controller's inputs r and y are given (open loop); gains may change from one
 sample to the next. The expected u are literal numbers: the exact rational value computed by
@@ -89,10 +97,14 @@ class Loop:
     c: float = 1.0        # setpoint weight of the derivative error
     Tf: float = 0.0       # measurement filter [s] (0: none)
     R: float = INF        # output rate limit [u units / s] (inf: none)
+    imposed: tuple | None = None  # per sample: None (the law) or the imposed output (manual value / tracked position)
+    imposed_by: str = "manual"    # the exports' input that imposes it: "manual" | "track"
 
     def __post_init__(self):
         n = len(self.r)
         assert len(self.y) == len(self.gains) == len(self.u) == n, "one r, y, gain triple and u per sample"
+        assert self.imposed is None or len(self.imposed) == n, "one imposed entry per sample"
+        assert self.imposed_by in ("manual", "track")
 
 
 @dataclass(frozen=True)
@@ -107,6 +119,7 @@ class Case:
     N: float | None = None          # derivative filter: Tdf = Td/N; None: unfiltered
     static_gain: float | None = None  # see the module docstring (closed loop through y = g*u)
     filter_order: int = 1           # sections of the measurement filter (1 or 2)
+    gain_change: str = "positional"  # "positional" | "bumpless" (control.pid)
 
     @property
     def steps(self) -> int:
@@ -124,7 +137,9 @@ class Case:
     def eq2(self) -> bool:
         """b = c = 1, Tf = 0 and no rate limit in every loop: paper eq. 2 (the law before setpoint weights, the
         filter and the rate limit)."""
-        return all(loop.b == 1.0 and loop.c == 1.0 and loop.Tf == 0.0 and loop.R == INF for loop in self.loops)
+        return self.gain_change == "positional" and all(
+            loop.b == 1.0 and loop.c == 1.0 and loop.Tf == 0.0 and loop.R == INF and loop.imposed is None
+            for loop in self.loops)
 
 
 def constant(gains: tuple, steps: int) -> tuple:
@@ -140,7 +155,8 @@ MUTATIONS = ("derivative_kick", "sum_without_current_error", "integrate_while_sa
              "cold_start", "first_gains_held", "proportional_on_error", "derivative_on_error",
              "unfiltered_measurement", "integral_on_filtered", "one_filter_section", "filter_from_zero",
              "kick_at_start", "preset_at_setpoint", "preset_only_with_u_start", "no_rate_limit",
-             "anti_windup_ignores_rate")
+             "anti_windup_ignores_rate", "no_rescale", "rescale_without_p", "rescale_without_d",
+             "rescale_to_clipped_output", "imposed_without_balance", "imposed_not_clipped")
 
 
 def _q(x) -> Fraction:
@@ -184,7 +200,10 @@ def exact_u(case: Case, mutation: str | None = None) -> list[list[Fraction]]:
     I(-1) = u_start / Ki), preset_at_setpoint (the law before the measurement preset: r(0) in place of y(0)),
     preset_only_with_u_start (the rule before: no preset when every u_start is 0), no_rate_limit (R ignored),
     anti_windup_ignores_rate (the output clipped to the rate band, but the anti-windup sees only the limits
-    u_min, u_max: it neither holds nor tracks while only the rate limit binds).
+    u_min, u_max: it neither holds nor tracks while only the rate limit binds), no_rescale (bumpless ignored),
+    rescale_without_p / rescale_without_d (the rescale leaves out the P or the D term), rescale_to_clipped_output
+    (v is the previous saturated u instead of the state's output), imposed_without_balance (an imposed sample keeps
+    I(k) = I_try), imposed_not_clipped (the imposed value is not clipped to the limits).
     """
     if mutation is not None and mutation not in MUTATIONS:
         raise ValueError(mutation)
@@ -201,6 +220,7 @@ def exact_u(case: Case, mutation: str | None = None) -> list[list[Fraction]]:
         rate = None if loop.R == INF or mutation == "no_rate_limit" else _q(loop.R)
         limits = (None if loop.u_min == -INF else _q(loop.u_min), None if loop.u_max == INF else _q(loop.u_max))
         last_u = None  # u(k-1) of the rate limit (None: none yet)
+        last_p = Fraction(0)  # ep(k-1)
         if mutation == "unfiltered_measurement":
             tf = Fraction(0)
         T = tf / sections
@@ -236,6 +256,27 @@ def exact_u(case: Case, mutation: str | None = None) -> list[list[Fraction]]:
             if case.N is not None and mutation != "unfiltered":
                 tdf = td / _q(case.N)
                 d = (tdf * derivative + dt * d) / (tdf + dt)
+            if (case.gain_change == "bumpless" and mutation != "no_rescale" and k > 0 and ki != 0
+                    and loop.gains[k] != loop.gains[k - 1]):
+                kp0, ti0, td0 = loop.gains[k - 1]
+                kp0, td0 = _q(kp0), _q(td0)
+                ki0 = Fraction(0) if ti0 == INF else kp0 / _q(ti0)
+                p0 = Fraction(0) if mutation == "rescale_without_p" else last_p
+                d0 = Fraction(0) if mutation == "rescale_without_d" else derivative
+                v = kp0 * (p0 + td0 * d0) + ki0 * integral
+                if mutation == "rescale_to_clipped_output":
+                    v = last_u
+                integral = (v - kp * (p0 + td * d0)) / ki
+            imposed = None if loop.imposed is None else loop.imposed[k]
+            if imposed is not None:
+                u = _q(imposed) if mutation == "imposed_not_clipped" else _clip(_q(imposed), *limits)
+                if ki != 0 and mutation != "imposed_without_balance":
+                    integral = (u - kp * (ep + td * d)) / ki
+                elif mutation == "imposed_without_balance":
+                    integral = integral + e * dt
+                last_error, derivative, previous_e, last_u, last_p = ed, d, e, u, ep
+                u_out.append(u)
+                continue
             summed = previous_e if mutation == "sum_without_current_error" else e
             i_try = integral + summed * dt
             u_try = kp * (ep + td * d) + ki * i_try
@@ -267,7 +308,7 @@ def exact_u(case: Case, mutation: str | None = None) -> list[list[Fraction]]:
                     else:
                         tt = _sqrt(_q(ti) * td) if td > 0 else _q(ti)
                     new_integral = i_try + dt / (tt + dt) * (limited - u_try) / ki
-            integral, last_error, derivative, previous_e, last_u = new_integral, ed, d, e, u
+            integral, last_error, derivative, previous_e, last_u, last_p = new_integral, ed, d, e, u, ep
             u_out.append(u)
         out.append(u_out)
     return out
@@ -878,8 +919,139 @@ RATE_LIMIT_BACK_CALCULATION = Case(
              u=(1.0, 1.5, 1.125, 1.625, 1.125, 1.625), u_min=-4.0, u_max=4.0, u_start=0.5, R=1.0),
     ))
 
+# -- the bumpless gain change and the imposed output (manual / tracking) ------------------------------------
+# gain_change "bumpless": at a change, "v" is the output the old gains give on sample k-1's ep, D and sum, and
+# I(k-1) := (v - Kp*(ep(k-1) + Td*D(k-1)))/Ki is what the new gains need to give v there.
+
+# k=0: [Kp 1, Ti 1, Td 0.5, Ki 1] I(-1) = (0.5 - 1*((0.5 - 1)*0.25))/1 = 0.625; e = 1 - 0.25 = 0.75,
+#      ep = 0.5*1 - 0.25 = 0.25, ed = 0*1 - 0.25 = -0.25; D = 0; I_try = 0.625 + 0.75*0.5 = 1;
+#      u_try = 1*(0.25 + 0.5*0) + 1*1 = 1.25; u = 1.25; I = 1
+# k=1: e = 1 - 0.375 = 0.625, ep = 0.5 - 0.375 = 0.125, ed = -0.375; D = (-0.375 - (-0.25))/0.5 = -0.25;
+#      I_try = 1 + 0.625*0.5 = 1.3125; u_try = 1*(0.125 + 0.5*(-0.25)) + 1*1.3125 = 1.3125; u = 1.3125; I = 1.3125
+# k=2: [Kp 2, Ti 0.5, Td 0.5, Ki 4] gain change: v = 1*(0.125 + 0.5*(-0.25)) + 1*1.3125 = 1.3125,
+#      I(1) := (1.3125 - 2*(0.125 + 0.5*(-0.25)))/4 = 0.328125; e = 1.5 - 0.75 = 0.75, ep = 0.75 - 0.75 = 0,
+#      ed = -0.75; D = (-0.75 - (-0.375))/0.5 = -0.75; I_try = 0.328125 + 0.75*0.5 = 0.703125;
+#      u_try = 2*(0 + 0.5*(-0.75)) + 4*0.703125 = 2.0625; u = 2.0625; I = 0.703125
+#      (positional: I_try = 1.3125 + 0.375 = 1.6875, u = -0.75 + 6.75 = 6)
+# k=3: e = 1.5 - 1 = 0.5, ep = 0.75 - 1 = -0.25, ed = -1; D = (-1 - (-0.75))/0.5 = -0.5;
+#      I_try = 0.703125 + 0.5*0.5 = 0.953125; u_try = 2*(-0.25 + 0.5*(-0.5)) + 4*0.953125 = 2.8125; u = 2.8125
+BUMPLESS_GAIN_STEP = Case(
+    name='bumpless_gain_step',
+    what=('bumpless gain change Kp 1 -> 2, Ti 1 -> 0.5 with a setpoint step at k = 2, b = 0.5, c = 0: the sum is '
+          'rescaled so that the new gains give the old output on sample 1 (its P and D terms absorbed)'),
+    dt=0.5, anti_windup='none', gain_change='bumpless',
+    loops=(
+        Loop(r=(1.0, 1.0, 1.5, 1.5),
+             y=(0.25, 0.375, 0.75, 1.0),
+             gains=constant((1.0, 1.0, 0.5), 2) + constant((2.0, 0.5, 0.5), 2),
+             u=(1.25, 1.3125, 2.0625, 2.8125), u_start=0.5, b=0.5, c=0.0),
+    ))
+
+# k=0: [Kp 1, Ti 1, Td 0, Ki 1] I(-1) = 0.5/1 = 0.5; e = 1 - 0 = 1; D = 0; I_try = 0.5 + 1*0.5 = 1;
+#      u_try = 1*1 + 1*1 = 2; u = 1; saturated, e pushes further: I = 0.5 (held)
+# k=1: e = 1 - 0.25 = 0.75; D = -0.5; I_try = 0.5 + 0.375 = 0.875; u_try = 0.75 + 0.875 = 1.625; u = 1; I = 0.5
+# k=2: [Kp 2, Ti 0.5, Td 0, Ki 4] gain change: v = 1*(0.75 + 0*(-0.5)) + 1*0.5 = 1.25 (beyond the limit: the
+#      state's output, not the clipped u), I(1) := (1.25 - 2*(0.75 + 0))/4 = -0.0625; e = 2 - 0.5 = 1.5; D = 1.5;
+#      I_try = -0.0625 + 0.75 = 0.6875; u_try = 2*1.5 + 4*0.6875 = 5.75; u = 1; held: I = -0.0625
+# k=3: e = 2 - 0.75 = 1.25; D = -0.5; I_try = -0.0625 + 0.625 = 0.5625; u_try = 2.5 + 2.25 = 4.75; u = 1;
+#      held: I = -0.0625
+# k=4: e = 2 - 1.75 = 0.25; D = -2; I_try = -0.0625 + 0.125 = 0.0625; u_try = 0.5 + 0.25 = 0.75; u = 0.75
+#      (positional: the sum is held at 0.5, u_try = 0.5 + 4*0.625 = 3, still at the limit)
+BUMPLESS_SATURATED = Case(
+    name='bumpless_saturated',
+    what=('a bumpless gain change while saturated, clamping: u stays at the limit, the change neither winds the sum '
+          'up nor down (v = 1.25 is kept, not the clipped 1), and the loop leaves the limit as the new controller'),
+    dt=0.5, anti_windup='clamping', gain_change='bumpless',
+    loops=(
+        Loop(r=(1.0, 1.0, 2.0, 2.0, 2.0),
+             y=(0.0, 0.25, 0.5, 0.75, 1.75),
+             gains=constant((1.0, 1.0, 0.0), 2) + constant((2.0, 0.5, 0.0), 3),
+             u=(1.0, 1.0, 1.0, 1.0, 0.75), u_min=-1.0, u_max=1.0, u_start=0.5),
+    ))
+
+# k=0: [Kp 1, Ti 1, Td 0, Ki 1] I(-1) = (0.5 - 1*((0.5 - 1)*1))/1 = 1; e = 0, ep = 0.5*1 - 1 = -0.5; D = 0;
+#      I_try = 1; u_try = -0.5 + 1 = 0.5; u = 0.5; I = 1
+# k=1: the same: u = 0.5; I = 1
+# k=2: [Kp -1, Ti 0.5, Td 0, Ki -2] gain change: v = 1*(-0.5) + 1*1 = 0.5, I(1) := (0.5 - (-1)*(-0.5))/(-2) = 0;
+#      e = 2 - 1 = 1, ep = 0.5*2 - 1 = 0; D = (1 - 0)/0.5 = 2; I_try = 0 + 0.5 = 0.5;
+#      u_try = -1*(0 + 0*2) + (-2)*0.5 = -1; u = -1; I = 0.5
+# k=3: e = 1, ep = 0; D = 0; I_try = 1; u_try = 0 + (-2)*1 = -2; u = -2
+BUMPLESS_SIGN_CHANGE = Case(
+    name='bumpless_sign_change',
+    what=('Kp changes sign (1 -> -1, Ti 1 -> 0.5; Ki -2 has its sign) at a setpoint step from an equilibrium with '
+          'b = 0.5: the same rescale, u(1) = 0.5 continued, then the reverse-acting law'),
+    dt=0.5, anti_windup='none', gain_change='bumpless',
+    loops=(
+        Loop(r=(1.0, 1.0, 2.0, 2.0),
+             y=(1.0, 1.0, 1.0, 1.0),
+             gains=constant((1.0, 1.0, 0.0), 2) + constant((-1.0, 0.5, 0.0), 2),
+             u=(0.5, 0.5, -1.0, -2.0), u_start=0.5, b=0.5),
+    ))
+
+# k=0: [Kp 1, Ti 1, Td 0, Ki 1] I(-1) = 0.25; e = 0.5; D = 0; I_try = 0.5; u_try = 0.5 + 0.5 = 1; u = 1; I = 0.5
+# k=1: e = 0.5; I_try = 0.75; u_try = 0.5 + 0.75 = 1.25; u = 1.25; I = 0.75
+# k=2: [Kp 2, Ti inf, Td 0, Ki 0] gain change, Ki = 0: I kept (0.75); e = 0.5; I_try = 1; u_try = 2*0.5 + 0*1 = 1;
+#      u = 1 (the jump -0.25: no integral term can hold the output); I = 1
+# k=3: I_try = 1.25; u_try = 1; u = 1; I = 1.25
+# k=4: [Kp 1, Ti 0.5, Td 0, Ki 2] gain change: v = 2*(0.5 + 0) + 0*1.25 = 1, I(3) := (1 - 1*0.5)/2 = 0.25;
+#      e = 0.5; I_try = 0.25 + 0.25 = 0.5; u_try = 0.5 + 2*0.5 = 1.5; u = 1.5 (from 1 by Ki*e*dt only)
+BUMPLESS_WITHOUT_INTEGRAL = Case(
+    name='bumpless_without_integral',
+    what=('bumpless, a change to Ti = inf (Ki = 0): the sum is kept and u jumps by the P term change and the lost '
+          'integral term; the change back to Ki = 2 is bumpless'),
+    dt=0.5, anti_windup='none', gain_change='bumpless',
+    loops=(
+        Loop(r=(1.0, 1.0, 1.0, 1.0, 1.0),
+             y=(0.5, 0.5, 0.5, 0.5, 0.5),
+             gains=constant((1.0, 1.0, 0.0), 2) + constant((2.0, INF, 0.0), 2) + constant((1.0, 0.5, 0.0), 1),
+             u=(1.0, 1.25, 1.0, 1.0, 1.5), u_start=0.25),
+    ))
+
+# k=0: [Kp 1, Ti 1, Td 0.5, Ki 1] I(-1) = (0 - 1*((0.5 - 1)*0.25))/1 = 0.125; e = 0.75, ep = 0.25, ed = -0.25;
+#      D = 0; manual 1.5: u = 1.5; I = (1.5 - 1*(0.25 + 0.5*0))/1 = 1.25
+# k=1: e = 0.5, ep = 0, ed = -0.5; D = -0.5; manual 1: u = 1; I = (1 - 1*(0 + 0.5*(-0.5)))/1 = 1.25
+# k=2 (automatic): e = 0.5, ep = 0, ed = -0.5; D = 0; I_try = 1.25 + 0.25 = 1.5; u_try = 1*(0 + 0) + 1.5 = 1.5;
+#      u = 1.5 (= 1 + Kp*Td*(D(2) - D(1)) + Ki*e*dt = 1 + 0.25 + 0.25: no bump); I = 1.5
+# k=3: e = 0.25, ep = -0.25, ed = -0.75; D = -0.5; I_try = 1.625; u_try = (-0.25 - 0.25) + 1.625 = 1.125; u = 1.125
+# k=4: e = 0.25, ep = -0.25, ed = -0.75; D = 0; I_try = 1.75; u_try = -0.25 + 1.75 = 1.5; u = 1.5
+MANUAL_TO_AUTO = Case(
+    name='manual_to_auto',
+    what=('manual output 1.5 then 1 (k = 0, 1), then automatic: the sum balanced to the manual value every manual '
+          'sample, so u continues from 1 with the controller\'s answer to the signals only'),
+    dt=0.5, anti_windup='clamping', gain_change='bumpless',
+    loops=(
+        Loop(r=(1.0, 1.0, 1.0, 1.0, 1.0),
+             y=(0.25, 0.5, 0.5, 0.75, 0.75),
+             gains=constant((1.0, 1.0, 0.5), 5),
+             u=(1.5, 1.0, 1.5, 1.125, 1.5), u_min=-2.0, u_max=2.0, b=0.5, c=0.0,
+             imposed=(1.5, 1.0, None, None, None)),
+    ))
+
+# R*dt = 0.5; Tt = Ti (Td = 0).
+# k=0: [Kp 1, Ti 0.5, Td 0, Ki 2] I(-1) = 0; e = 0.5; D = 0; I_try = 0.25; u_try = 0.5 + 0.5 = 1; band [-0.5, 0.5];
+#      u = 0.5; g = 0.5/(0.5 + 0.5) = 0.5: I = 0.25 + 0.5*(0.5 - 1)/2 = 0.125
+# k=1: tracking 3 (beyond u_max = 2): u = 2 (clipped, no rate band); I = (2 - 1*0.5)/2 = 0.75
+# k=2 (automatic): e = 1 - 1.25 = -0.25; D = -1.5; I_try = 0.75 - 0.125 = 0.625; u_try = -0.25 + 1.25 = 1;
+#      band [2 - 0.5, 2 + 0.5] within the limits: [1.5, 2]; u = 1.5; I = 0.625 + 0.5*(1.5 - 1)/2 = 0.75
+# k=3: e = 0; D = 0.5; I_try = 0.75; u_try = 0 + 1.5 = 1.5; band [1, 2]; u = 1.5; I = 0.75
+# k=4: [Kp 2, Ti 0.25, Td 0, Ki 8] gain change: v = 1*0 + 2*0.75 = 1.5, I(3) := (1.5 - 2*0)/8 = 0.1875;
+#      e = 2 - 1 = 1; D = 2; I_try = 0.6875; u_try = 2*1 + 8*0.6875 = 7.5; band [1, 2]; u = 2
+TRACK_TO_AUTO = Case(
+    name='track_to_auto',
+    what=('tracking the actuator at 3 (clipped to u_max = 2) at k = 1, then automatic with back-calculation and the '
+          'rate limit from the tracked value, and a bumpless gain change at k = 4'),
+    dt=0.5, anti_windup='back_calculation', gain_change='bumpless',
+    loops=(
+        Loop(r=(1.0, 1.0, 1.0, 1.0, 2.0),
+             y=(0.5, 0.5, 1.25, 1.0, 1.0),
+             gains=constant((1.0, 0.5, 0.0), 4) + constant((2.0, 0.25, 0.0), 1),
+             u=(0.5, 2.0, 1.5, 1.5, 2.0), u_min=-1.0, u_max=2.0, R=1.0,
+             imposed=(None, 3.0, None, None, None), imposed_by='track'),
+    ))
+
 CASES = (P_ONLY, PI_CLAMPING, PID_BACK_CALCULATION, PI_BACK_CALCULATION_GIVEN_TT, PID_FIRST_SAMPLE,
          PID_DERIVATIVE_FILTER, PD_WITHOUT_INTEGRAL, BUMPLESS_START, GAIN_CHANGE, TWO_LOOPS,
          SETPOINT_WEIGHT, DERIVATIVE_ON_MEASUREMENT, MEASUREMENT_FILTER_FIRST_ORDER, MEASUREMENT_FILTER_SECOND_ORDER,
          BUMPLESS_SETPOINT_WEIGHT, TWO_LOOPS_STRUCTURE, PRESET_SETPOINT_STEP, PRESET_ZERO_START, RATE_LIMIT_CLAMPING,
-         RATE_LIMIT_BACK_CALCULATION)
+         RATE_LIMIT_BACK_CALCULATION, BUMPLESS_GAIN_STEP, BUMPLESS_SATURATED, BUMPLESS_SIGN_CHANGE,
+         BUMPLESS_WITHOUT_INTEGRAL, MANUAL_TO_AUTO, TRACK_TO_AUTO)

@@ -117,10 +117,13 @@ def _siso_measurement():
 def _siso_error():
     """first_order scheduled by its error r - y (rows on both signs), clamping, no derivative filter; b = 0.5,
     c = 0, a first-order measurement filter Tf = 0.05 s and the rate limit 10 u/s (1 per sample); the preset from
-    u0 = 0 at the noisy first measurement (b != 1: not a zero error sum)."""
+    u0 = 0 at the noisy first measurement (b != 1: not a zero error sum). The paper's positional gain change (the
+    other cases run the bumpless default): this table's Kp grows with |e|, a nonlinear P action u = Kp(e)*e that the
+    bumpless rescale absorbs (it answers only the change of e), and with it the unstable loop, rate limited, grows
+    into a limit cycle and diverges at seed 3."""
     config = _scenario_config("first_order", anti_windup="clamping", derivative_filter_N=None, episode_steps=200,
                               measurement_noise_std=0.01, setpoint_schedule=((0, (0.9,)), (100, (-0.7,))),
-                              **_structure(0.5, 0.0, 0.05, 1))
+                              gain_change="positional", **_structure(0.5, 0.0, 0.05, 1))
     config = _rated(config, 10.0)
     return config, _table(config, "error[y]", "", [-0.4, -0.02, 0.0, 0.03, 0.5], Kp=[22.0, 12.0, 9.0, 13.0, 25.0],
                           Ti=[0.8, 1.5, 2.0, 1.4, 0.7], Td=[0.1, 0.04, 0.02, 0.05, 0.12]), (0.0,)

@@ -32,6 +32,10 @@ near zero).
    bit for both versions). The PID is preset (at y(0), from u_start) before the forecast is called,
    as LoopCore does; the forecast itself rolls out from the state it is given.
 
+Cases with gain_change "bumpless" run the rescale of a gain change (PID(gain_change="bumpless"), the exports'
+table with that law); cases with an `imposed` output run PID.track_values at those samples, and the exports'
+manual or tracking input (C: <name>_step_modes, ST: Manual/ManualValue or Track/TrackValue).
+
 `test_each_mutation_of_the_law_is_caught` shows the cases can fail: each deliberately wrong law of
 pid_law_cases.MUTATIONS (a derivative kick on the first sample, clamping that never holds the sum,
 ...) changes the expected numbers of at least one case, so an implementation with that error fails.
@@ -159,6 +163,20 @@ def test_the_cases_cover_what_they_claim():
         assert max(steps) == loop.R * case.dt and all(s <= loop.R * case.dt for s in steps)
         assert all(loop.u_min < u < loop.u_max for u in loop.u)
     assert by["rate_limit_back_calculation"].loops[0].u_start != 0  # the band starts around u_start
+    # the bumpless gain change: a change with b != 1 and D != 0 at the sample before (P and D terms absorbed), one
+    # while saturated, a sign change of Kp, one to and from Ki = 0; manual and tracking (beyond a limit), both laws
+    (loop,) = by["bumpless_gain_step"].loops
+    assert loop.b != 1 and loop.gains[1] != loop.gains[2] and loop.y[1] != loop.y[0]
+    (loop,) = by["bumpless_saturated"].loops
+    k = loop.gains.index(loop.gains[-1])
+    assert loop.u[k - 1] == loop.u[k] == loop.u_max and loop.u[-1] < loop.u_max
+    (loop,) = by["bumpless_sign_change"].loops
+    assert loop.gains[0][0] > 0 > loop.gains[-1][0]
+    assert [g[1] for g in by["bumpless_without_integral"].loops[0].gains].count(INF) == 2
+    assert {l.imposed_by for c in CASES for l in c.loops if l.imposed is not None} == {"manual", "track"}
+    (loop,) = by["track_to_auto"].loops
+    assert max(v for v in loop.imposed if v is not None) > loop.u_max and loop.R < INF
+    assert {c.gain_change for c in CASES} == {"positional", "bumpless"}
 
 
 CAUGHT_BY = {"derivative_kick": "pid_first_sample", "integrate_while_saturated": "pi_clamping",
@@ -170,7 +188,10 @@ CAUGHT_BY = {"derivative_kick": "pid_first_sample", "integrate_while_saturated":
              "integral_on_filtered": "measurement_filter_first_order", "one_filter_section": "measurement_filter_second_order",
              "filter_from_zero": "measurement_filter_first_order", "kick_at_start": "bumpless_setpoint_weight",
              "preset_at_setpoint": "preset_setpoint_step", "preset_only_with_u_start": "preset_zero_start",
-             "no_rate_limit": "rate_limit_clamping", "anti_windup_ignores_rate": "rate_limit_back_calculation"}
+             "no_rate_limit": "rate_limit_clamping", "anti_windup_ignores_rate": "rate_limit_back_calculation",
+             "no_rescale": "bumpless_gain_step", "rescale_without_p": "bumpless_gain_step",
+             "rescale_without_d": "bumpless_gain_step", "rescale_to_clipped_output": "bumpless_saturated",
+             "imposed_without_balance": "manual_to_auto", "imposed_not_clipped": "track_to_auto"}
 
 
 @pytest.mark.parametrize("mutation", MUTATIONS)
@@ -192,7 +213,13 @@ def _python_pid(case):
                case.anti_windup, Tt=None if Tts[0] is None else Tts, derivative_filter_N=case.N,
                setpoint_weight=[l.b for l in case.loops], derivative_weight=[l.c for l in case.loops],
                measurement_filter_s=[l.Tf for l in case.loops], measurement_filter_order=case.filter_order,
-               u_rate_limit=[l.R for l in case.loops])
+               u_rate_limit=[l.R for l in case.loops], gain_change=case.gain_change)
+
+
+def _imposed(case, k: int) -> list | None:
+    """Per loop the output imposed at sample k (None: the law), or None when no loop has one."""
+    values = [None if loop.imposed is None else loop.imposed[k] for loop in case.loops]
+    return None if all(v is None for v in values) else values
 
 
 @pytest.mark.parametrize("name", IDS)
@@ -203,7 +230,11 @@ def test_python_pid(name):
     pid.preset_output([loop.u_start for loop in case.loops], y, Kp, Ti)  # LoopCore's rule: always, at y(0)
     out = []
     for k in range(case.steps):
-        out.append(pid.step(*_per_sample(case, k)).tolist())
+        imposed = _imposed(case, k)
+        if imposed is None:
+            out.append(pid.step(*_per_sample(case, k)).tolist())
+        else:
+            out.append(pid.track_values(*_per_sample(case, k), imposed))
     _check("the Python PID (control/pid.py)", case, np.array(out).T)
 
 
@@ -243,7 +274,7 @@ def _schedule(case):
         setpoint_weight=np.array([l.b for l in case.loops], float),
         derivative_weight=np.array([l.c for l in case.loops], float),
         measurement_filter_s=np.array([l.Tf for l in case.loops], float), measurement_filter_order=case.filter_order,
-        u_rate_limit=np.array([l.R for l in case.loops], float))
+        u_rate_limit=np.array([l.R for l in case.loops], float), gain_change=case.gain_change)
 
 
 def _controller(case):
@@ -282,15 +313,20 @@ DRIVER_CASE = r"""
 static int run_@n@(void)
 {
     @n@_state s;
-    double r[@P@_N_LOOPS], y[@P@_N_LOOPS], u[@P@_N_LOOPS], u0[@P@_N_LOOPS];
-    int n, k, i;
+    double r[@P@_N_LOOPS], y[@P@_N_LOOPS], u[@P@_N_LOOPS], u0[@P@_N_LOOPS], value[@P@_N_LOOPS];
+    int n, k, i, mode[@P@_N_LOOPS], manual[@P@_N_LOOPS], track[@P@_N_LOOPS];
     if (scanf("%d", &n) != 1) return 1;
     for (i = 0; i < @P@_N_LOOPS; i++) if (scanf("%lf", &u0[i]) != 1) return 1;
     @n@_reset(&s, u0);
     for (k = 0; k < n; k++) {
         for (i = 0; i < @P@_N_LOOPS; i++) if (scanf("%lf", &r[i]) != 1) return 1;
         for (i = 0; i < @P@_N_LOOPS; i++) if (scanf("%lf", &y[i]) != 1) return 1;
-        @n@_step(&s, r, y, u);
+        for (i = 0; i < @P@_N_LOOPS; i++) {  /* 0: automatic, 1: manual, 2: tracking; then the value */
+            if (scanf("%d %lf", &mode[i], &value[i]) != 2) return 1;
+            manual[i] = mode[i] == 1;
+            track[i] = mode[i] == 2;
+        }
+        @n@_step_modes(&s, r, y, manual, value, track, value, u);
         for (i = 0; i < @P@_N_LOOPS; i++) printf("%a ", u[i]);
         printf("\n");
     }
@@ -333,7 +369,9 @@ def test_exported_c(name, c_driver):
     lines = [str(case.steps), " ".join(repr(loop.u_start) for loop in case.loops)]
     for k in range(case.steps):
         r, y, *_ = _per_sample(case, k)
-        lines.append(" ".join(repr(v) for v in r + y))
+        modes = [(0, 0.0) if loop.imposed is None or loop.imposed[k] is None
+                 else (1 if loop.imposed_by == "manual" else 2, loop.imposed[k]) for loop in case.loops]
+        lines.append(" ".join(repr(v) for v in r + y) + " " + " ".join(f"{m} {v!r}" for m, v in modes))
     proc = subprocess.run([str(c_driver), case.name], input="\n".join(lines) + "\n",
                           capture_output=True, text=True, check=False)
     assert proc.returncode == 0, proc.stderr
@@ -385,6 +423,11 @@ def test_exported_structured_text(name, st_blocks):
     for k in range(case.steps):
         r, y, *_ = _per_sample(case, k)
         fb["Setpoint"], fb["Measurement"] = r, y
+        imposed = [None if loop.imposed is None else loop.imposed[k] for loop in case.loops]
+        for flag, value, by in (("Manual", "ManualValue", "manual"), ("Track", "TrackValue", "track")):
+            on = [v is not None and loop.imposed_by == by for v, loop in zip(imposed, case.loops)]
+            fb[flag] = on
+            fb[value] = [v if o else 0.0 for v, o in zip(imposed, on)]
         fb.call()
         out.append(fb["U"])
     _check("the exported Structured Text (templates/st_body.j2)", case, np.array(out).T)

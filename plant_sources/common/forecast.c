@@ -10,6 +10,7 @@ typedef struct {
     double integral[PRLPID_MAX_LOOPS], last_error[PRLPID_MAX_LOOPS], derivative[PRLPID_MAX_LOOPS];
     double filtered[PRLPID_MAX_LOOPS], stage[PRLPID_MAX_LOOPS];
     double last_output[PRLPID_MAX_LOOPS];
+    double last_p[PRLPID_MAX_LOOPS], last_kp[PRLPID_MAX_LOOPS], last_ti[PRLPID_MAX_LOOPS], last_td[PRLPID_MAX_LOOPS];
     int initialized;
 } PidState;
 
@@ -25,7 +26,9 @@ size_t prlpid_forecast_struct_size(int which) {
 }
 
 /* One sample on the integral, proportional and derivative errors e, ep, ed (pid.py PID.step_weighted),
- * clipped to the limits, or to the rate limit's band within them; writes saturated u. */
+ * clipped to the limits, or to the rate limit's band within them; writes saturated u. Bumpless: when the gains
+ * differ from the last sample's, the error sum is first rescaled so that the new gains give the old output on
+ * the last sample's ep, D and sum. */
 static int pid_step(const PrlpidForecastSetup *s, const PrlpidForecastInput *in, PidState *st,
                     const double *errors, const double *p_errors, const double *d_errors, double *u_out) {
     const double dt = s->pid_sample_time;
@@ -46,6 +49,16 @@ static int pid_step(const PrlpidForecastSetup *s, const PrlpidForecastInput *in,
         }
         if (ti == 0.0) return PRLPID_EZERODIV;
         ki = kp / ti;
+        if (s->gain_change == PRLPID_BUMPLESS && (kp != st->last_kp[i] || ti != st->last_ti[i] || td != st->last_td[i])
+            && st->last_kp[i] == st->last_kp[i] && ki != 0) {
+            double kp0 = st->last_kp[i], d0 = st->derivative[i], p0 = st->last_p[i];
+            double v = kp0 * (p0 + st->last_td[i] * d0) + kp0 / st->last_ti[i] * st->integral[i];
+            st->integral[i] = (v - kp * (p0 + td * d0)) / ki;
+        }
+        st->last_p[i] = p_errors[i];
+        st->last_kp[i] = kp;
+        st->last_ti[i] = ti;
+        st->last_td[i] = td;
         integral = st->integral[i] + e * dt;
         u_unsat = kp * (p_errors[i] + td * d) + ki * integral;
         lo = s->u_min[i];
@@ -182,7 +195,8 @@ int prlpid_forecast_core(Instance *plant, Instance *prior, const PrlpidForecastS
     n = s->n_loops;
     if (n < 1 || n > PRLPID_MAX_LOOPS || s->horizon < 1 || (s->coupled && n != 3) || s->n_overrides < 0 ||
         (s->n_overrides > 0 && (!s->override_vr || !s->override_value)) || !s->measurements || !s->rewards ||
-        (s->measurement_filter_order != 1 && s->measurement_filter_order != 2)) {
+        (s->measurement_filter_order != 1 && s->measurement_filter_order != 2) ||
+        (s->gain_change != PRLPID_POSITIONAL && s->gain_change != PRLPID_BUMPLESS)) {
         return PRLPID_EINVAL;
     }
     out->steps = out->n_measurements = out->stopped = 0;
@@ -198,6 +212,10 @@ int prlpid_forecast_core(Instance *plant, Instance *prior, const PrlpidForecastS
     memcpy(st.filtered, in->filtered, sizeof(st.filtered));
     memcpy(st.stage, in->filter_stage, sizeof(st.stage));
     memcpy(st.last_output, in->last_output, sizeof(st.last_output));
+    memcpy(st.last_p, in->last_p_error, sizeof(st.last_p));
+    memcpy(st.last_kp, in->last_Kp, sizeof(st.last_kp));
+    memcpy(st.last_ti, in->last_Ti, sizeof(st.last_ti));
+    memcpy(st.last_td, in->last_Td, sizeof(st.last_td));
     st.initialized = in->initialized;
     for (i = 0; i < n; i++) {
         previous_error[i] = (in->setpoint[i] - in->measurement[i]) / s->scale[i];

@@ -4,8 +4,9 @@
  * prlpid_forecast(plant, prior, setup, input, result) copies the plant instance's full state into the
  * prior, sets the overrides on the prior, and rolls the prior `horizon` samples ahead with a copy of
  * the PID state and fixed gains: u = PID (the 2-DOF law of pid.py: setpoint weights b, c, the
- * measurement filter Tf and the output rate limit R; eq. 2 when b = c = 1, Tf = 0, R = inf; optionally the
- * coupled errors of eq. 27) on the last measurement, prior inputs := u, doStep, measurement := prior
+ * measurement filter Tf, the output rate limit R and the bumpless gain change, which at the first step rescales
+ * the error sum from the previous sample's gains in the state to the call's; eq. 2 when b = c = 1, Tf = 0,
+ * R = inf and gain_change positional; optionally the coupled errors of eq. 27) on the last measurement, prior inputs := u, doStep, measurement := prior
  * outputs, reward (eq. 10-11 plus the control-variation term) on the normalised error. A discarded step or an error beyond the divergence
  * bound adds the divergence penalty and ends the roll-out. The result is the mean reward. The roll-out starts
  * from the PID state copied in (the bumpless preset, if any, happened before the call; none happens here).
@@ -26,7 +27,7 @@
 #include <stddef.h>
 #include "instance.h"
 
-#define PRLPID_FORECAST_ABI 3
+#define PRLPID_FORECAST_ABI 4 /* 4: the bumpless gain change (gain_change, the previous gains and ep) */
 #define PRLPID_MAX_LOOPS 3
 
 #if defined(_WIN32)
@@ -36,6 +37,7 @@
 #endif
 
 enum { PRLPID_CLAMPING = 0, PRLPID_BACK_CALCULATION = 1, PRLPID_NO_ANTI_WINDUP = 2 };
+enum { PRLPID_POSITIONAL = 0, PRLPID_BUMPLESS = 1 }; /* what a gain change does to the error sum (pid.py) */
 
 /* Return codes: 0 = done (possibly stopped by divergence); negative = nothing meaningful in result. */
 enum {
@@ -59,6 +61,7 @@ typedef struct {
     int has_Tt;                     /* 1: Tt below; 0: sqrt(Ti*Td), or Ti when Td = 0 */
     int n_overrides;                /* entries in override_vr / override_value */
     int measurement_filter_order;   /* 1 | 2: sections of the measurement filter */
+    int gain_change;                /* PRLPID_POSITIONAL | PRLPID_BUMPLESS */
     unsigned int input_vr[PRLPID_MAX_LOOPS];   /* prior inputs the PID drives */
     unsigned int output_vr[PRLPID_MAX_LOOPS];  /* prior outputs it measures */
     double pid_sample_time;         /* PID dt, s */
@@ -93,6 +96,9 @@ typedef struct {
     double filtered[PRLPID_MAX_LOOPS], filter_stage[PRLPID_MAX_LOOPS];  /* PID state: measurement filter */
     double last_output[PRLPID_MAX_LOOPS];  /* PID state: its previous output u(k-1), the rate limit's origin
                                               (NaN: none yet, no rate limit at that sample) */
+    double last_p_error[PRLPID_MAX_LOOPS];  /* PID state: ep(k-1), the proportional error of its last sample */
+    double last_Kp[PRLPID_MAX_LOOPS], last_Ti[PRLPID_MAX_LOOPS], last_Td[PRLPID_MAX_LOOPS];  /* PID state: the
+                                              gains of its last sample (NaN: none yet, no rescale) */
     int initialized;                /* PID state: 0 until its first step after reset */
 } PrlpidForecastInput;
 

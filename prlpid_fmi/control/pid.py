@@ -38,6 +38,33 @@ With b = c = 1 and Tf = 0 this is paper eq. 2 exactly, bit for bit (1.0*r == r):
   [max(u_min, u(k-1) - R*dt), min(u_max, u(k-1) + R*dt)], and the anti-windup below treats that band as the
   limits. The first sample after a reset without a preset is not rate limited.
 
+Gain changes (``gain_change``): "positional" (the paper's eq. 2, the law above as it stands) or "bumpless".
+"bumpless" rescales the error sum when (Kp, Ti, Td) differ from the previous sample's (Kp', Ti', Td'), before
+anything else of sample k, so that the state's output does not jump::
+
+    v    = Kp'*(ep(k-1) + Td'*D(k-1)) + Ki'*I(k-1)     the old gains on sample k-1's signals and sum
+    I(k-1) := (v - Kp*(ep(k-1) + Td*D(k-1))) / Ki      the new gains then give v there  (Ki = Kp/Ti != 0)
+
+(I(k-1) after the anti-windup, D the derivative as stored, filtered when N is set). Sample k then runs the
+law above unchanged, so u_try(k) = v + Kp*(ep(k) - ep(k-1)) + Kp*Td*(D(k) - D(k-1)) + Ki*e(k)*dt: the output
+moves only as the new controller answers the signals' change (at an equilibrium, not at all). With constant
+gains nothing is rescaled and the law is bit for bit "positional". Edge cases:
+
+- Ki = 0 (Ti = inf or Kp = 0) after the change: no integral term can hold the output, I is left as it is and
+  u jumps by the change of the P and D terms and loses Ki'*I (a P or PD law has no state for its output); the
+  output rate limit, when set, bounds that jump. Back from Ki = 0 to Ki != 0 is bumpless (the formula).
+- A sign change of Kp: the same formula (Ki has the sign of Kp); the clamping test uses the new Kp*e.
+- While saturated: v is the unsaturated value the state holds (not the clipped u), so the change neither
+  winds the sum up nor down; the applied output stays at the limit as long as v is beyond it, and clamping and
+  back-calculation act on sample k as without a change.
+- The first sample after reset() (with or without preset_output) has no previous gains: no rescale.
+
+Manual and tracking (``track_values``): a sample whose output is imposed per loop (a manual value, or the
+actuator's actual position while an override or a limit acts) outputs it clipped to [u_min, u_max] (not rate
+limited: the operator or the actuator moved it), advances the filters, ed, D, ep and the gains as a normal
+sample, and balances the sum as preset_output does: I(k) = (u(k) - Kp*(ep(k) + Td*D(k))) / Ki (Ki = 0: I left
+as it is). The next automatic sample continues from u(k) as from an automatic one: no bump on the transfer.
+
 Anti-windup (``anti_windup``), with u_try = u computed from I(k-1) + e(k)*dt:
 
 - "none": I(k) = I(k-1) + e(k)*dt.
@@ -76,6 +103,7 @@ from dataclasses import dataclass
 import numpy as np
 
 ANTI_WINDUP_MODES = ("clamping", "back_calculation", "none")
+GAIN_CHANGE_MODES = ("bumpless", "positional")  # what a change of (Kp, Ti, Td) does to the error sum
 COUPLING_NAMES = ("c_rp", "c_ry", "c_pr", "c_py", "c_yr", "c_yp")
 
 
@@ -96,7 +124,9 @@ class PIDState:
     [error units]; derivative: last (filtered) derivative D [error units / s]; filtered: the measurement
     filter's output yf(k-1) [measurement units]; filter_stage: the first section's output of a second-order
     filter (equal to filtered for order 1); initialized: False until the first step after reset; last_output:
-    the previous output u(k-1) the rate limit moves from (NaN: none yet).
+    the previous output u(k-1) the rate limit moves from (NaN: none yet); last_p_error: ep(k-1) [error units];
+    last_gains: (3, n_loops) Kp [u per error unit], Ti [s], Td [s] of sample k-1 (NaN: none yet), what a
+    bumpless gain change rescales the sum from (None: none).
     """
 
     integral: np.ndarray
@@ -106,10 +136,13 @@ class PIDState:
     filtered: np.ndarray | None = None
     filter_stage: np.ndarray | None = None
     last_output: np.ndarray | None = None
+    last_p_error: np.ndarray | None = None
+    last_gains: np.ndarray | None = None
 
     def copy(self) -> "PIDState":
         return PIDState(self.integral.copy(), self.last_error.copy(), self.derivative.copy(), self.initialized,
-                        *(None if a is None else a.copy() for a in (self.filtered, self.filter_stage, self.last_output)))
+                        *(None if a is None else a.copy() for a in (self.filtered, self.filter_stage, self.last_output,
+                                                                    self.last_p_error, self.last_gains)))
 
 
 def _per_loop(value, n_loops: int, name: str) -> list:
@@ -143,6 +176,10 @@ class PID:
         derivative_weight: c in [0, 1] (0: derivative on the measurement; 1: on the error, the paper's).
         measurement_filter_s: Tf [s] >= 0 of the measurement filter feeding P and D; 0 = none.
         measurement_filter_order: 1 or 2.
+        u_rate_limit: R [u units / s] per loop (inf: none).
+        gain_change: "positional" (eq. 2: a gain change acts on the whole sum) or "bumpless" (the sum is rescaled
+            so that u does not jump; module docstring). The default is the paper's law; LoopCore runs the
+            scenario's controller.gain_change.
 
     ``unsaturated_u`` (n_loops,): u before saturation in the last step (zeros after reset); with
     back-calculation it includes the step's tracking correction (see module docstring).
@@ -151,7 +188,7 @@ class PID:
     def __init__(self, sample_time_s: float, n_loops: int = 1, u_min=-np.inf, u_max=np.inf,
                  anti_windup: str = "clamping", Tt=None, derivative_filter_N: float | None = None,
                  setpoint_weight=1.0, derivative_weight=1.0, measurement_filter_s=0.0,
-                 measurement_filter_order: int = 1, u_rate_limit=math.inf):
+                 measurement_filter_order: int = 1, u_rate_limit=math.inf, gain_change: str = "positional"):
         if not (np.isfinite(sample_time_s) and sample_time_s > 0):
             raise ValueError(f"sample_time_s must be a finite number > 0, got {sample_time_s!r}")
         if isinstance(n_loops, bool) or int(n_loops) != n_loops or n_loops < 1:
@@ -169,6 +206,10 @@ class PID:
         if any(not lo <= hi for lo, hi in zip(self._u_min, self._u_max)):
             raise ValueError(f"u_min must be <= u_max (and not NaN), got u_min={u_min!r}, u_max={u_max!r}")
         self.anti_windup = anti_windup
+        if gain_change not in GAIN_CHANGE_MODES:
+            raise ValueError(f"gain_change must be one of {GAIN_CHANGE_MODES}, got {gain_change!r}")
+        self.gain_change = gain_change
+        self._bumpless = gain_change == "bumpless"
         rate = _per_loop(u_rate_limit, n, "u_rate_limit")
         if not all(r > 0 for r in rate):
             raise ValueError(f"u_rate_limit must be > 0 (inf: none), got {u_rate_limit!r}")
@@ -195,6 +236,11 @@ class PID:
         self._b, self._c, self._tf = b, c, tf
         self._section = [v / self.measurement_filter_order for v in tf]  # time constant of each filter section
         self._weighted = any(v != 1.0 for v in b + c) or any(tf)
+
+    @property
+    def weighted(self) -> bool:
+        """Whether b, c or Tf differ from eq. 2's (b = c = 1, Tf = 0) in some loop: else ep = ed = e."""
+        return self._weighted
 
     @property
     def setpoint_weight(self) -> np.ndarray:
@@ -243,19 +289,29 @@ class PID:
         self._filtered = [0.0] * n
         self._stage = [0.0] * n
         self._last_u = [math.nan] * n  # the previous output (NaN: none yet, the rate limit waits)
+        self._last_p = [0.0] * n  # ep(k-1)
+        self._last_kp = [math.nan] * n  # the gains of sample k-1 (NaN: none yet, no rescale)
+        self._last_ti = [math.nan] * n
+        self._last_td = [math.nan] * n
         self._initialized = False
         self._unsaturated_u = [0.0] * n
 
     def get_state(self) -> PIDState:
         """A copy of the internal state (later steps do not change it)."""
         return PIDState(np.array(self._integral), np.array(self._last_error), np.array(self._derivative),
-                        self._initialized, np.array(self._filtered), np.array(self._stage), np.array(self._last_u))
+                        self._initialized, np.array(self._filtered), np.array(self._stage), np.array(self._last_u),
+                        np.array(self._last_p), np.array([self._last_kp, self._last_ti, self._last_td]))
 
     def raw_state(self) -> tuple[list, list, list, bool, list, list]:
         """(integral, last_error, derivative, initialized, filtered, filter_stage) WITHOUT copying: the live
         lists of n_loops floats. For readers that copy the values out at once (the C forecast); never mutate them.
         """
         return self._integral, self._last_error, self._derivative, self._initialized, self._filtered, self._stage
+
+    def raw_gain_state(self) -> tuple[list, list, list, list]:
+        """(ep(k-1), Kp, Ti, Td of sample k-1) WITHOUT copying: the live lists of n_loops floats the bumpless
+        rescale reads (gains NaN: none yet). For the C forecast, which copies them at every call; never mutate them."""
+        return self._last_p, self._last_kp, self._last_ti, self._last_td
 
     def raw_structure(self) -> tuple[list, list, list]:
         """(b, c, Tf) WITHOUT copying: the live lists of n_loops floats (set_structure replaces them, never
@@ -275,6 +331,12 @@ class PID:
                                 n, "PIDState.filter_stage")
         self._last_u = _per_loop(np.asarray(np.full(n, math.nan) if state.last_output is None else state.last_output,
                                             dtype=float), n, "PIDState.last_output")
+        self._last_p = _per_loop(np.asarray(zeros if state.last_p_error is None else state.last_p_error, dtype=float),
+                                 n, "PIDState.last_p_error")
+        gains = np.full((3, n), math.nan) if state.last_gains is None else np.asarray(state.last_gains, dtype=float)
+        if gains.shape != (3, n):
+            raise ValueError(f"PIDState.last_gains must have shape (3, {n}), got {gains.shape}")
+        self._last_kp, self._last_ti, self._last_td = (gains[j].tolist() for j in range(3))
         self._initialized = bool(state.initialized)
 
     def copy(self) -> "PID":
@@ -333,8 +395,17 @@ class PID:
         """`step` on lists of n_loops floats, unchecked; returns saturated u as a list. The hot path."""
         return self.step_weighted(*self.weighted_errors(setpoints, measurements), Kps, Tis, Tds)
 
-    def step_weighted(self, errors: list, p_errors: list, d_errors: list, Kps: list, Tis: list, Tds: list) -> list:
-        """One sample on the integral, proportional and derivative errors (e, ep, ed of the module docstring)."""
+    def track_values(self, setpoints: list, measurements: list, Kps: list, Tis: list, Tds: list,
+                     imposed: list) -> list:
+        """One sample with the output imposed where imposed[i] is a number (manual value or the actuator's actual
+        position, in u units; None: that loop runs the law): u = imposed clipped to [u_min, u_max], the state
+        advances and the sum is balanced so that the next automatic sample starts from u (module docstring)."""
+        return self.step_weighted(*self.weighted_errors(setpoints, measurements), Kps, Tis, Tds, imposed)
+
+    def step_weighted(self, errors: list, p_errors: list, d_errors: list, Kps: list, Tis: list, Tds: list,
+                      imposed: list | None = None) -> list:
+        """One sample on the integral, proportional and derivative errors (e, ep, ed of the module docstring);
+        imposed: as in track_values (None: every loop automatic)."""
         n = self.n_loops
         dt = self.sample_time_s
         N = self.derivative_filter_N
@@ -343,6 +414,8 @@ class PID:
             self._last_error = list(d_errors)
             self._initialized = True
         integrals, last_errors, derivatives = self._integral, self._last_error, self._derivative
+        last_p, last_kp, last_ti, last_td = self._last_p, self._last_kp, self._last_ti, self._last_td
+        bumpless = self._bumpless
         rates, last_u = self._rate, self._last_u
         u_out = [0.0] * n
         u_unsat_out = [0.0] * n
@@ -355,6 +428,22 @@ class PID:
                 tf = td / N
                 d = (tf * derivatives[i] + dt * d) / (tf + dt)
             ki = kp / ti
+            if bumpless and (kp != last_kp[i] or ti != last_ti[i] or td != last_td[i]) and last_kp[i] == last_kp[i]:
+                if ki != 0:  # the new gains give the old output v on sample k-1's signals (module docstring)
+                    kp0, d0, p0 = last_kp[i], derivatives[i], last_p[i]
+                    v = kp0 * (p0 + last_td[i] * d0) + kp0 / last_ti[i] * integrals[i]
+                    integrals[i] = (v - kp * (p0 + td * d0)) / ki
+            last_p[i], last_kp[i], last_ti[i], last_td[i] = p_errors[i], kp, ti, td
+            if imposed is not None and imposed[i] is not None:  # manual or tracking: u given, the sum balanced
+                lo, hi = self._u_min[i], self._u_max[i]
+                u = imposed[i]
+                u = lo if u < lo else hi if u > hi else u
+                if ki != 0:
+                    integrals[i] = (u - kp * (p_errors[i] + td * d)) / ki
+                last_errors[i] = ed
+                derivatives[i] = d
+                u_out[i] = u_unsat_out[i] = u
+                continue
             integral = integrals[i] + e * dt
             u_unsat = kp * (p_errors[i] + td * d) + ki * integral
             lo, hi = self._u_min[i], self._u_max[i]
@@ -438,9 +527,14 @@ class CoupledPID:
 
     def __init__(self, sample_time_s: float, u_min=-np.inf, u_max=np.inf, anti_windup: str = "clamping",
                  Tt=None, derivative_filter_N: float | None = None, setpoint_weight=1.0, derivative_weight=1.0,
-                 measurement_filter_s=0.0, measurement_filter_order: int = 1, u_rate_limit=math.inf):
+                 measurement_filter_s=0.0, measurement_filter_order: int = 1, u_rate_limit=math.inf,
+                 gain_change: str = "positional"):
         self.pid = PID(sample_time_s, 3, u_min, u_max, anti_windup, Tt, derivative_filter_N, setpoint_weight,
-                       derivative_weight, measurement_filter_s, measurement_filter_order, u_rate_limit)
+                       derivative_weight, measurement_filter_s, measurement_filter_order, u_rate_limit, gain_change)
+
+    @property
+    def gain_change(self) -> str:
+        return self.pid.gain_change
 
     @property
     def sample_time_s(self) -> float:
@@ -466,14 +560,22 @@ class CoupledPID:
 
     def step_values(self, r: list, y: list, Kps: list, Tis: list, Tds: list, c: list) -> list:
         """`step` on lists of floats (r, y, gains (3,), coupling (6,)), unchecked; returns u as a list."""
+        return self.pid.step_weighted(*self.coupled_errors(r, y, c), Kps, Tis, Tds)
+
+    def track_values(self, r: list, y: list, Kps: list, Tis: list, Tds: list, c: list, imposed: list) -> list:
+        """step_values with the output imposed where imposed[i] is a number (PID.track_values)."""
+        return self.pid.step_weighted(*self.coupled_errors(r, y, c), Kps, Tis, Tds, imposed)
+
+    def coupled_errors(self, r: list, y: list, c: list) -> tuple[list, list, list]:
+        """(e, ep, ed) of eq. 27 for one sample (lists of 3 floats), advancing the measurement filter."""
         pid = self.pid
         errors = _coupled_errors(r, y, c)
-        if not pid._weighted:
-            return pid.step_weighted(errors, errors, errors, Kps, Tis, Tds)
+        if not pid.weighted:
+            return errors, errors, errors
         yf = pid.filter_measurement(y)
-        b, cw = pid._b, pid._c
-        return pid.step_weighted(errors, _coupled_errors([b[i] * r[i] for i in range(3)], yf, c),
-                                 _coupled_errors([cw[i] * r[i] for i in range(3)], yf, c), Kps, Tis, Tds)
+        b, cw = pid.raw_structure()[:2]
+        return (errors, _coupled_errors([b[i] * r[i] for i in range(3)], yf, c),
+                _coupled_errors([cw[i] * r[i] for i in range(3)], yf, c))
 
     def preset_output(self, u0: list, measurements: list, Kps: list, Tis: list) -> None:
         self.pid.preset_output(u0, measurements, Kps, Tis)
@@ -489,6 +591,9 @@ class CoupledPID:
 
     def raw_structure(self) -> tuple[list, list, list]:
         return self.pid.raw_structure()
+
+    def raw_gain_state(self) -> tuple[list, list, list, list]:
+        return self.pid.raw_gain_state()
 
     def set_state(self, state: PIDState) -> None:
         self.pid.set_state(state)

@@ -30,6 +30,8 @@ class DeployedController:
     each, the PID's structure (not scheduled); measurement_filter_order: 1 | 2 (prlpid_fmi.control.pid).
     u_rate_limit: n_loops output rate limits R [input units / s] (> 0; inf: none): u moves at most R*Ts per sample
     from the previous output (the start output after a reset), and the anti-windup treats that band as the limits.
+    gain_change: "bumpless" (a change of the interpolated gains rescales the error sum so that u does not jump) or
+    "positional" (the paper's eq. 2); prlpid_fmi.control.pid.
     """
 
     name: str
@@ -57,6 +59,12 @@ class DeployedController:
     measurement_filter_s: tuple
     measurement_filter_order: int
     u_rate_limit: tuple
+    gain_change: str
+
+    @property
+    def bumpless(self) -> bool:
+        """Whether a gain change rescales the error sum (gain_change "bumpless")."""
+        return self.gain_change == "bumpless"
 
     @property
     def rate_limited(self) -> bool:
@@ -96,6 +104,7 @@ class DeployedController:
         """(key, text) lines for the header comment of every format."""
         from prlpid_fmi.tuning.schedule.table import (
             BUMPLESS_START,
+            GAIN_CHANGE_EQUATION,
             INTERPOLATION,
             MEASUREMENT_FILTER_EQUATION,
             PID_EQUATION,
@@ -107,7 +116,11 @@ class DeployedController:
                   + "; ed_prev = ed at the first sample (no derivative kick); u clipped to " + RATE_LIMIT_BAND),
                  ("measurement filter", "none (yf = y)" if not self.filtered else
                   f"order {self.measurement_filter_order}, by backward Euler: {MEASUREMENT_FILTER_EQUATION}"),
+                 ("gain change", f"{self.gain_change}: {GAIN_CHANGE_EQUATION[self.gain_change]}"),
                  ("bumpless start", BUMPLESS_START + " (u0: the start output given at reset, clipped to the limits)"),
+                 ("manual and tracking", "per loop, a Track (actuator's actual position) or Manual value imposed: "
+                  "u = that value clipped to [u_min, u_max] (Track first), and I = (u - Kp*(ep + Td*D))/Ki "
+                  "(Ki = 0: I kept), so that the next automatic sample continues from u without a bump"),
                  ("rate limit", "none" if not self.rate_limited else
                   "per loop below (R [input units / s]; inf: none); the block keeps its previous output u_prev"),
                  ("sample time", f"{self.sample_time_s!r} s (call the block once every sample time)"),
@@ -152,12 +165,12 @@ def from_schedule(schedule: "GainSchedule", name: str, source: str = "a gain sch
     Raises PrlPidError naming the problem: non-finite gains or breakpoints, Ti <= 0, Td < 0, an
     unknown anti-windup mode, a derivative filter N <= 0, u_min > u_max, a setpoint or derivative weight
     outside [0, 1], a measurement filter Tf that is negative or not finite, a filter order other than 1, 2, or a
-    rate limit that is not > 0 (inf: none).
+    rate limit that is not > 0 (inf: none), or an unknown gain-change law.
     """
     import numpy as np
 
     from prlpid_fmi.control import COUPLING_NAMES
-    from prlpid_fmi.control.pid import ANTI_WINDUP_MODES
+    from prlpid_fmi.control.pid import ANTI_WINDUP_MODES, GAIN_CHANGE_MODES
     from prlpid_fmi.tuning.schedule.table import LOOP_VARIABLE
 
     s = schedule
@@ -181,6 +194,8 @@ def from_schedule(schedule: "GainSchedule", name: str, source: str = "a gain sch
         raise PrlPidError(f"{where}{s.variable}: breakpoints (got {s.breakpoints.tolist()}; expected strictly increasing)")
     if s.anti_windup not in ANTI_WINDUP_MODES:
         raise PrlPidError(f"{where}anti_windup: (got {s.anti_windup!r}; expected one of {', '.join(ANTI_WINDUP_MODES)})")
+    if s.gain_change not in GAIN_CHANGE_MODES:
+        raise PrlPidError(f"{where}gain_change: (got {s.gain_change!r}; expected one of {', '.join(GAIN_CHANGE_MODES)})")
     if s.derivative_filter_N is not None and not (math.isfinite(s.derivative_filter_N) and s.derivative_filter_N > 0):
         raise PrlPidError(f"{where}derivative_filter_N: (got {s.derivative_filter_N!r}; expected a number > 0, or none)")
     if not (math.isfinite(s.sample_time_s) and s.sample_time_s > 0):
@@ -222,4 +237,4 @@ def from_schedule(schedule: "GainSchedule", name: str, source: str = "a gain sch
         derivative_weight=tuple(float(v) for v in s.derivative_weight),
         measurement_filter_s=tuple(float(v) for v in s.measurement_filter_s),
         measurement_filter_order=int(s.measurement_filter_order),
-        u_rate_limit=tuple(float(v) for v in s.u_rate_limit))
+        u_rate_limit=tuple(float(v) for v in s.u_rate_limit), gain_change=s.gain_change)

@@ -105,7 +105,7 @@ def make_pid(config: TuningConfig) -> PID | CoupledPID:
                 u_max=[float(l.u_max) for l in config.loops], anti_windup=config.anti_windup,
                 derivative_filter_N=config.derivative_filter_N, setpoint_weight=b, derivative_weight=c,
                 measurement_filter_s=tf, measurement_filter_order=config.measurement_filter_order,
-                u_rate_limit=[float(l.u_rate_limit) for l in config.loops])
+                u_rate_limit=[float(l.u_rate_limit) for l in config.loops], gain_change=config.gain_change)
     if config.coupled:
         if n != 3:
             raise PlantError(f"the cross-axis coupled PID needs 3 loops (roll, pitch, yaw), got {n}")

@@ -39,6 +39,7 @@ from prlpid_fmi.schema.types import (
     Finite,
     Flag,
     Fraction,
+    GainChange,
     GainMapping,
     GainScale,
     Isolation,
@@ -348,6 +349,10 @@ class ControllerModel(Section):
     """The PID structure and how actions become gains."""
 
     anti_windup: AntiWindup = Field("clamping", description="clamping | back_calculation | none")
+    gain_change: GainChange = Field(
+        "bumpless", description="bumpless: when Kp, Ti, Td change between samples the error sum is rescaled so that "
+                                "u does not jump (the P and D terms' changes included); positional: the paper's eq. 2, "
+                                "a gain change acts on the whole sum")
     derivative_filter_N: Optional[Positive] = Field(
         None, description="null: unfiltered derivative; N > 0: first-order filter with time constant Td / N")
     setpoint_weight: tuned_or_number(0.0, 1.0) = Field(

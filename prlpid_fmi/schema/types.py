@@ -17,11 +17,12 @@ from typing import Annotated, Any, Literal, Optional, Union, get_args
 from pydantic import BeforeValidator, Field, PlainValidator, Strict, WithJsonSchema
 from pydantic_core import PydanticCustomError
 
-from prlpid_fmi.control.pid import ANTI_WINDUP_MODES
+from prlpid_fmi.control.pid import ANTI_WINDUP_MODES, GAIN_CHANGE_MODES
 from prlpid_fmi.control.smoothing import SMOOTHING_METHODS
 
 # choices (the tuples of names live where the behaviour lives; these Literals type the schema and config)
 AntiWindup = Literal[ANTI_WINDUP_MODES]  # clamping | back_calculation | none
+GainChange = Literal[GAIN_CHANGE_MODES]  # bumpless | positional (control.pid)
 Smoothing = Literal[SMOOTHING_METHODS]  # none | sma | lwma | era
 GainScale = Literal["log", "linear"]
 GainMapping = Literal["anchored", "absolute"]

@@ -9,7 +9,9 @@ slice assignment and makes one foreign call per forecast.
 The PID's structure (setpoint weights b, c and measurement filter Tf, control.pid) can change between
 episodes (PID.set_structure, the fixed-PID search), so each call copies it into the setup together with the
 PID's state (filter state included); the measurement filter's order and the rate limits are fixed at the PID's
-construction. The rate limit's previous output (PID.last_output, NaN: none yet) is part of the state copied in.
+construction. The rate limit's previous output (PID.last_output, NaN: none yet) is part of the state copied in, and
+so are the previous sample's gains and proportional error (PID.raw_gain_state), from which the bumpless gain change
+(PID.gain_change "bumpless") rescales the error sum at the roll-out's first step.
 
 The C call moves the prior inside the library; FmuPlant keeps the prior's communication time in
 `prior.time`, so the binding writes the prior's time after the roll-out back to it (the FMI path
@@ -21,14 +23,16 @@ import ctypes
 import math
 from ctypes import c_double, c_int, c_uint, c_void_p
 
-from prlpid_fmi.control.pid import ANTI_WINDUP_MODES
+from prlpid_fmi.control.pid import ANTI_WINDUP_MODES, GAIN_CHANGE_MODES
 from prlpid_fmi.errors import PlantError
 from prlpid_fmi.loop.forecast.base import Forecast
 
-ABI_VERSION = 3
+ABI_VERSION = 4  # forecast.h PRLPID_FORECAST_ABI
 MAX_LOOPS = 3
 ANTI_WINDUP_CODES = {"clamping": 0, "back_calculation": 1, "none": 2}
 assert set(ANTI_WINDUP_CODES) == set(ANTI_WINDUP_MODES)
+GAIN_CHANGE_CODES = {"positional": 0, "bumpless": 1}
+assert set(GAIN_CHANGE_CODES) == set(GAIN_CHANGE_MODES)
 _EFMU, _EZERODIV, _EDOMAIN = -2, -3, -4
 _L = MAX_LOOPS
 
@@ -38,7 +42,7 @@ class ForecastSetup(ctypes.Structure):
 
     _fields_ = [("n_loops", c_int), ("horizon", c_int), ("anti_windup", c_int), ("coupled", c_int),
                 ("has_derivative_filter", c_int), ("has_Tt", c_int), ("n_overrides", c_int),
-                ("measurement_filter_order", c_int),
+                ("measurement_filter_order", c_int), ("gain_change", c_int),
                 ("input_vr", c_uint * _L), ("output_vr", c_uint * _L),
                 ("pid_sample_time", c_double), ("step_size", c_double), ("derivative_filter_N", c_double),
                 ("Tt", c_double * _L), ("setpoint_weight", c_double * _L), ("derivative_weight", c_double * _L),
@@ -56,7 +60,8 @@ class ForecastSetup(ctypes.Structure):
 # PrlpidForecastInput: these double arrays in this order, then `int initialized`.
 _INPUT_ARRAYS = (("setpoint", _L), ("measurement", _L), ("Kp", _L), ("Ti", _L), ("Td", _L), ("coupling", 6),
                  ("u_prev", _L), ("integral", _L), ("last_error", _L), ("derivative", _L), ("filtered", _L),
-                 ("filter_stage", _L), ("last_output", _L))
+                 ("filter_stage", _L), ("last_output", _L), ("last_p_error", _L), ("last_Kp", _L), ("last_Ti", _L),
+                 ("last_Td", _L))
 
 
 class ForecastInput(ctypes.Structure):
@@ -123,6 +128,7 @@ class NativeForecast(Forecast):
         s.n_loops, s.horizon, s.coupled = n, N, int(self.coupled)
         s.anti_windup = ANTI_WINDUP_CODES[core.anti_windup]
         s.measurement_filter_order = core.measurement_filter_order
+        s.gain_change = GAIN_CHANGE_CODES[core.gain_change]
         s.has_derivative_filter = int(core.derivative_filter_N is not None)
         s.derivative_filter_N = core.derivative_filter_N if core.derivative_filter_N is not None else math.nan
         Tt = core.Tt
@@ -171,7 +177,7 @@ class NativeForecast(Forecast):
         """As FmiForecast.mean_reward, in one C call."""
         n = self.n_loops
         (v_setpoint, v_measurement, v_Kp, v_Ti, v_Td, v_coupling, v_u_prev, v_integral, v_last_error, v_derivative,
-         v_filtered, v_filter_stage, v_last_output) = self._views
+         v_filtered, v_filter_stage, v_last_output, v_last_p, v_last_Kp, v_last_Ti, v_last_Td) = self._views
         v_setpoint[:n] = setpoint
         v_measurement[:n] = measurement
         v_Kp[:n] = Kp
@@ -187,6 +193,11 @@ class NativeForecast(Forecast):
         v_filtered[:n] = filtered
         v_filter_stage[:n] = filter_stage
         v_last_output[:n] = self._core.last_output  # replaced (not mutated) by every step: read it each call
+        last_p, last_Kp, last_Ti, last_Td = self.pid.raw_gain_state()
+        v_last_p[:n] = last_p
+        v_last_Kp[:n] = last_Kp
+        v_last_Ti[:n] = last_Ti
+        v_last_Td[:n] = last_Td
         self._input.initialized = initialized
         s = self._setup  # the structure in force now (set_structure may have changed it)
         b, c, tf = self.pid.raw_structure()

@@ -9,6 +9,9 @@ neither: it is read as b = c = 1, Tf = 0, order 1, the law (paper eq. 2) it was 
 
 The metadata line u_rate_limit[<loop>] gives each loop's output rate limit [input units / s], inf for none; a
 file written before the rate limit has no such line and is read as inf (no rate limit).
+
+The metadata line gain_change (bumpless | positional, control.pid) says what a change of the interpolated gains
+between samples does to the error sum; a file written before the bumpless law has none and is read as positional.
 """
 from __future__ import annotations
 
@@ -24,6 +27,7 @@ from prlpid_fmi.errors import PrlPidError
 from prlpid_fmi.rundir import write_atomic
 from prlpid_fmi.tuning.schedule.table import (
     BUMPLESS_START,
+    GAIN_CHANGE_EQUATION,
     INTERPOLATION,
     MEASUREMENT_FILTER_EQUATION,
     PID_EQUATION,
@@ -56,6 +60,7 @@ def _metadata(s: GainSchedule) -> list[tuple[str, str]]:
                      + ("; coupled errors (r - y) + C*y, paper eq. 27, for e, ep (b*r, yf) and ed (c*r, yf)"
                         if s.coupling is not None else "")),
         ("pid_equation", (f"{PID_EQUATION}; yf = y through the measurement filter: {MEASUREMENT_FILTER_EQUATION}; "
+                          f"gain change: {GAIN_CHANGE_EQUATION[s.gain_change]}; "
                           "I includes the current e; ed_prev = ed at the first sample (no derivative kick); "
                           f"u then clipped to {RATE_LIMIT_BAND}; Ti = inf means no integral action; "
                           "b, c, Tf per loop in the b, c, Tf columns, R in u_rate_limit[<loop>]")),
@@ -64,6 +69,7 @@ def _metadata(s: GainSchedule) -> list[tuple[str, str]]:
         ("scheduling_variable", s.variable),
         ("scheduling_unit", s.unit),
         ("interpolation", INTERPOLATION),
+        ("gain_change", s.gain_change),
         ("anti_windup", s.anti_windup),
         ("anti_windup_method", _ANTI_WINDUP_TEXT.get(s.anti_windup, s.anti_windup)),
         ("derivative_filter_N", "none" if s.derivative_filter_N is None else _f(s.derivative_filter_N)),
@@ -162,7 +168,8 @@ def _rate_limits(path, meta: dict, loops: list) -> np.ndarray:
 def read_schedule_csv(path) -> GainSchedule:
     """Parse a CSV written by write_schedule_csv (exact round trip). Checks Ki/Kd against Kp, Ti, Td, and that
     every row has the same b, c, Tf per loop; a file without those columns (written before the 2-DOF law)
-    reads as b = c = 1, Tf = 0, measurement_filter_order 1, and one without u_rate_limit[<loop>] as inf (none)."""
+    reads as b = c = 1, Tf = 0, measurement_filter_order 1, one without u_rate_limit[<loop>] as inf (none), and one
+    without gain_change as positional."""
     meta = read_schedule_metadata(path)
     try:
         with open(path, newline="") as f:
@@ -187,6 +194,9 @@ def read_schedule_csv(path) -> GainSchedule:
     order = meta.get("measurement_filter_order", "1")
     if order not in ("1", "2"):
         raise PrlPidError(f"{path}: measurement_filter_order: (got {order!r}; expected 1 or 2)")
+    gain_change = meta.get("gain_change", "positional")  # a file written before the bumpless law: eq. 2's
+    if gain_change not in GAIN_CHANGE_EQUATION:
+        raise PrlPidError(f"{path}: gain_change: (got {gain_change!r}; expected {' or '.join(GAIN_CHANGE_EQUATION)})")
     s = GainSchedule(
         variable=variable, unit=meta.get("scheduling_unit", ""), breakpoints=table[:, 0].copy(),
         Kp=get("Kp"), Ti=get("Ti"), Td=get("Td"),
@@ -203,7 +213,7 @@ def read_schedule_csv(path) -> GainSchedule:
         excluded=tuple(float(v) for v in meta.get("excluded_operating_points", "none").split(" (")[0].split()
                        if v != "none"),
         setpoint_weight=weight_b, derivative_weight=weight_c, measurement_filter_s=filter_tf,
-        measurement_filter_order=int(order), u_rate_limit=_rate_limits(path, meta, loops))
+        measurement_filter_order=int(order), u_rate_limit=_rate_limits(path, meta, loops), gain_change=gain_change)
     if np.any(np.diff(s.breakpoints) <= 0):
         raise PrlPidError(f"{path}: breakpoints ({variable}) must be strictly increasing")
     if not (np.allclose(get("Ki"), s.Ki, rtol=1e-9, atol=0) and np.allclose(get("Kd"), s.Kd, rtol=1e-9, atol=0)):

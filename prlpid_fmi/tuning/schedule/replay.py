@@ -39,7 +39,8 @@ def replay_schedule(schedule: GainSchedule, config: TuningConfig, seed: int = 0,
     The table drives the loop core (prlpid_fmi.loop.core.LoopCore, or its isolated twin) as one of its
     three drivers, through prlpid_fmi.loop.evaluation.evaluate_gains: the config's (evaluation) setpoint
     schedule, noise and disturbances, the forecast off; the PID's structure (b, c, Tf per loop and the measurement
-    filter's order) and the loops' output rate limits are the table's, not the config's, so that a table read from
+    filter's order), the loops' output rate limits and the gain-change law (bumpless or positional: the gains change
+    every sample between breakpoints) are the table's, not the config's, so that a table read from
     its CSV replays the controller it was tuned as (and exported). Before each step the scheduling variable is read
     (setpoint, measurement, error or an FMU variable: prlpid_fmi.tuning.schedule.variable), the table gives
     Kp, Ti, Td (and coupling) there, and the core's PID, saturation, anti-windup and plant use them. No
@@ -63,7 +64,8 @@ def replay_schedule(schedule: GainSchedule, config: TuningConfig, seed: int = 0,
 
     loops = tuple(dataclasses.replace(l, u_rate_limit=float(r)) for l, r in zip(config.loops, schedule.u_rate_limit))
     config = dataclasses.replace(config, forecast_horizon=0, tuned_structure=schedule.structure,
-                                 measurement_filter_order=schedule.measurement_filter_order, loops=loops)
+                                 measurement_filter_order=schedule.measurement_filter_order, loops=loops,
+                                 gain_change=schedule.gain_change)
     core = make_core(config)
     try:
         probe = SchedulingVariable(schedule.variable, core)

@@ -54,12 +54,18 @@ BUMPLESS_START = ("I_prev = (u0 - Kp*((b - 1)*y0))/Ki before every first sample 
                   "actuator's value u0 (also u0 = 0) and the first measurement y0, so that u = u0 when r = y (no kick "
                   "from b) and a setpoint step at the start acts through b; u_prev := u0")
 INTERPOLATION = "linear between breakpoints, held constant outside"
+GAIN_CHANGE_EQUATION = {  # what a change of (Kp, Ti, Td) between samples does (control.pid gain_change)
+    "bumpless": ("when Kp, Ti or Td differ from the previous sample's (Kp', Ti', Td', Ki' = Kp'/Ti'), first "
+                 "I_prev := (Kp'*(ep_prev + Td'*D_prev) + Ki'*I_prev - Kp*(ep_prev + Td*D_prev))/Ki, so that u does not "
+                 "jump (D_prev: the derivative as kept, filtered with N; Ki = 0: I_prev kept); not at the first sample"),
+    "positional": "none: a gain change acts on the whole sum I (the paper's eq. 2)",
+}
 LOOP_SIGNALS = ("setpoint", "measurement", "error")  # scheduling variables read from a loop, not the FMU
 LOOP_VARIABLE = re.compile(r"^(setpoint|measurement|error)\[(.+)\]$")  # <signal>[<loop output>]
 
 __all__ = ["GainSchedule", "schedule_from_rows", "fixed_schedule", "table_meta", "exact_mean", "LOOP_SIGNALS",
            "LOOP_VARIABLE", "PID_EQUATION", "MEASUREMENT_FILTER_EQUATION", "INTERPOLATION", "STRUCTURE_COLUMNS",
-           "RATE_LIMIT_BAND", "BUMPLESS_START"]
+           "RATE_LIMIT_BAND", "BUMPLESS_START", "GAIN_CHANGE_EQUATION"]
 
 STRUCTURE_COLUMNS = ("b", "c", "Tf")  # per loop, after the gains: setpoint weight, derivative weight, filter [s]
 
@@ -80,6 +86,8 @@ class GainSchedule:
     the law of paper eq. 2, which tables written before the 2-DOF law were tuned with).
     u_rate_limit (n_loops,): the PID's output rate limit per loop [input units / s], inf = none (None: none,
     as in tables written before the rate limit).
+    gain_change: "bumpless" | "positional" (control.pid): what a change of the interpolated gains between samples
+    does to the error sum; "positional" for tables written before the bumpless law.
     """
 
     variable: str
@@ -104,6 +112,7 @@ class GainSchedule:
     measurement_filter_s: Optional[np.ndarray] = None
     measurement_filter_order: int = 1
     u_rate_limit: Optional[np.ndarray] = None
+    gain_change: str = "positional"
 
     def __post_init__(self):
         n = len(self.loop_names)
@@ -193,13 +202,15 @@ def _group(unit: str) -> str:
 
 
 def structure_fields(config: TuningConfig) -> dict:
-    """The config's PID structure (loop.core.pid_structure) and the loops' rate limits as GainSchedule fields."""
+    """The config's PID structure (loop.core.pid_structure), the loops' rate limits and the gain-change law as
+    GainSchedule fields."""
     from prlpid_fmi.loop.core import pid_structure
 
     b, c, tf = pid_structure(config)
     return dict(setpoint_weight=np.array(b, float), derivative_weight=np.array(c, float),
                 measurement_filter_s=np.array(tf, float), measurement_filter_order=int(config.measurement_filter_order),
-                u_rate_limit=np.array([float(l.u_rate_limit) for l in config.loops], float))
+                u_rate_limit=np.array([float(l.u_rate_limit) for l in config.loops], float),
+                gain_change=config.gain_change)
 
 
 def table_meta(core, config: TuningConfig) -> dict:
