@@ -128,7 +128,9 @@ def test_start_values_are_the_hand_computed_steady_states(fmus):
     1 N.m / (0.01 + 0.01) N.m.s/rad and 0.05 N.m / 0.001 N.m.s/rad."""
     start = {"HeatExchanger": ("T_out", 40.0), "RCLadder4": ("v_out", 5.0), "InverseResponse": ("T_tray", 80.0),
              "TwoMassDrive": ("w_load", 50.0), "MotorInertia": ("w", 50.0)}
-    assert sorted(p.name for p in PLANTS.iterdir() if (p / "model.yaml").is_file()) == sorted(start)
+    nonlinear = {"PhNeutralization", "ExothermicCSTR", "ConicalTank"}   # tests/test_nonlinear_plants.py
+    assert sorted(p.name for p in PLANTS.iterdir() if (p / "model.yaml").is_file() and p.name not in nonlinear) \
+        == sorted(start)
     for name, (output, value) in start.items():
         with FmuPlant(fmus[name], inputs=[], outputs=[output]) as plant:
             assert plant.read_outputs()[0] == pytest.approx(value, rel=1e-12), name
