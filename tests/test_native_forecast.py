@@ -102,7 +102,8 @@ def _warm_up(plant, pid, spec, rng, steps, coupling=None):
 def _pid_state(pid):
     s = pid.get_state()
     return (s.integral.tolist(), s.last_error.tolist(), s.derivative.tolist(), s.initialized, s.filtered.tolist(),
-            s.filter_stage.tolist(), str(s.last_output.tolist()))  # str: NaN == NaN
+            s.filter_stage.tolist(), str(s.last_output.tolist()), s.last_p_error.tolist(),
+            str(s.last_gains.tolist()))  # str: NaN == NaN
 
 
 def _compare(plant, prior, native, fmi, args):
@@ -339,6 +340,56 @@ def test_rate_limit_native_equals_fmi_path_bit_for_bit(name, fmi_version, anti_w
             _compare(plant, prior, native, fmi, (r, y, Kp, Ti, Td, None, u_prev))
             y = _warm_up(plant, pid, spec, rng, 1)
         assert any(bound)  # the rate limit clipped u in the roll-outs
+
+
+@pytest.mark.parametrize("anti_windup", ["clamping", "back_calculation", "none"])
+@pytest.mark.parametrize("name", PLANTS)
+def test_bumpless_gain_change_native_equals_fmi_path_bit_for_bit(name, fmi_version, anti_windup):
+    """gain_change "bumpless" (control/pid.py): the forecast's first step rescales the error sum from the previous
+    sample's gains (copied in with the state, ABI 4) to the call's; native == FMI path, with the 2-DOF structure,
+    the derivative filter, rate limits (with clamping), Ti = inf (Ki = 0: no rescale) and the last sample's gains
+    (no rescale); the first step's error sum differs from the positional law's where a rescale happens, not elsewhere."""
+    spec = SPECS[name]
+    n = len(spec.inputs)
+    rng = np.random.default_rng([PLANTS.index(name), fmi_version, len(anti_windup), 23])
+    kw = dict(anti_windup=anti_windup, setpoint_weight=0.5, derivative_weight=0.0, measurement_filter_s=2 * TS,
+              derivative_filter_N=8.0 if anti_windup != "none" else None,
+              u_rate_limit=_rate_limits(spec, n) if anti_windup == "clamping" else math.inf)
+    pid = PID(TS, n, spec.u_limits[0], spec.u_limits[1], gain_change="bumpless", **kw)
+    twin = PID(TS, n, spec.u_limits[0], spec.u_limits[1], gain_change="positional", **kw)
+    plant, prior, native, fmi = _pair(name, fmi_version, pid, 10, RewardWeights(control_variation_weight=0.3))
+    differs = []
+    with plant, prior:
+        y = _warm_up(plant, pid, spec, rng, 5)
+        for call in range(6):
+            r, Kp, Ti, Td, _, u_prev = _random_call(rng, spec, n)
+            if call == 1:
+                Ti = [math.inf] * n
+            if call == 2:  # the last sample's gains: nothing to rescale
+                _, Kp, Ti, Td = (list(v) for v in pid.raw_gain_state())
+            _compare(plant, prior, native, fmi, (r, y, Kp, Ti, Td, None, u_prev))
+            twin.set_state(pid.get_state())  # the first step of the roll-out, on both laws
+            bumpless = pid.copy()
+            bumpless.step_values(r, y, Kp, Ti, Td)
+            twin.step_values(r, y, Kp, Ti, Td)
+            differs.append(bumpless.raw_state()[0] != twin.raw_state()[0])
+            y = _warm_up(plant, pid, spec, rng, 1)
+    assert any(differs[i] for i in (0, 3, 4, 5)) and not differs[1] and not differs[2]  # Ki = 0, equal gains: none
+
+
+def test_quadrotor_coupled_pid_bumpless(fmi_version):
+    spec = SPECS["QuadrotorAttitude"]
+    rng = np.random.default_rng(29)
+    pid = CoupledPID(TS, -2.0, 2.0, "back_calculation", derivative_filter_N=10.0, setpoint_weight=0.7,
+                     gain_change="bumpless")
+    plant, prior, native, fmi = _pair("QuadrotorAttitude", fmi_version, pid, 10, RewardWeights(control_variation_weight=1.0))
+    with plant, prior:
+        coupling = rng.uniform(-0.5, 0.5, 6).tolist()
+        y = _warm_up(plant, pid, spec, rng, 4, coupling)
+        for _ in range(6):
+            r, Kp, Ti, Td, coupling, u_prev = _random_call(rng, spec, 3, coupled=True)
+            _compare(plant, prior, native, fmi, (r, y, Kp, Ti, Td, coupling, u_prev))
+            y = _warm_up(plant, pid, spec, rng, 1, coupling)
 
 
 @pytest.mark.parametrize("anti_windup", ["clamping", "back_calculation"])
