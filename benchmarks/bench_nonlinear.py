@@ -326,7 +326,7 @@ def main(argv=None) -> int:
                          + f"); deployed: {m.get('deployed', NA)}" + (f"; {note}" if note else ""))
     print()
     print(f"# Nonlinear plants (issue 23): {', '.join(a.plants)}; seeds {' '.join(map(str, a.seeds))}; "
-          f"training budget {a.timesteps if a.timesteps is not None else 'each scenario'}s")
+          "training budget " + (f"{a.timesteps} steps" if a.timesteps is not None else "each scenario's"))
     print(fingerprint)
     print()
     for label, which in (("On the evaluation", 4), ("On held-out episodes (benchmarks/scenarios/heldout/)", 5)):
