@@ -212,8 +212,12 @@ def test_bundled_sweeps_are_the_paper_studies():
         assert "gain_mapping" in text.split("name:")[0], name  # the comment says which map and why
         if name.startswith("experiment_"):
             assert {v.scenario.tuning.gain_mapping for v in sweep.variants} == {"absolute", "anchored"}
-        else:  # studies of the paper's own method
+            # the paper variant runs eq. 2's positional gain change, the tool's own the bumpless default
+            assert {(v.scenario.tuning.gain_mapping, v.scenario.tuning.gain_change) for v in sweep.variants} == {
+                ("absolute", "positional"), ("anchored", "bumpless")}, name
+        else:  # studies of the paper's own method, with its PID law
             assert {v.scenario.tuning.gain_mapping for v in sweep.variants} == {"absolute"}, name
+            assert {v.scenario.tuning.gain_change for v in sweep.variants} == {"positional"}, name
 
     def knobs(name):
         return [(v.scenario.agent.algorithm, v.scenario.tuning.forecast_horizon, v.scenario.tuning.smoothing)

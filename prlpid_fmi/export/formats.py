@@ -32,7 +32,13 @@ docs/deploy.md describes), sample by sample:
    the configured derivative filter and anti-windup, clipped to [lo, hi] = [max(u_min, u_prev - R*Ts),
    min(u_max, u_prev + R*Ts)] for a loop with a rate limit R (else [u_min, u_max]), which the anti-windup
    treats as the limits; operation by operation as PID.step_weighted (eq. 2 exactly when b = c = 1, Tf = 0
-   and no rate limit). The block keeps its previous output u_prev as state.
+   and no rate limit). The block keeps its previous output u_prev as state;
+7. bumpless gain change (the table's gain_change "bumpless"): before 6, when the looked-up Kp, Ti, Td differ from the
+   previous sample's and Ki != 0, the error sum is rescaled so that the new gains give the previous output on the
+   previous sample's ep, D and sum (PID.step_weighted; not at the first sample);
+8. manual and tracking per loop (C <name>_step_modes, ST Manual/ManualValue, Track/TrackValue; Track first): u is
+   the imposed value clipped to the limits and the error sum is balanced to it, I = (u - Kp*(ep + Td*D))/Ki, as
+   PID.track_values.
 
 Back-calculation's tracking time Tt = sqrt(Ti*Td) is computed every sample from the interpolated
 Ti and Td: ST calls the standard SQRT; C has its own correctly rounded square root without libm (x scaled
