@@ -69,7 +69,7 @@ def _inspect(args: argparse.Namespace) -> int:
     if args.probe:
         from prlpid_fmi.fmu.dynamic_check import dynamic_check, failed, format_findings
 
-        findings = dynamic_check(args.fmu)
+        findings = dynamic_check(args.fmu, step_timeout_s=args.step_timeout)
         print("Dynamic checks (--probe):")
         print(format_findings(findings))
         return 1 if failed(findings) else 0
@@ -131,18 +131,21 @@ def _start_values(pairs: list[str]) -> dict:
 
 
 def _init(args: argparse.Namespace) -> int:
-    from prlpid_fmi.scenario.draft import init_scenario
+    from prlpid_fmi.fmu.isolate import init_isolated
 
-    sys.stdout.write(init_scenario(args.fmu, output=args.output, start_values=_start_values(args.set)))
+    text = init_isolated(args.fmu, args.step_timeout, output=args.output, start_values=_start_values(args.set))
+    sys.stdout.write(text)  # only a complete scenario reaches stdout
     return 0
 
 
 def _probe(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from prlpid_fmi.probe.step_test import format_probe, plot_probe, probe
+    from prlpid_fmi.fmu.isolate import probe_isolated
+    from prlpid_fmi.probe.step_test import format_probe, plot_probe
 
-    result = probe(args.fmu, output=args.output, inputs=args.input or None, start_values=_start_values(args.set))
+    result = probe_isolated(args.fmu, args.step_timeout, output=args.output, inputs=args.input or None,
+                            start_values=_start_values(args.set))
     print(format_probe(result))
     plot = Path(args.plot) if args.plot else Path(f"{Path(args.fmu).stem}-probe.png")
     plot_probe(result, plot)
@@ -272,6 +275,19 @@ class _Parser(argparse.ArgumentParser):
 
 
 SCENARIO_HELP = "scenario YAML file, or the name of a bundled scenario (first_order, two_tank, ...)"
+STEP_TIMEOUT_HELP = ("seconds an FMU call may take before it counts as hung (the FMU runs in a worker process; "
+                     "default: 100 x the measured step cost, at least 10 s)")
+
+
+def _seconds(text: str) -> float:
+    """A positive number of seconds (--step-timeout)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"not a positive number of seconds: {text!r} (expected e.g. 5 or 0.5)")
+    return value
 
 
 def make_parser() -> argparse.ArgumentParser:
@@ -302,6 +318,7 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--probe", action="store_true",
                    help="also run it: state save/restore, independent instances, reset, memory after 100 resets "
                         "(one line per finding; exit code 1 when one fails)")
+    p.add_argument("--step-timeout", type=_seconds, default=None, metavar="S", help=STEP_TIMEOUT_HELP)
 
     p = command("validate", _validate, "check a scenario file or a sweep file; one clear line per mistake")
     p.add_argument("scenario", help=SCENARIO_HELP + "; or a sweep file, or a bundled sweep's name")
@@ -314,6 +331,7 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("fmu", help="path to a .fmu file")
     p.add_argument("--output", default=None, help="the output to control (default: the FMU's first output)")
     p.add_argument("--set", **operating_point)
+    p.add_argument("--step-timeout", type=_seconds, default=None, metavar="S", help=STEP_TIMEOUT_HELP)
 
     p = command("probe", _probe, "open-loop step and trim test: each input's gain, time constant or growth rate, "
                                  "dead time, with a plot")
@@ -322,6 +340,7 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--input", action="append", help="probe only this input (repeatable; default: every input)")
     p.add_argument("--set", **operating_point)
     p.add_argument("--plot", default=None, help="PNG to write (default: <fmu name>-probe.png here)")
+    p.add_argument("--step-timeout", type=_seconds, default=None, metavar="S", help=STEP_TIMEOUT_HELP)
 
     p = command("tune", _tune, "train the adaptive PID, compare it with a tuned fixed PID, export the schedule")
     p.add_argument("scenario", help=SCENARIO_HELP)

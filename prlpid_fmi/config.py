@@ -121,6 +121,7 @@ class TuningConfig:
     isolation: Isolation = _d(_m.PlantModel, "isolation")  # auto | process | none (prlpid_fmi.loop.isolated)
     leak_check_every: int = _d(_m.PlantModel, "leak_check_every")  # resets between leak checks; 0 = off
     leak_limit_mb: float = _d(_m.PlantModel, "leak_limit_mb")  # growth [MB] over one check that re-instantiates
+    step_timeout_s: Optional[float] = _d(_m.PlantModel, "step_timeout_s")  # watchdog [s]; None: measured (fmu.watchdog)
     prior: PriorConfig = PriorConfig()
     # controller
     anti_windup: AntiWindup = _d(_m.ControllerModel, "anti_windup")

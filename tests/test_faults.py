@@ -165,12 +165,14 @@ def test_once_per_process_is_read_and_training_runs_one_instance_per_process(fau
 
 def test_leak_guard_reinstantiates_an_fmu_whose_resets_grow(faulty, tmp_path):
     """Each reset of this FMU keeps 1 MB until the instance is freed: without the guard 60 resets hold 60 MB,
-    with a check every 10 resets and a 4 MB limit the memory stays near 10 MB and a warning says why."""
+    with a check every 10 resets and a 4 MB limit the memory stays near 10 MB and a warning says why. (Each
+    episode takes a step: an instance that has not moved since it was made or reset is not reset again.)"""
     config = load_scenario(scenario_file(tmp_path, faulty["leak"], plant={"leak_check_every": 0})).tuning
     core = LoopCore(config)
     start = rss_bytes()
     for _ in range(60):
         core.reset(np.random.default_rng(0))
+        core.step([1.0], [1.0], [0.0])
     unguarded = rss_bytes() - start
     core.close()
     core = LoopCore(dataclasses.replace(config, leak_check_every=10, leak_limit_mb=4.0))
@@ -179,6 +181,7 @@ def test_leak_guard_reinstantiates_an_fmu_whose_resets_grow(faulty, tmp_path):
         warnings.simplefilter("always")
         for _ in range(60):
             core.reset(np.random.default_rng(0))
+            core.step([1.0], [1.0], [0.0])
     guarded = rss_bytes() - start
     # how often depends on whether glibc hands freed blocks back to the OS (its mmap threshold adapts),
     # so the bound that matters is on the memory held, below; at least one re-instantiation must happen

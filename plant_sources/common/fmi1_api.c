@@ -8,6 +8,7 @@
 
 #include "fmi1Functions.h"
 #include "instance.h"
+#include "faults.h"
 
 #define FMI1_CONCAT2(a, b) a##_fmi##b
 #define FMI1_CONCAT(a, b) FMI1_CONCAT2(a, b)
@@ -68,7 +69,7 @@ FMI1_EXPORT fmi1Component FMI1(InstantiateSlave)(fmi1String instanceName, fmi1St
 FMI1_EXPORT fmi1Status FMI1(InitializeSlave)(fmi1Component c, fmi1Real tStart, fmi1Boolean stopTimeDefined,
                                              fmi1Real tStop) {
     Status status;
-    (void)stopTimeDefined; (void)tStop;
+    prlpid_fault_on_setup(CORE(c), stopTimeDefined, tStop);
     status = instance_enter_initialization(CORE(c), tStart);
     if (status != STATUS_OK) return to_fmi1(status);
     return to_fmi1(instance_exit_initialization(CORE(c)));

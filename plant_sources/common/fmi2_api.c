@@ -5,6 +5,7 @@
 #include "fmi2Functions.h"
 #include "forecast.h"
 #include "instance.h"
+#include "faults.h"
 
 typedef struct {
     Instance *core;
@@ -70,9 +71,10 @@ void fmi2FreeInstance(fmi2Component c) {
 
 fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
                                fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
-    (void)toleranceDefined; (void)tolerance; (void)stopTimeDefined; (void)stopTime;
+    (void)toleranceDefined; (void)tolerance;
     if (CORE(c)->mode != MODE_INSTANTIATED) return fmi2Error;
     CORE(c)->m.time = startTime;
+    prlpid_fault_on_setup(CORE(c), stopTimeDefined, stopTime);
     return fmi2OK;
 }
 

@@ -5,6 +5,7 @@
 #include "fmi3Functions.h"
 #include "forecast.h"
 #include "instance.h"
+#include "faults.h"
 
 typedef struct {
     Instance *core;
@@ -83,7 +84,8 @@ void fmi3FreeInstance(fmi3Instance c) {
 
 fmi3Status fmi3EnterInitializationMode(fmi3Instance c, fmi3Boolean toleranceDefined, fmi3Float64 tolerance,
                                        fmi3Float64 startTime, fmi3Boolean stopTimeDefined, fmi3Float64 stopTime) {
-    (void)toleranceDefined; (void)tolerance; (void)stopTimeDefined; (void)stopTime;
+    (void)toleranceDefined; (void)tolerance;
+    prlpid_fault_on_setup(CORE(c), stopTimeDefined, stopTime);
     return to_fmi3(instance_enter_initialization(CORE(c), startTime));
 }
 

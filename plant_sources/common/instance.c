@@ -53,6 +53,7 @@ Instance *instance_new(const char *name, LogFunction log, void *log_env) {
     c->mode = MODE_INSTANTIATED;
     set_start_values(c);
     prlpid_fault_count_instance(1);
+    prlpid_fault_on_new(c);
     return c;
 }
 
@@ -68,6 +69,7 @@ void instance_reset(Instance *c) {
     prlpid_fault_on_reset(c);
     set_start_values(c);
     c->mode = MODE_INSTANTIATED;
+    prlpid_fault_after_reset(c);
 }
 
 Status instance_enter_initialization(Instance *c, double start_time) {
@@ -92,6 +94,7 @@ Status instance_exit_initialization(Instance *c) {
     model_initialize(&c->m);
     model_outputs(&c->m);
     c->mode = MODE_STEP;
+    prlpid_fault_after_initialization(c);
     return STATUS_OK;
 }
 
@@ -134,7 +137,10 @@ Status instance_do_step(Instance *c, double t, double h) {
         instance_log(c, STATUS_ERROR, "communicationStepSize must be positive and finite, got %g", h);
         return STATUS_ERROR;
     }
-    if (prlpid_fault_before_step(c, t) != STATUS_OK) return STATUS_DISCARD;
+    {
+        Status fault = prlpid_fault_before_step(c, t, h);
+        if (fault != STATUS_OK) return fault;
+    }
     n = (long)ceil(h / c->m.v[VR_fixed_step] - 1e-9);
     if (n < 1) n = 1;
     dt = h / (double)n;

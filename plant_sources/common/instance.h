@@ -20,6 +20,13 @@ typedef struct {
 #ifdef PRLPID_FAULT_RESET_LEAK_BYTES
     void *fault_leak; /* test builds only: blocks the leaking reset allocated (faults.c) */
 #endif
+#if defined(PRLPID_FAULT_RESET_NOOP) || defined(PRLPID_FAULT_CRASH_IN_RESET_BEFORE_INIT) || defined(PRLPID_FAULT_STOP_TIME)
+    /* test builds only (faults.c) */
+    int fault_initialized;          /* initialisation mode was left at least once */
+    int fault_frozen;               /* PRLPID_FAULT_RESET_NOOP: outputs held at fault_held since a reset */
+    double fault_held[N_VARIABLES];
+    double fault_stop_time;         /* PRLPID_FAULT_STOP_TIME: the stop time in force [s] */
+#endif
 } Instance;
 
 Instance *instance_new(const char *name, LogFunction log, void *log_env);

@@ -25,10 +25,17 @@ _FMI2_SINKS: "weakref.WeakValueDictionary[int, object]" = weakref.WeakValueDicti
 _FMI2_LOGGER = []
 
 
+def _sink_by_name(instance_name):
+    """The one live instance with this name (bytes), for an FMU that logs with another componentEnvironment."""
+    name = instance_name.decode("utf-8", "replace") if instance_name else None
+    found = [s for s in list(_FMI2_SINKS.values()) if name is None or getattr(s, "instance_name", None) == name]
+    return found[0] if len(found) == 1 else None
+
+
 def _fmi2_logger(logger_type):
     if not _FMI2_LOGGER:
         def dispatch(env, instance_name, status, category, message):
-            sink = _FMI2_SINKS.get(env or 0)
+            sink = _FMI2_SINKS.get(env or 0) or _sink_by_name(instance_name)
             if sink is not None:
                 sink.last_message = message.decode("utf-8", "replace") if message else ""
 
@@ -45,6 +52,9 @@ class FmiAdapter:
 
     byte_type = ctypes.c_char
     prefix = ""
+    # what FmuPlant calls the FMI functions it watches (fmu.watchdog) and names in its messages
+    call_names = {"instantiate": "instantiation", "reset": "reset", "initialize": "initialisation",
+                  "step": "doStep", "free": "freeing the instance"}
 
     def __init__(self, fmu):
         self._fmu = fmu                      # the FMPy slave object
@@ -71,7 +81,8 @@ class FmiAdapter:
     def reset(self) -> None:
         self._fmu.reset()
 
-    def initialize(self, start_time: float) -> None:
+    def initialize(self, start_time: float, stop_time: float | None = None) -> None:
+        """Set up the experiment from start_time [s] (with stop_time [s] defined when given) and initialise."""
         raise NotImplementedError
 
     def terminate(self) -> None:
@@ -109,6 +120,9 @@ class Fmi2Adapter(FmiAdapter):
 
     prefix = "fmi2"
     byte_type = ctypes.c_char
+    call_names = {"instantiate": "fmi2Instantiate", "reset": "fmi2Reset",
+                  "initialize": "fmi2SetupExperiment/EnterInitializationMode/ExitInitializationMode",
+                  "step": "fmi2DoStep", "free": "fmi2Terminate/fmi2FreeInstance"}
     state_names = ("GetFMUstate", "SetFMUstate", "FreeFMUstate", "SerializedFMUstateSize",
                    "SerializeFMUstate", "DeSerializeFMUstate")
 
@@ -156,8 +170,8 @@ class Fmi2Adapter(FmiAdapter):
         adapter._callbacks = callbacks  # keep the callback structure alive with the instance
         return adapter
 
-    def initialize(self, start_time):
-        self._fmu.setupExperiment(startTime=start_time)
+    def initialize(self, start_time, stop_time=None):
+        self._fmu.setupExperiment(startTime=start_time, stopTime=stop_time)
         self._fmu.enterInitializationMode()
         self._fmu.exitInitializationMode()
 
@@ -167,6 +181,9 @@ class Fmi3Adapter(FmiAdapter):
 
     prefix = "fmi3"
     byte_type = ctypes.c_uint8
+    call_names = {"instantiate": "fmi3InstantiateCoSimulation", "reset": "fmi3Reset",
+                  "initialize": "fmi3EnterInitializationMode/ExitInitializationMode", "step": "fmi3DoStep",
+                  "free": "fmi3Terminate/fmi3FreeInstance"}
     state_names = ("GetFMUState", "SetFMUState", "FreeFMUState", "SerializedFMUStateSize",
                    "SerializeFMUState", "DeserializeFMUState")
 
@@ -197,8 +214,8 @@ class Fmi3Adapter(FmiAdapter):
         fmu.instantiate(logMessage=log)  # FMPy keeps the callback alive
         return cls(fmu)
 
-    def initialize(self, start_time):
-        self._fmu.enterInitializationMode(startTime=start_time)
+    def initialize(self, start_time, stop_time=None):
+        self._fmu.enterInitializationMode(startTime=start_time, stopTime=stop_time)
         self._fmu.exitInitializationMode()
 
 
@@ -209,6 +226,7 @@ class Fmi2ModelExchangeAdapter(Fmi2Adapter):
     states from before the step and reports discard, like a co-simulation FMU that rejects a step."""
 
     slave_class = "FMU2Model"
+    call_names = {**Fmi2Adapter.call_names, "step": "the model-exchange step (CVode over fmi2GetDerivatives, events)"}
     relative_tolerance = 1e-8   # CVode's; absolute tolerance = this x the FMU's state nominals
 
     def __init__(self, fmu):
@@ -223,9 +241,9 @@ class Fmi2ModelExchangeAdapter(Fmi2Adapter):
         adapter._x_saved = (ctypes.c_double * max(adapter._nx, 1))()
         return adapter
 
-    def initialize(self, start_time):
+    def initialize(self, start_time, stop_time=None):
         fmu = self._fmu
-        fmu.setupExperiment(startTime=start_time)
+        fmu.setupExperiment(startTime=start_time, stopTime=stop_time)
         fmu.enterInitializationMode()
         fmu.exitInitializationMode()
         self._event_iteration()
@@ -305,6 +323,8 @@ class Fmi1Adapter(Fmi2Adapter):
 
     prefix = "fmi1"
     state_names = ()
+    call_names = {"instantiate": "fmiInstantiateSlave", "reset": "fmiResetSlave", "initialize": "fmiInitializeSlave",
+                  "step": "fmiDoStep", "free": "fmiTerminateSlave/fmiFreeSlaveInstance"}
 
     def __init__(self, fmu):
         super().__init__(fmu)
@@ -348,8 +368,9 @@ class Fmi1Adapter(Fmi2Adapter):
         adapter._callbacks = callbacks
         return adapter
 
-    def initialize(self, start_time):
-        status = self.function("InitializeSlave")(self.component, float(start_time), 0, 0.0)
+    def initialize(self, start_time, stop_time=None):
+        status = self.function("InitializeSlave")(self.component, float(start_time), int(stop_time is not None),
+                                                  float(stop_time or 0.0))
         if status > FMI_WARNING:
             raise RuntimeError(f"fmiInitializeSlave returned status {status}")
 

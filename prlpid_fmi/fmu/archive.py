@@ -69,10 +69,33 @@ def _check(path: Path) -> list[str]:
     platform = fmpy.platform_tuple if md.fmiVersion.startswith("3") else fmpy.platform
     wanted = {f"binaries/{platform}/{i}{fmpy.sharedLibraryExtension}" for i in identifiers}
     if not wanted & set(names):
-        present = sorted({n.split("/")[1] for n in names if n.startswith("binaries/") and n.count("/") >= 2})
-        if any(n.startswith("sources/") for n in names):
-            hint = f"it has sources/: compile them with `fmpy compile {path.name}`"
-        else:
-            hint = f"binaries for: {', '.join(present) or 'no platform'}"
-        problems.append(f"no binary for this platform ({sorted(wanted)[0]} is missing; {hint})")
+        problems.append(f"no binary for this platform ({sorted(wanted)[0]} is missing; "
+                        f"{missing_binary_hint(path.name, names, platform, identifiers[0], fmpy.sharedLibraryExtension)})")
     return problems
+
+
+def missing_binary_hint(fmu_name: str, names: list[str], platform: str, identifier: str, extension: str) -> str:
+    """What to do when binaries/<platform>/<identifier><extension> is not in the archive (member `names`): rename
+    the one library there that is named otherwise; compile the C sources when there are some; else which
+    platforms the FMU has binaries for."""
+    folder = f"binaries/{platform}/"
+    others = sorted(n for n in names if n.startswith(folder) and n.endswith(extension) and n.count("/") == 2)
+    if len(others) == 1:
+        return (f"its binary is named {others[0].rsplit('/', 1)[1]}, not after the modelIdentifier: rename "
+                f"{others[0]} to {folder}{identifier}{extension} in the archive")
+    if others:
+        return (f"{folder} holds {', '.join(n.rsplit('/', 1)[1] for n in others)}, none named after the "
+                f"modelIdentifier {identifier!r}: rename the model's library to {identifier}{extension}")
+    if any(n.startswith("sources/") and n.endswith((".c", ".cpp")) for n in names):
+        return f"it has C sources in sources/: compile them with `fmpy compile {fmu_name}`"
+    present = sorted({n.split("/")[1] for n in names if n.startswith("binaries/") and n.count("/") >= 2})
+    return f"binaries for: {', '.join(present) or 'no platform'}"
+
+
+def binary_problem(path: str | Path) -> str:
+    """The archive's missing-binary problem (with its hint), or "" (for an FMU that failed to load)."""
+    try:
+        found = [q for q in archive_problems(path) if q.startswith("no binary")]
+    except OSError:
+        return ""
+    return found[0] if found else ""

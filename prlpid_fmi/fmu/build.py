@@ -43,6 +43,7 @@ INTERFACES = ("co-simulation", "model-exchange")
 DEFAULT_FMI_VERSION = 2
 DEFAULT_FIXED_STEP_S = 1e-3  # internal RK4 step of a plant whose model.yaml declares none (bundled plants do)
 DEFAULT_EXPERIMENT_STEP_S = 0.1
+DEFAULT_EXPERIMENT_STOP_S = 10.0  # DefaultExperiment stopTime (a test build with PRLPID_FAULT_STOP_TIME: that value)
 CAPABILITY_FLAGS = ("canGetAndSetFMUstate", "canSerializeFMUstate", "canBeInstantiatedOnlyOncePerProcess")
 CAUSALITY_CODES = {
     ("independent", None): "CAUSALITY_INDEPENDENT",
@@ -166,12 +167,18 @@ def _units(spec: PlantSpec) -> list[str]:
     return sorted({v.unit for v in spec.variables if v.unit})
 
 
-def _units_and_experiment(root: ET.Element, spec: PlantSpec) -> None:
+def experiment_stop_time(defines: dict | None) -> float:
+    """The DefaultExperiment stopTime [s] a build declares: the stop time a PRLPID_FAULT_STOP_TIME test build
+    enforces, else DEFAULT_EXPERIMENT_STOP_S."""
+    return float((defines or {}).get("PRLPID_FAULT_STOP_TIME", DEFAULT_EXPERIMENT_STOP_S))
+
+
+def _units_and_experiment(root: ET.Element, spec: PlantSpec, stop_time_s: float = DEFAULT_EXPERIMENT_STOP_S) -> None:
     """UnitDefinitions and DefaultExperiment, the same in FMI 2.0 and 3.0."""
     units = ET.SubElement(root, "UnitDefinitions")
     for u in _units(spec):
         ET.SubElement(units, "Unit", name=u)
-    ET.SubElement(root, "DefaultExperiment", startTime="0.0", stopTime="10.0",
+    ET.SubElement(root, "DefaultExperiment", startTime="0.0", stopTime=_fmt(stop_time_s),
                   stepSize=_fmt(DEFAULT_EXPERIMENT_STEP_S))
 
 
@@ -186,7 +193,8 @@ def _capability_attributes(fmi_version: int, capabilities: dict | None) -> dict[
 
 
 def _model_description_fmi2(spec: PlantSpec, token: str, capabilities: dict | None = None,
-                            interface: str = "co-simulation", api_version: int = 2) -> ET.Element:
+                            interface: str = "co-simulation", api_version: int = 2,
+                            stop_time_s: float = DEFAULT_EXPERIMENT_STOP_S) -> ET.Element:
     """FMI 2.0 modelDescription; api_version 1 lists the FMI 1.0 shim as the source to compile (build only)."""
     root = ET.Element("fmiModelDescription", fmiVersion="2.0", modelName=spec.name, guid=token,
                       description=spec.description, generationTool="prlpid-fmi",
@@ -201,7 +209,7 @@ def _model_description_fmi2(spec: PlantSpec, token: str, capabilities: dict | No
     files = ET.SubElement(cs, "SourceFiles")
     for f in _compiled_sources(spec, api_version):
         ET.SubElement(files, "File", name=f)
-    _units_and_experiment(root, spec)
+    _units_and_experiment(root, spec, stop_time_s)
     variables = ET.SubElement(root, "ModelVariables")
     outputs = []
     for vr, v in enumerate(spec.variables):
@@ -248,7 +256,7 @@ def _me_state_variables(variables: ET.Element, spec: PlantSpec) -> tuple[list[in
     return states, [n + k + i + 1 for i in range(k)]
 
 
-def _model_description_fmi1(spec: PlantSpec, token: str) -> ET.Element:
+def _model_description_fmi1(spec: PlantSpec, token: str, stop_time_s: float = DEFAULT_EXPERIMENT_STOP_S) -> ET.Element:
     """FMI 1.0 co-simulation stand-alone modelDescription (no time variable; parameters are 'parameter')."""
     root = ET.Element("fmiModelDescription", fmiVersion="1.0", modelName=spec.name, modelIdentifier=spec.name,
                       guid=token, description=spec.description, generationTool="prlpid-fmi",
@@ -257,7 +265,7 @@ def _model_description_fmi1(spec: PlantSpec, token: str) -> ET.Element:
     units = ET.SubElement(root, "UnitDefinitions")
     for u in _units(spec):
         ET.SubElement(units, "BaseUnit", unit=u)
-    ET.SubElement(root, "DefaultExperiment", startTime="0.0", stopTime="10.0")
+    ET.SubElement(root, "DefaultExperiment", startTime="0.0", stopTime=_fmt(stop_time_s))
     variables = ET.SubElement(root, "ModelVariables")
     for vr, v in enumerate(spec.variables):
         if v.causality == "independent":
@@ -281,7 +289,8 @@ def _model_description_fmi1(spec: PlantSpec, token: str) -> ET.Element:
     return root
 
 
-def _model_description_fmi3(spec: PlantSpec, token: str, capabilities: dict | None = None) -> ET.Element:
+def _model_description_fmi3(spec: PlantSpec, token: str, capabilities: dict | None = None,
+                            stop_time_s: float = DEFAULT_EXPERIMENT_STOP_S) -> ET.Element:
     root = ET.Element("fmiModelDescription", fmiVersion="3.0", modelName=spec.name,
                       instantiationToken=token, description=spec.description,
                       generationTool="prlpid-fmi", variableNamingConvention="flat")
@@ -289,7 +298,7 @@ def _model_description_fmi3(spec: PlantSpec, token: str, capabilities: dict | No
                        canHandleVariableCommunicationStepSize="true", canGetAndSetFMUState="true",
                        canSerializeFMUState="true", hasEventMode="false", providesIntermediateUpdate="false")
     cs.attrib.update(_capability_attributes(3, capabilities))
-    _units_and_experiment(root, spec)
+    _units_and_experiment(root, spec, stop_time_s)
     variables = ET.SubElement(root, "ModelVariables")
     outputs = []
     for vr, v in enumerate(spec.variables):
@@ -350,7 +359,8 @@ def _build_lock():
 
 def build_fmu(name: str, fmi_version: int = DEFAULT_FMI_VERSION, out_dir: Path | None = None,
               source_dir: Path | None = None, defines: dict | None = None,
-              capabilities: dict | None = None, interface: str = "co-simulation") -> Path:
+              capabilities: dict | None = None, interface: str = "co-simulation",
+              binary_name: str | None = None) -> Path:
     """Build one plant into an FMU (binary for this platform + sources). Returns its path.
 
     out_dir: where to write (default: the per-user FMU cache). source_dir: a directory with model.yaml
@@ -360,13 +370,15 @@ def build_fmu(name: str, fmi_version: int = DEFAULT_FMI_VERSION, out_dir: Path |
     plant_sources/common/faults.h ({"PRLPID_FAULT_NAN_AFTER_S": 3.0}); bundled plants are built without.
     capabilities: modelDescription flags to override {FMI 2.0 name: bool}, names in CAPABILITY_FLAGS.
     interface: "co-simulation" or "model-exchange" (FMI 2.0 only: an FMU with only that interface).
+    binary_name: a test FMU whose binary is named this instead of the modelIdentifier (some exporters do that).
     """
     with _build_lock():
-        return _build(name, fmi_version, out_dir, source_dir, defines, capabilities, interface)
+        return _build(name, fmi_version, out_dir, source_dir, defines, capabilities, interface, binary_name)
 
 
 def _build(name: str, fmi_version: int, out_dir: Path | None, source_dir: Path | None,
-           defines: dict | None = None, capabilities: dict | None = None, interface: str = "co-simulation") -> Path:
+           defines: dict | None = None, capabilities: dict | None = None, interface: str = "co-simulation",
+           binary_name: str | None = None) -> Path:
     if fmi_version not in API_SOURCE:
         raise ArgumentError(f"{{fmi_version}} must be 1, 2 or 3, got {fmi_version!r}")
     if interface not in INTERFACES or (interface == "model-exchange" and fmi_version != 2):
@@ -376,6 +388,7 @@ def _build(name: str, fmi_version: int, out_dir: Path | None, source_dir: Path |
 
     spec = load_spec(name, source_dir)
     token = instantiation_token(spec, fmi_version, defines, capabilities, interface)
+    stop = experiment_stop_time(defines)
     target = fmu_path(name, fmi_version, out_dir, interface)
     target.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix=f"build-{name}-") as tmp:
@@ -391,10 +404,10 @@ def _build(name: str, fmi_version: int, out_dir: Path | None, source_dir: Path |
         for mo in spec.directory.glob("*.mo"):
             shutil.copy2(mo, documentation / mo.name)
         if fmi_version in (1, 2):  # FMI 1.0: FMPy's CMake build reads an FMI 2.0 description, replaced below
-            _write_xml(_model_description_fmi2(spec, token, capabilities, interface, fmi_version),
+            _write_xml(_model_description_fmi2(spec, token, capabilities, interface, fmi_version, stop),
                        unzipdir / "modelDescription.xml")
         else:
-            _write_xml(_model_description_fmi3(spec, token, capabilities), unzipdir / "modelDescription.xml")
+            _write_xml(_model_description_fmi3(spec, token, capabilities, stop), unzipdir / "modelDescription.xml")
             _write_xml(_build_description_fmi3(spec), sources / "buildDescription.xml")
         build_dir = Path(tmp) / "cmake"
         build_dir.mkdir()
@@ -405,12 +418,15 @@ def _build(name: str, fmi_version: int, out_dir: Path | None, source_dir: Path |
         except (subprocess.CalledProcessError, OSError) as exc:
             raise PlantError(f"building {name} (FMI {fmi_version}.0) failed: {exc}\n{log.read_text()[-3000:]}") from None
         if fmi_version == 1:
-            _write_xml(_model_description_fmi1(spec, token), unzipdir / "modelDescription.xml")
+            _write_xml(_model_description_fmi1(spec, token, stop), unzipdir / "modelDescription.xml")
         def write_zip(tmp: Path) -> None:
             with zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zf:
                 for path in sorted(unzipdir.rglob("*")):
                     if path.is_file():
-                        zf.write(path, path.relative_to(unzipdir).as_posix())
+                        member = path.relative_to(unzipdir).as_posix()
+                        if binary_name and member.startswith("binaries/") and path.stem == spec.name:
+                            member = member.rsplit("/", 1)[0] + f"/{binary_name}{path.suffix}"
+                        zf.write(path, member)
 
         write_atomic(target, write_zip)
     return target

@@ -50,6 +50,8 @@ class FmuDescription:
     once_per_process: bool = False  # canBeInstantiatedOnlyOncePerProcess
     n_states: int = 0             # continuous states (model exchange integrates them)
     n_event_indicators: int = 0
+    default_start_time_s: float | None = None   # DefaultExperiment startTime [s]
+    default_stop_time_s: float | None = None    # DefaultExperiment stopTime [s] (some FMUs refuse steps past it)
 
     def variable(self, name: str) -> FmuVariable | None:
         for v in self.variables:
@@ -166,7 +168,13 @@ def _describe(path: str, mtime: float) -> FmuDescription:
                     v.description or "", number(v, "min"), number(v, "max"), number(v, "nominal"),
                     len(getattr(v, "dimensions", None) or ()))
         for v in md.modelVariables)
-    step = md.defaultExperiment.stepSize if md.defaultExperiment is not None else None
+    def experiment(key):
+        try:
+            return float(getattr(md.defaultExperiment, key))
+        except (AttributeError, TypeError, ValueError):
+            return None
+
+    step, start, stop = experiment("stepSize"), experiment("startTime"), experiment("stopTime")
     return FmuDescription(
         path=Path(path), fmi_version=md.fmiVersion, model_name=md.modelName,
         model_identifier=cs.modelIdentifier if cs else "",
@@ -176,7 +184,8 @@ def _describe(path: str, mtime: float) -> FmuDescription:
         default_step_size_s=float(step) if step else None, variables=variables,
         once_per_process=bool(cs and cs.canBeInstantiatedOnlyOncePerProcess),
         n_states=int(md.numberOfContinuousStates or len(md.derivatives)),
-        n_event_indicators=int(md.numberOfEventIndicators or 0))
+        n_event_indicators=int(md.numberOfEventIndicators or 0), default_start_time_s=start,
+        default_stop_time_s=stop)
 
 
 def missing_fmu_text(path: Path) -> str:
@@ -210,6 +219,9 @@ def format_description(d: FmuDescription) -> str:
     ]
     if d.default_step_size_s:
         lines.append(f"Default step {d.default_step_size_s:g} s")
+    if d.default_stop_time_s is not None:
+        lines.append(f"Experiment   from {d.default_start_time_s or 0:g} s to {d.default_stop_time_s:g} s "
+                     "(DefaultExperiment; the stop time is set up where an FMU enforces it)")
     for title, causality in (("Inputs", "input"), ("Outputs", "output"), ("Parameters", "parameter")):
         group = [v for v in d.variables if v.causality == causality]
         lines.append(f"{title}:" + ("" if group else " none"))

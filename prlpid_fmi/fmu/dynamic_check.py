@@ -137,14 +137,15 @@ def check_reset(path: Path) -> list[Finding]:
     with _plant(path) as plant:
         initial = plant.read_outputs()
         first = _run(plant, u)
-        again_initial = plant.reset()
+        again_initial = plant.raw_reset()
         again = _run(plant, u)
         names, ts = plant.outputs, plant.sample_time_s
     ok_initial, ok_run = _same(initial, again_initial), _same(first, again)
-    bad = np.argwhere(~np.isfinite(first))
+    bad = np.argwhere(~np.isfinite(first) | ((first != 0) & (np.abs(first) < np.finfo(float).tiny)))
     if bad.size:
         k, i = bad[0]
         value = "NaN" if np.isnan(first[k, i]) else repr(float(first[k, i]))
+        value += " (a denormal: garbage)" if np.isfinite(first[k, i]) else ""
         outputs = Finding("outputs", "FAIL", f"{names[i]} is {value} at t = {(k + 1) * ts:g} s "
                                              f"(inputs held within 10 % of their start values)")
     else:
@@ -167,7 +168,7 @@ def check_memory(path: Path) -> list[Finding]:
         if before is None:
             return [Finding("memory", "SKIP", "resident memory is not readable on this platform")]
         for _ in range(MEMORY_RESETS):
-            plant.reset()
+            plant.raw_reset()
             _run(plant, u)
         grown = rss_bytes() - before
     per_reset_kb = grown / MEMORY_RESETS / 1024
@@ -181,8 +182,9 @@ def check_memory(path: Path) -> list[Finding]:
 CHECKS = (check_state, check_instances, check_reset, check_memory)
 
 
-def dynamic_check(path: str | Path) -> list[Finding]:
-    """Every check, each in a worker process; a check whose worker dies is a FAIL naming how."""
+def dynamic_check(path: str | Path, step_timeout_s: float | None = None) -> list[Finding]:
+    """Every check, each in a worker process; a check whose worker dies (a crash, or a call that does not return
+    within step_timeout_s [s]: the watchdog's, default measured) is a FAIL naming the call and the time."""
     from prlpid_fmi.fmu.worker import WorkerCrashed, call_in_worker
 
     path = Path(path)
@@ -191,7 +193,8 @@ def dynamic_check(path: str | Path) -> list[Finding]:
     for check in CHECKS:
         name = check.__name__.removeprefix("check_")
         try:
-            findings += call_in_worker(check, path, fmus=[path], what=f"the {name} check")
+            findings += call_in_worker(check, path, fmus=[path], what=f"the {name} check",
+                                       step_timeout_s=step_timeout_s)
         except WorkerCrashed as exc:
             findings.append(Finding(name, "FAIL", str(exc)))
         except Exception as exc:  # noqa: BLE001 - an FMU error is this check's finding

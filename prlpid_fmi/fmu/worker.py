@@ -5,11 +5,17 @@ worker costs a fork, not an interpreter start. The FMUs a call opens are extract
 the workers use those folders."""
 from __future__ import annotations
 
+import ctypes
+import mmap
 import multiprocessing
+import os
 import signal
+import tempfile
 from pathlib import Path
 
 from prlpid_fmi.errors import PlantError
+from prlpid_fmi.fmu import plant as plant_module
+from prlpid_fmi.fmu import watchdog
 from prlpid_fmi.fmu.plant import extracted_folders, reuse_extracted
 
 JOIN_TIMEOUT_S = 5.0
@@ -26,11 +32,99 @@ def in_worker() -> bool:
     return _in_worker
 
 
-def become_worker() -> None:
-    """Mark this process as a worker (in_worker() is then True) that leaves Ctrl-C to its parent."""
+def become_worker(conn=None, crumb_path: str | None = None, step_timeout_s: float | None = None,
+                  check_outputs: bool = False) -> None:
+    """Mark this process as a worker (in_worker() is then True) that leaves Ctrl-C to its parent.
+
+    Its stdout goes to stderr (an FMU's own printf never reaches the tool's results); a watchdog line
+    (a call that does not return) goes to the parent over `conn` as ("hang", line); the FMI call under
+    way is kept in the crumb file for the parent (crash_text); step_timeout_s: the watchdog's timeout
+    for every plant [s] (None: each plant's own); check_outputs: garbage outputs raise (FmuPlant)."""
     global _in_worker
     _in_worker = True
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        os.dup2(2, 1)
+    except OSError:
+        pass
+    if conn is not None:
+        watchdog.reporter = lambda line: conn.send(("hang", line))
+    if crumb_path is not None:
+        attach_crumb(crumb_path)
+    watchdog.default_timeout_s = step_timeout_s
+    plant_module.FmuPlant.check_outputs = bool(check_outputs)
+
+
+# -- the crumb: which FMI call a worker is in, readable after the worker died ------------------------
+class CrumbFile(ctypes.Structure):
+    """A worker's crumb (fmu.plant.Crumb) followed by the names of the FMUs it opened, one per line."""
+
+    _fields_ = [("crumb", plant_module.Crumb), ("names", ctypes.c_char * 1024)]
+
+
+_mapped = []
+
+
+def new_crumb_file() -> str:
+    """A zeroed crumb file for one worker (the parent removes it with remove_crumb_file)."""
+    fd, path = tempfile.mkstemp(prefix="prlpid-fmi-crumb-")
+    os.write(fd, bytes(ctypes.sizeof(CrumbFile)))
+    os.close(fd)
+    return path
+
+
+def remove_crumb_file(path: str | None) -> None:
+    if path:
+        try:
+            os.unlink(path)
+        except OSError:
+            pass
+
+
+def attach_crumb(path: str) -> None:
+    """In the worker: FmuPlant writes its calls into this file's memory."""
+    with open(path, "r+b") as f:
+        mm = mmap.mmap(f.fileno(), ctypes.sizeof(CrumbFile))
+    shared = CrumbFile.from_buffer(mm)
+    _mapped.append((mm, shared))
+    plant_module.crumb = shared.crumb
+    plant_module.crumb_names = shared
+
+
+def read_crumb(path: str | None):
+    """(busy, call, fmu name, t) from a worker's crumb file, or None."""
+    try:
+        raw = Path(path).read_bytes()
+    except (OSError, TypeError):
+        return None
+    if len(raw) < ctypes.sizeof(CrumbFile):
+        return None
+    c = CrumbFile.from_buffer_copy(raw)
+    names = c.names.decode("utf-8", "replace").splitlines()
+    name = names[c.crumb.plant] if 0 <= c.crumb.plant < len(names) else None
+    call = plant_module.CALL_CODES[c.crumb.call] if 0 <= c.crumb.call < len(plant_module.CALL_CODES) else ""
+    return bool(c.crumb.busy), call, name, float(c.crumb.t)
+
+
+def crash_text(fmus, crumb_path: str | None, how: str, what: str) -> str:
+    """One line: which FMU crashed how, in which FMI call at which time (from the crumb), during what."""
+    from prlpid_fmi.fmu.adapters import adapter_class
+    from prlpid_fmi.fmu.description import describe_fmu
+
+    found = read_crumb(crumb_path)
+    names = ", ".join(Path(p).name for p in fmus) or "the FMU"
+    if not found or not found[1]:
+        return f"{names} crashed ({how}) in a worker process during {what}"
+    busy, call, name, t = found
+    path = next((p for p in fmus if Path(p).name == name), None)
+    call_name = call
+    if path is not None:
+        d = describe_fmu(path)
+        call_name = adapter_class(d.fmi_version, d.co_simulation).call_names.get(call, call)
+    where = plant_module.describe_call(name or names, call_name, call, t).split(": ", 1)[1]
+    if busy:
+        return f"{name or names} crashed ({how}) in {where} (in a worker process during {what})"
+    return f"{name or names} crashed ({how}) in a worker process during {what}, after {where}"
 
 
 def mp_context():
@@ -46,6 +140,8 @@ def mp_context():
 
 def signal_name(exitcode: int | None) -> str:
     """'SIGSEGV' for a worker killed by signal 11, 'exit code 3' otherwise."""
+    if exitcode == watchdog.HANG_EXIT:
+        return "hung: ended by the step watchdog"
     if exitcode is not None and exitcode < 0:
         try:
             return signal.Signals(-exitcode).name
@@ -58,36 +154,47 @@ class WorkerCrashed(PlantError):
     """A worker process running an FMU died (the FMU crashed it)."""
 
 
-def _run_one(conn, fn, args, extracted: dict) -> None:
-    become_worker()
+def _run_one(conn, fn, args, extracted: dict, options: dict) -> None:
+    become_worker(conn, **options)
     reuse_extracted(extracted)
     try:
-        conn.send(("ok", fn(*args)))
+        result = fn(*args)
+        if plant_module.FmuPlant.check_outputs and plant_module.garbage_seen:
+            raise PlantError(plant_module.garbage_seen[0])  # fn may have stopped quietly at the garbage
+        conn.send(("ok", result))
     except Exception as exc:  # noqa: BLE001 - raised in the parent
-        conn.send(("error", exc))
+        garbage = plant_module.FmuPlant.check_outputs and plant_module.garbage_seen
+        conn.send(("error", PlantError(garbage[0]) if garbage else exc))  # the garbage, not what fn made of it
     conn.close()
 
 
-def call_in_worker(fn, *args, fmus=(), what: str = "the call"):
+def call_in_worker(fn, *args, fmus=(), what: str = "the call", step_timeout_s: float | None = None,
+                   check_outputs: bool = False):
     """fn(*args) in a worker process (fn and the result picklable); its exceptions are raised here.
 
-    fmus: FMU paths fn opens (extracted here first, once). Raises WorkerCrashed naming the FMU and how
-    the worker ended when it dies before answering.
+    fmus: FMU paths fn opens (extracted here first, once). step_timeout_s: the step watchdog's timeout in the
+    worker [s] (None: the measured default); check_outputs: a non-finite or denormal output of any plant is a
+    PlantError (FmuPlant.check_outputs). Raises WorkerCrashed naming the FMU, the FMI call, the time and how the
+    worker ended when it dies (a crash) or is ended by its watchdog (a call that did not return) before answering.
     """
     ctx = mp_context()
     parent, child = ctx.Pipe()
-    proc = ctx.Process(target=_run_one, args=(child, fn, args, extracted_folders(fmus)), daemon=True)
+    crumb = new_crumb_file()
+    options = {"crumb_path": crumb, "step_timeout_s": step_timeout_s, "check_outputs": check_outputs}
+    proc = ctx.Process(target=_run_one, args=(child, fn, args, extracted_folders(fmus), options), daemon=True)
     proc.start()
     child.close()
     try:
         tag, payload = parent.recv()
     except (EOFError, OSError):
         proc.join(JOIN_TIMEOUT_S)
-        names = ", ".join(Path(p).name for p in fmus) or "the FMU"
-        raise WorkerCrashed(f"{names} crashed ({signal_name(proc.exitcode)}) in a worker process during {what}") from None
+        raise WorkerCrashed(crash_text(fmus, crumb, signal_name(proc.exitcode), what)) from None
     finally:
         parent.close()
-    proc.join(JOIN_TIMEOUT_S)
+        proc.join(JOIN_TIMEOUT_S)
+        remove_crumb_file(crumb)
+    if tag == "hang":
+        raise WorkerCrashed(f"{payload}, in a worker process during {what}")
     if tag == "error":
         raise payload
     return payload

@@ -113,6 +113,13 @@ def make_pid(config: TuningConfig) -> PID | CoupledPID:
     return PID(n_loops=n, **args)
 
 
+def plant_limits(config: TuningConfig) -> dict:
+    """FmuPlant's step_timeout_s (plant.step_timeout_s) and stop_time_s: an episode, the forecast's look-ahead
+    beyond it and two samples of margin [s], so an FMU that enforces its stop time accepts every step."""
+    steps = config.episode_steps + config.forecast_horizon + 2
+    return {"step_timeout_s": config.step_timeout_s, "stop_time_s": steps * config.sample_time_s}
+
+
 class LoopConstants:
     """What every core (LoopCore, and IsolatedCore in front of a worker process) exposes to its drivers, set
     from the config: config, n_loops, loop_names, inputs, scale, bound, u_min, u_max, u_scale, weights,
@@ -152,7 +159,8 @@ class LoopCore(LoopConstants):
         c = config
         self.set_loop_constants(c)
         path = resolve_fmu(c.fmu, c.fmi_version)
-        self.plant = FmuPlant(path, self.inputs, self.loop_names, c.sample_time_s, c.plant_parameters, "plant")
+        self.plant = FmuPlant(path, self.inputs, self.loop_names, c.sample_time_s, c.plant_parameters, "plant",
+                              **plant_limits(c))
         self.plant.guard_leaks(c.leak_check_every, c.leak_limit_mb)
         self.pid = make_pid(c)
         self._randomize = randomized_parameters(c)
@@ -190,7 +198,7 @@ class LoopCore(LoopConstants):
             prior = self.plant
         else:
             prior = FmuPlant(prior_path, self.inputs, self.loop_names, c.sample_time_s,
-                             {**c.plant_parameters, **c.prior.parameters}, "prior")
+                             {**c.plant_parameters, **c.prior.parameters}, "prior", **plant_limits(c))
         if prior_path != path and not c.prior.state_map:
             raise PlantError(f"prior FMU {prior_path} differs from the plant {path}: its state cannot be "
                              "copied, so prior.state_map must say which prior parameters take which plant values")

@@ -3,9 +3,11 @@
 `IsolatedCore` has LoopCore's interface for its drivers (the agent's env, the fixed-PID search, the
 schedule replay, evaluation): `reset`, `step`, `step_control`, `begin_step`, `close` and the signals
 they read after each call. Each call is one message over a pipe to a worker process that holds a
-real LoopCore. When the FMU kills the worker (a segmentation fault, an abort), the episode ends with
-the divergence penalty and a Termination of kind "crash" naming the FMU and the time; the next
-`reset` starts a fresh worker. A worker that crashes while resetting twice in a row is a PlantError.
+real LoopCore. When the FMU kills the worker (a segmentation fault, an abort) or hangs in a call (the
+worker's step watchdog ends it, or it does not answer within twice its step timeout and is killed),
+the episode ends with the divergence penalty and a Termination of kind "crash" naming the FMU, the FMI
+call and the time (read from the worker's crumb file, fmu.worker); the next `reset` starts a fresh
+worker. A worker that crashes while resetting twice in a row is a PlantError naming the call.
 
 Workers come from prlpid_fmi.fmu.worker (the fork server, FMUs extracted once by the parent), so a
 restart costs a fork and the FMU's instantiation, not an interpreter start.
@@ -16,7 +18,10 @@ restart costs a fork and the FMU's instantiation, not an interpreter start.
 from __future__ import annotations
 
 import dataclasses
+import statistics
+import time
 import warnings
+from collections import deque
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +30,9 @@ from prlpid_fmi.config import TuningConfig
 from prlpid_fmi.errors import PlantError
 from prlpid_fmi.fmu.plant import extracted_folders, reuse_extracted
 from prlpid_fmi.fmu.resolve import resolve_fmu
-from prlpid_fmi.fmu.worker import JOIN_TIMEOUT_S, become_worker, mp_context, signal_name
+from prlpid_fmi.fmu.watchdog import MIN_STEP_TIMEOUT_S, STEP_TIMEOUT_FACTOR
+from prlpid_fmi.fmu.worker import (JOIN_TIMEOUT_S, become_worker, crash_text, mp_context, new_crumb_file,
+                                   read_crumb, remove_crumb_file, signal_name)
 from prlpid_fmi.loop.core import LoopConstants, LoopCore, Termination
 
 _SNAPSHOT = ("k", "setpoint", "measurement", "previous_error", "applied_setpoint", "control_signal", "pid_output",
@@ -50,9 +57,12 @@ def _snapshot(core: LoopCore) -> tuple:
     return tuple(getattr(core, name, None) for name in _SNAPSHOT)
 
 
-def _serve(conn, config: TuningConfig, forecast_path: str, extracted: dict) -> None:
+SETUP_ALLOWANCE_S = 30.0  # a reset or start message may take this much longer than a step one [s]
+
+
+def _serve(conn, config: TuningConfig, forecast_path: str, extracted: dict, crumb_path: str) -> None:
     """Worker main: build a LoopCore, then answer (operation, arguments) messages until "close" or EOF."""
-    become_worker()  # the parent decides when to stop
+    become_worker(conn, crumb_path)  # the parent decides when to stop
     reuse_extracted(extracted)
     try:
         core = LoopCore(config, forecast_path)
@@ -103,7 +113,7 @@ def _serve(conn, config: TuningConfig, forecast_path: str, extracted: dict) -> N
 
 
 class _WorkerDied(Exception):
-    """The worker process ended while a call was under way."""
+    """The worker process ended while a call was under way (args: the watchdog's line, when it sent one)."""
 
 
 class _RemotePlant:
@@ -144,6 +154,9 @@ class IsolatedCore(LoopConstants):
         self.prior = self.forecast = self.pid = None  # in the worker
         self.crashes = 0
         self._proc = self._conn = None
+        self._crumb = None
+        self._hang = None           # the line of a worker that hung (its watchdog's, or the parent's)
+        self._round_trips = deque(maxlen=15)  # [s] of step messages, for the default step timeout
         self._rng = None
         self.k = 0
         self.termination: Termination | None = None
@@ -154,23 +167,43 @@ class IsolatedCore(LoopConstants):
     def _start(self) -> None:
         ctx = mp_context()
         parent, child = ctx.Pipe()
-        proc = ctx.Process(target=_serve, args=(child, self.config, self.forecast_path, self._extracted),
+        remove_crumb_file(self._crumb)
+        self._crumb = new_crumb_file()
+        proc = ctx.Process(target=_serve, args=(child, self.config, self.forecast_path, self._extracted, self._crumb),
                            name=f"prlpid-fmi plant {self.plant.path.name}", daemon=True)
         proc.start()
         child.close()
         self._proc, self._conn, self._rng = proc, parent, None
         try:
-            self._receive()
+            self._receive(self._backstop_s(setup=True))
         except _WorkerDied:
-            raise PlantError(f"{self.plant.path.name}: the FMU crashed ({signal_name(proc.exitcode)}) in its worker "
-                             "process while being instantiated") from None
+            raise PlantError(self._lost("the loop's start")) from None
 
-    def _receive(self):
+    def _backstop_s(self, setup: bool = False) -> float:
+        """How long the parent waits for an answer before it kills the worker [s]: twice the step timeout (the
+        worker's own watchdog ends it first), plus SETUP_ALLOWANCE_S for a reset or the start."""
+        timeout = self.config.step_timeout_s
+        if timeout is None:
+            measured = STEP_TIMEOUT_FACTOR * statistics.median(self._round_trips) if self._round_trips else 0.0
+            timeout = max(MIN_STEP_TIMEOUT_S, measured)
+        return 2.0 * timeout + 1.0 + (SETUP_ALLOWANCE_S if setup else 0.0)
+
+    def _receive(self, wait_s: float):
         try:
+            if not self._conn.poll(wait_s):
+                self._hang = (f"{self.plant.path.name}: the worker process running the FMU did not answer within "
+                              f"{wait_s:g} s (a call that never returns; plant.step_timeout_s) and was killed")
+                self._proc.kill()
+                self._proc.join(JOIN_TIMEOUT_S)
+                raise _WorkerDied()
             tag, payload = self._conn.recv()
         except (EOFError, OSError):
             self._proc.join(JOIN_TIMEOUT_S)
             raise _WorkerDied() from None
+        if tag == "hang":
+            self._hang = payload
+            self._proc.join(JOIN_TIMEOUT_S)
+            raise _WorkerDied()
         if tag == "error":
             raise payload
         return payload
@@ -183,15 +216,31 @@ class IsolatedCore(LoopConstants):
         except (BrokenPipeError, OSError):
             self._proc.join(JOIN_TIMEOUT_S)
             raise _WorkerDied() from None
-        return self._receive()
+        if op not in ("step", "step_control"):
+            return self._receive(self._backstop_s(setup=True))
+        started = time.perf_counter()
+        answer = self._receive(self._backstop_s())
+        self._round_trips.append(time.perf_counter() - started)
+        return answer
 
-    def _lost(self) -> str:
-        """Forget the dead worker; returns how it ended ('SIGSEGV', ...)."""
+    def _lost(self, during: str = "the loop") -> str:
+        """Forget the dead worker; returns one line: which FMU, how it ended, in which FMI call at what time."""
         how = signal_name(self._proc.exitcode)
+        paths = [self.plant.path] + ([resolve_fmu(self.config.prior.fmu, self.config.fmi_version)]
+                                     if self.config.prior.fmu and self.config.forecast_horizon else [])
+        text = self._hang or crash_text(paths, self._crumb, how, during)
+        found = read_crumb(self._crumb)
+        if found and found[0] and found[1] == "reset":  # the next worker instantiates afresh instead
+            from prlpid_fmi.fmu import verdicts
+
+            verdicts.put(self.plant.path, "reset", f"it crashed the worker: {text}")
+            warnings.warn(f"{text}; every episode instantiates the FMU afresh instead (remembered for this file)",
+                          stacklevel=4)
+        self._hang = None
         self._conn.close()
         self._proc = self._conn = None
         self.crashes += 1
-        return how
+        return text
 
     def _apply(self, snapshot: tuple) -> None:
         for name, value in zip(_SNAPSHOT, snapshot):
@@ -208,10 +257,9 @@ class IsolatedCore(LoopConstants):
                 self._rng = rng
                 return
             except _WorkerDied:
-                how = self._lost()
+                how = self._lost("a reset")
                 if attempt == 2:
-                    raise PlantError(f"{self.plant.path.name}: the FMU crashed ({how}) in its worker process while "
-                                     "resetting to t = 0 s, twice; it cannot be run") from None
+                    raise PlantError(f"{how}, while resetting to t = 0 s, twice; it cannot be run") from None
 
     def step(self, Kp, Ti, Td, coupling=None) -> tuple[float, bool]:
         """As LoopCore.step; a crash of the FMU ends the episode with the divergence penalty."""
@@ -235,11 +283,11 @@ class IsolatedCore(LoopConstants):
         self.k += 1
         self.forecast_reward = self.step_reward = None
         name = self.plant.path.name
-        self.termination = Termination("crash", self.k, t, f"{name} crashed ({how}) in the step from t = {t:g} s")
+        self.termination = Termination("crash", self.k, t, f"{how} (the loop's step from t = {t:g} s)")
         if name not in _warned:
             _warned.add(name)
-            warnings.warn(f"{name} crashed ({how}) in its worker process at t = {t:g} s: the episode ends with the "
-                          "divergence penalty and a fresh worker starts the next one", stacklevel=3)
+            warnings.warn(f"{how}: the episode ends with the divergence penalty at t = {t:g} s and a fresh worker "
+                          "starts the next one", stacklevel=3)
         return self.penalty, True
 
     def set_structure(self, setpoint_weight, derivative_weight, measurement_filter_s) -> None:
@@ -259,6 +307,8 @@ class IsolatedCore(LoopConstants):
         """Stop the worker (idempotent)."""
         proc, conn = self._proc, self._conn
         self._proc = self._conn = None
+        remove_crumb_file(self._crumb)
+        self._crumb = None
         if proc is None:
             return
         try:

@@ -56,6 +56,9 @@ def tune(scenario_path: str | Path, timesteps: int | None = None, seed: int | No
     if seed is not None and not 0 <= seed <= MAX_SEED:
         raise ArgumentError(f"{{seed}}: out of range (got {seed}; expected an integer from 0 to {MAX_SEED})")
     scenario = load_scenario(scenario_path)
+    from prlpid_fmi.fmu import watchdog
+
+    watchdog.default_timeout_s = scenario.tuning.step_timeout_s  # every FMU call of this run (fmu.watchdog)
     if not resume:  # a loop that cannot be closed is refused before anything is written (probe.feasibility)
         from prlpid_fmi.probe.feasibility import check_loops
 
@@ -63,6 +66,7 @@ def tune(scenario_path: str | Path, timesteps: int | None = None, seed: int | No
             warnings.warn(note, stacklevel=2)
     run_dir, created = rd.prepare_run_dir(out, scenario.name, resume)
     crashed = rd.mark_active(run_dir)
+    watchdog.context["run_dir"] = run_dir  # what a hang's one line says is kept
     try:
         return _tune(scenario, Path(scenario_path), run_dir, timesteps, seed, resume, progress_bar, baseline,
                      crashed and resume)
@@ -72,6 +76,7 @@ def tune(scenario_path: str | Path, timesteps: int | None = None, seed: int | No
         rd.discard_if_empty(run_dir, created)
         raise
     finally:
+        watchdog.context.pop("run_dir", None)
         rd.mark_inactive(run_dir)
 
 

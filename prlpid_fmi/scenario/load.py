@@ -143,7 +143,7 @@ def build_scenario(model: ScenarioModel, name: str, path: Optional[str] = None) 
     tuning = TuningConfig(
         fmu=p.fmu, loops=tuple(_loop(l) for l in p.loops), plant_parameters=dict(p.parameters),
         sample_time_s=p.sample_time, fmi_version=p.fmi_version, isolation=p.isolation,
-        leak_check_every=p.leak_check_every, leak_limit_mb=p.leak_limit_mb,
+        leak_check_every=p.leak_check_every, leak_limit_mb=p.leak_limit_mb, step_timeout_s=p.step_timeout_s,
         prior=PriorConfig(fmu=model.prior.fmu, parameters=dict(model.prior.parameters),
                           state_map=dict(model.prior.state_map)),
         **_fields(c, ("anti_windup", "derivative_filter_N", "setpoint_weight", "derivative_weight", "measurement_filter",
@@ -207,7 +207,8 @@ def scenario_model(s: Scenario) -> ScenarioModel:
         "name": s.name,
         "plant": {"fmu": t.fmu, "fmi_version": t.fmi_version, "sample_time": t.sample_time_s,
                   "parameters": dict(t.plant_parameters), "loops": loops, "isolation": t.isolation,
-                  "leak_check_every": t.leak_check_every, "leak_limit_mb": t.leak_limit_mb},
+                  "leak_check_every": t.leak_check_every, "leak_limit_mb": t.leak_limit_mb,
+                  "step_timeout_s": t.step_timeout_s},
         "prior": asdict(t.prior),
         "controller": {**_fields(t, m.ControllerModel.model_fields.keys() - {"anchor_bands"}),
                        "anchor_bands": asdict(t.anchor_bands)},

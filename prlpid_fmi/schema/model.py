@@ -28,6 +28,7 @@ from pydantic_core import PydanticCustomError
 
 from prlpid_fmi.control.reward import RewardWeights
 from prlpid_fmi.control.smoothing import DEFAULT_ALPHA, DEFAULT_WINDOW
+from prlpid_fmi.fmu.watchdog import MIN_STEP_TIMEOUT_S, STEP_TIMEOUT_FACTOR
 from prlpid_fmi.schema import checks
 from prlpid_fmi.schema.checks import check_variable, state_of
 from prlpid_fmi.schema.types import (
@@ -249,6 +250,11 @@ class PlantModel(Section):
         100, description="resets between checks of the memory the FMU's resets added; 0 = no check")
     leak_limit_mb: Positive = Field(
         64.0, description="memory [MB] the resets may add between two checks before the FMU is instantiated afresh")
+    step_timeout_s: Optional[Positive] = Field(
+        None, description="a call into the FMU (a step, a reset, its instantiation) that has not returned after this "
+                          "many seconds ends the run with one line, the run directory kept (with isolation process: "
+                          f"ends its episode like a crash); null = {STEP_TIMEOUT_FACTOR:g} x the measured cost of a step, at "
+                          f"least {MIN_STEP_TIMEOUT_S:g} s")
 
     @model_validator(mode="before")
     @classmethod
