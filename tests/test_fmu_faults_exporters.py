@@ -242,3 +242,29 @@ def test_a_binary_named_otherwise_gets_the_rename_hint(fault_fmus):
     proc = run_cli("probe", str(fault_fmus["misnamed"]))
     line = one_line_exit_2(proc, "rename binaries/linux64/fou_20sim.so to binaries/linux64/FirstOrderUnstable.so")
     assert "fmpy compile" not in line
+
+
+def test_sigterm_during_a_call_that_never_returns_ends_the_process_with_one_line(fault_fmus, tmp_path):
+    """The Python handler never runs during the C call; the watchdog sees the signal's wakeup byte and, the call
+    still under way SIGNAL_GRACE_S later, ends the process with 128 + SIGTERM."""
+    from prlpid_fmi.fmu.watchdog import SIGNAL_GRACE_S
+
+    gate = tmp_path / "gate"
+    gate.write_text("")
+    code = ("import signal; from prlpid_fmi.errors import Interrupted\n"
+            "def h(s, f): raise Interrupted(s)\n"
+            "signal.signal(signal.SIGTERM, h)\n"
+            "from prlpid_fmi.fmu import FmuPlant\n"
+            f"p = FmuPlant({str(fault_fmus['hang'])!r}, ['u'], ['y'], 0.1, {{'a': -1.0}}, step_timeout_s=60)\n"
+            "print('ready', flush=True)\n"
+            "[p.step([0.1]) for _ in range(100)]\n")
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**ENV, "PRLPID_FAULT_GATE": str(gate)})
+    assert proc.stdout.readline().strip() == "ready"
+    time.sleep(0.5)
+    sent = time.monotonic()
+    proc.terminate()
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 128 + 15 and time.monotonic() - sent <= SIGNAL_GRACE_S + 1.5
+    lines = error_lines(err)
+    assert len(lines) == 1 and "interrupted by SIGTERM while FirstOrderUnstable.fmu: fmi2DoStep from t = 3 s" in lines[0]
