@@ -967,6 +967,7 @@ def tool_fixed_pid(plant: Plant, timeout_s: float):
     """(ToolResult, "") of tune_fixed_pid run as `tune` runs it, or (None, reason)."""
     import dataclasses
 
+    from prlpid_fmi.progress import Steps
     from prlpid_fmi.robustness.margins import margins_of, setpoint_range_points
     from prlpid_fmi.scenario.load import load_scenario
     from prlpid_fmi.tuning.fixed_pid import tune_fixed_pid
@@ -985,14 +986,17 @@ def tool_fixed_pid(plant: Plant, timeout_s: float):
     assert all(not math.isfinite(getattr(l, "u_rate_limit", math.inf)) for l in s.tuning.loops), "a rate limit"
     t0 = time.time()
 
-    def watchdog(done, expected):
-        if time.time() - t0 > timeout_s:
-            raise _Timeout(f"{done}/{expected} evaluations after {time.time() - t0:.0f} s")
+    class Watchdog(Steps):  # silent; ends the search past timeout_s (checked at every cost evaluation)
+        def update(self, done):
+            if time.time() - t0 > timeout_s:
+                raise _Timeout(f"{done} evaluations of the current step after {time.time() - t0:.0f} s")
+
+    watchdog = Watchdog("fixed-PID search", enabled=False)
 
     try:
         fixed = tune_fixed_pid(s.tuning, seed=s.agent.seed, episodes=s.baseline.episodes, maxiter=s.baseline.maxiter,
                                popsize=s.baseline.popsize, max_sensitivity=float(s.deploy.max_sensitivity),
-                               callback=watchdog, baseline=s.baseline, deploy=s.deploy)
+                               progress=watchdog, baseline=s.baseline, deploy=s.deploy)
     except _Timeout as exc:
         return None, f"tool search over {timeout_s:.0f} s ({exc}): plant skipped"
     seconds = time.time() - t0

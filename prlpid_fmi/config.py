@@ -221,5 +221,7 @@ class DeployConfig:
     max_sensitivity: float = _d(_m.DeployModel, "max_sensitivity")
     max_overshoot: float = _d(_m.DeployModel, "max_overshoot")  # fraction of the setpoint step
     max_noise_gain: float = _d(_m.DeployModel, "max_noise_gain")  # std(u) from measurement noise / control span
+    allow_unverified: bool = _d(_m.DeployModel, "allow_unverified")  # a schedule with an impossible Ms estimate
+    classical_schedule: str = _d(_m.DeployModel, "classical_schedule")  # auto | on | off
     schedule_points: int = _d(_m.DeployModel, "schedule_points")
     schedule_by: str = _d(_m.DeployModel, "schedule_by")  # auto | setpoint | measurement | error

@@ -1,6 +1,12 @@
 """Progress of long work on stderr (training, the fixed-PID search: an honest total and an ETA; the steps
 after training: when each starts and how long it took).
 
+Work made of steps of different kinds (the fixed-PID search: a stabilising search, frequency-response
+experiments, the load design with its polish, the setpoint weight, the Ms check on the FMU) is shown step
+by step (`Steps`): each step with its own count and ETA where its size is known, a start and a duration
+where it is not. One total over all of them would lie: its units do not cost the same, and steps such as
+the Ms check have no size known in advance.
+
 On a terminal: one line redrawn in place (a bar). Otherwise (`nohup ... > log`): a plain line when the
 work starts, about every 30 s, and when it ends, so a log shows where a long run is. The count never
 passes the total: PPO collects whole rollouts, so SB3's own bar ends at 51,200/50,000.
@@ -106,6 +112,71 @@ class Progress:
             self.stream.write(f"prlpid-fmi: {self.label}: {self.done:,}/{self.total:,} {self.unit} "
                               f"({pct:.0f} %){extra}\n")
         self.stream.flush()
+
+
+class Steps:
+    """Work in named steps (see the module docstring), all under one `label`; silent if not enabled.
+
+    step(name, total, unit): ends the current step and starts the next, counted (`update`) when total is
+    given, else announced with its duration at the end. close(): ends the last step and shows the whole
+    duration.
+    """
+
+    def __init__(self, label: str, enabled: bool = True, stream: TextIO | None = None,
+                 clock: Callable[[], float] = time.monotonic):
+        self.label, self.enabled, self.clock = label, enabled, clock
+        self.stream = stream if stream is not None else sys.stderr
+        self.t0 = clock()
+        self._counted: Progress | None = None
+        self._plain: tuple[str, float] | None = None
+
+    def step(self, name: str, total: int | None = None, unit: str = "evaluations") -> "Steps":
+        self._end_step()
+        if not self.enabled:
+            return self
+        if total is not None and total > 0:
+            self._counted = Progress(f"{self.label}: {name}", unit, total=int(total), stream=self.stream,
+                                     clock=self.clock)
+        else:
+            self._plain = (name, self.clock())
+            self.stream.write(f"prlpid-fmi: {self.label}: {name} ...\n")
+            self.stream.flush()
+        return self
+
+    def update(self, done: int) -> None:
+        if self._counted is not None:
+            self._counted.update(done)
+
+    def close(self) -> None:
+        self._end_step()
+        if self.enabled:
+            self.stream.write(f"prlpid-fmi: {self.label}: done in {format_duration(self.clock() - self.t0)}\n")
+            self.stream.flush()
+        self.enabled = False
+
+    def _end_step(self) -> None:
+        if self._counted is not None:
+            self._counted.close()
+            self._counted = None
+        if self._plain is not None:
+            name, t0 = self._plain
+            self.stream.write(f"prlpid-fmi: {self.label}: {name}: done in {format_duration(self.clock() - t0)}\n")
+            self.stream.flush()
+            self._plain = None
+
+
+def counted(fn, steps: Steps):
+    """`fn` reporting its number of calls so far to `steps` (the count of the current step) on every call."""
+    calls = [0]
+
+    def wrapped(*args):
+        calls[0] += 1
+        steps.update(calls[0])
+        return fn(*args)
+    return wrapped
+
+
+QUIET = Steps("", enabled=False)  # a Steps that shows nothing (the default of functions that report steps)
 
 
 @contextlib.contextmanager

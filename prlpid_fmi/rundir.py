@@ -40,6 +40,8 @@ MODEL = "model.zip"
 VECNORMALIZE = "vecnormalize.pkl"
 FIXED_PID = "fixed_pid.json"
 FIXED_PID_CSV = "fixed_pid.csv"
+CLASSICAL_SCHEDULE = "classical_schedule.csv"  # the classical gain schedule (nonlinear plants)
+ADAPTIVE_SCHEDULE = "adaptive_schedule.csv"  # the policy's gain table, deployed or not
 METRICS = "metrics.json"
 GAINS = "gains.csv"
 SCHEDULE = "schedule.csv"
@@ -53,7 +55,7 @@ TENSORBOARD = "tensorboard"
 MONITOR = "monitor"
 EVALUATIONS = "evaluations"
 ACTIVE = ".active"
-OWNED_FILES = frozenset({ACTIVE, SCENARIO, RUN_INFO, MODEL, VECNORMALIZE, FIXED_PID, FIXED_PID_CSV, METRICS, GAINS, SCHEDULE, REPORT,
+OWNED_FILES = frozenset({ACTIVE, SCENARIO, RUN_INFO, MODEL, VECNORMALIZE, FIXED_PID, FIXED_PID_CSV, CLASSICAL_SCHEDULE, ADAPTIVE_SCHEDULE, METRICS, GAINS, SCHEDULE, REPORT,
                          RESPONSE_PLOT, CONTROL_SIGNAL_PLOT, GAINS_PLOT, LEARNING_CURVE_PLOT})
 OWNED_DIRS = frozenset({CHECKPOINTS, TENSORBOARD, MONITOR, EVALUATIONS})
 PACKAGES = ("prlpid-fmi", "fmpy", "numpy", "scipy", "torch", "stable-baselines3", "gymnasium", "pyyaml", "matplotlib")

@@ -192,12 +192,18 @@ def test_bring_your_own_fmi3_fmu(tmp_path, capsys):
     y = plant.reset()[0]
     u0 = min(max(float(plant.get(["power"])[0]), 0.0), 1000.0)  # the bumpless start: balanced at y0 with u0
     integral, ed_prev, stages = None, None, [y] * order
+    bumpless = schedule.gain_change == "bumpless"  # the CSV's gain_change line (control/pid.py's docstring)
+    last = None  # (Kp, Ti, Td, ep, D) of the previous sample
     measured = [y]
     for k in range(200):
         r = 40.0 if k < 100 else 55.0
         kp, ti, td = (float(np.ravel(g)[0]) for g in schedule.gains_at(r)[:3])
         if integral is None:
             integral = (u0 - kp * ((b - 1.0) * y)) / (kp / ti)
+        elif bumpless and last[:3] != (kp, ti, td):  # the new gains give the old output on the last sample's signals
+            kp0, ti0, td0, ep0, d0 = last
+            v = kp0 * (ep0 + td0 * d0) + kp0 / ti0 * integral
+            integral = (v - kp * (ep0 + td * d0)) / (kp / ti)
         yf = y
         if tf > 0 and k > 0:
             x = y
@@ -206,11 +212,12 @@ def test_bring_your_own_fmi3_fmu(tmp_path, capsys):
             yf = x
         e, ep, ed = r - y, b * r - yf, c * r - yf
         ed_prev = ed if ed_prev is None else ed_prev
-        u_try = kp * (ep + td * (ed - ed_prev) / ts) + kp / ti * (integral + e * ts)
+        d = (ed - ed_prev) / ts
+        u_try = kp * (ep + td * d) + kp / ti * (integral + e * ts)
         if 0.0 <= u_try <= 1000.0 or (u_try > 1000.0) != (kp * e > 0):
             integral += e * ts
         u = min(max(u_try, 0.0), 1000.0)
-        ed_prev = ed
+        ed_prev, last = ed, (kp, ti, td, ep, d)
         y = plant.step([u])[0]
         measured.append(y)
     plant.close()

@@ -292,6 +292,33 @@ def test_evaluate_report_names_the_scenario_file(trained_run, tmp_path, capsys):
     assert f"Scenario file: `{trained_run / 'scenario.yaml'}`" in (out_dir / "report.md").read_text()
 
 
+def test_evaluate_takes_a_file_with_only_an_evaluation_section(trained_run, tmp_path, capsys):
+    """A held-out schedule without copying the scenario: the file's `evaluation:` replaces the run's, everything
+    else is the run's own scenario.yaml; a mistake in it is one line naming that file and the key, exit 2. Known
+    answer: the same evaluation written into a full copy of the run's scenario gives the same metrics."""
+    import yaml
+
+    held_out = {"episode_steps": 80, "setpoints": [{"at_step": 0, "value": 0.3}, {"at_step": 40, "value": -0.6}]}
+    only = tmp_path / "held_out.yaml"
+    only.write_text(yaml.safe_dump({"evaluation": held_out}))
+    assert main(["-q", "evaluate", str(trained_run), "--scenario", str(only)]) == 0
+    out_dir = Path(capsys.readouterr().out.split("evaluation written to ")[1].strip())
+    used = yaml.safe_load((out_dir / "scenario.yaml").read_text())
+    own = yaml.safe_load((trained_run / "scenario.yaml").read_text())
+    assert used["plant"] == own["plant"] and used["name"] == own["name"]
+    assert [s["value"] for s in used["evaluation"]["setpoints"]] == [[0.3], [-0.6]]
+    full = tmp_path / "full.yaml"
+    full.write_text(yaml.safe_dump({**own, "evaluation": held_out}))
+    assert main(["-q", "evaluate", str(trained_run), "--scenario", str(full)]) == 0
+    full_dir = Path(capsys.readouterr().out.split("evaluation written to ")[1].strip())
+    assert json.loads((out_dir / "metrics.json").read_text())["fixed_pid"] == \
+        json.loads((full_dir / "metrics.json").read_text())["fixed_pid"]
+    only.write_text(yaml.safe_dump({"evaluation": {**held_out, "episode_step": 80}}))
+    assert main(["-q", "evaluate", str(trained_run), "--scenario", str(only)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(only) in err[0] and "evaluation.episode_step" in err[0]
+
+
 def test_evaluate_opens_with_the_deployed_controller_on_that_evaluation(trained_run, tmp_path, capsys):
     """The deployed schedule.csv is replayed on the new evaluation. Known answer: a run that deploys the one-row
     table of the fixed PID (marked here as a deployed gain schedule) must score exactly the fixed PID's numbers."""
@@ -334,12 +361,27 @@ def test_tune_progress_goes_to_stderr_and_never_passes_the_target(tmp_path, caps
     assert training[-1].startswith("prlpid-fmi: training: 200 steps in ")
     assert all(int(line.split(": ")[2].split("/")[0].replace(",", "")) <= 200 for line in training[:-1])
     from prlpid_fmi.tuning.fixed_pid import STABILISING_GENERATIONS
+    from prlpid_fmi.tuning.load_design import POLISH_EVALUATIONS
 
-    # the load design's two searches with the small baseline (maxiter 1, popsize 2) over (Kp, Ti, Td): the
-    # stabilising setpoint search's generations, then the load search's, (generations + 1) * popsize * 3 each
-    budget = (STABILISING_GENERATIONS + 1) * 2 * 3 + (1 + 1) * 2 * 3
-    assert f"prlpid-fmi: fixed-PID search: {budget} evaluations in " in err  # the closing line: all done
-    assert "done early" not in err
+    # the fixed-PID search step by step, each count against its own budget with the small baseline (maxiter 1,
+    # popsize 2) over (Kp, Ti, Td): the stabilising setpoint search (generations + 1) * popsize * 3 evaluations,
+    # the load search's DE (1 + 1) * 2 * 3 and its polish POLISH_EVALUATIONS * 3 at most; the experiments and the
+    # Ms checks as steps with their durations
+    search = [line[len("prlpid-fmi: fixed-PID search: "):] for line in err.splitlines()
+              if line.startswith("prlpid-fmi: fixed-PID search: ")]
+    budgets = {"stabilising PID (setpoint search)": (STABILISING_GENERATIONS + 1) * 2 * 3,
+               "load design (differential evolution, then Nelder-Mead)": (1 + 1) * 2 * 3 + POLISH_EVALUATIONS * 3}
+    for name, budget in budgets.items():
+        counts = [line.split(": ", 1)[1] for line in search if line.startswith(name + ": ")]
+        assert counts[0] == f"0/{budget:,} evaluations (0 %)", counts
+        assert all(int(c.split("/")[0].replace(",", "")) <= budget for c in counts[1:-1] if "/" in c)
+        done = int(counts[-1].split(" evaluations in ")[0].replace(",", ""))
+        assert 0 < done <= budget and (done == budget) != ("done early" in counts[-1])
+    steps = [line.split(" ...")[0] for line in search if line.endswith(" ...")]
+    assert steps[0].startswith("Ms check on the FMU of the stabilising PID")
+    assert steps[1] == "frequency response of the plant at 3 operating points"
+    assert steps[-1].startswith("Ms check on the FMU (3 operating points")
+    assert search[-1].startswith("done in ")
     assert "prlpid-fmi: training" not in out and "fixed-PID search:" not in out
     after = [line for line in err.splitlines() if line.startswith(("prlpid-fmi: gain schedule", "prlpid-fmi: evaluation",
                                                                      "prlpid-fmi: choice"))]
@@ -468,6 +510,33 @@ def test_progress_total_given_later_and_an_early_end():
     lines = stream.getvalue().splitlines()
     assert lines[0] == "prlpid-fmi: fixed-PID search: 48/504 evaluations (10 %), 24 evaluations/s, ETA 19 s"
     assert lines[-1] == "prlpid-fmi: fixed-PID search: 240 evaluations in 3 s (stopped before 504: done early)"
+
+
+def test_steps_show_each_step_with_its_own_count_or_duration():
+    from prlpid_fmi.progress import Steps, counted
+
+    clock, stream = FakeClock(), io.StringIO()
+    steps = Steps("fixed-PID search", stream=stream, clock=clock)
+    steps.step("search", 100)
+    cost = counted(lambda x: x * x, steps)
+    for i in range(40):
+        clock.t += 0.05
+        cost(float(i))
+    steps.step("Ms check")
+    clock.t += 4.0
+    steps.close()
+    assert stream.getvalue().splitlines() == [
+        "prlpid-fmi: fixed-PID search: search: 0/100 evaluations (0 %)",
+        "prlpid-fmi: fixed-PID search: search: 40 evaluations in 2 s (stopped before 100: done early)",
+        "prlpid-fmi: fixed-PID search: Ms check ...",
+        "prlpid-fmi: fixed-PID search: Ms check: done in 4 s",
+        "prlpid-fmi: fixed-PID search: done in 6 s"]
+    quiet = io.StringIO()
+    silent = Steps("x", enabled=False, stream=quiet)
+    silent.step("a", 10)
+    silent.update(5)
+    silent.close()
+    assert quiet.getvalue() == ""
 
 
 class FakeTerminal(io.StringIO):

@@ -45,13 +45,24 @@ def test_nothing_is_deployed_when_neither_meets_the_limit_and_the_verdict_says_s
 
 
 def test_impossible_margins_neither_qualify_nor_disqualify_but_failed_ones_do():
-    """robustness.status: a plant varying faster than the experiment ("varying") cannot be judged; a loop that
-    diverged, sat at a limit or was too lightly damped to settle has failed, whatever its estimate says."""
+    """robustness.status: a plant varying faster than the experiment ("varying") cannot be judged: the fixed PID
+    stays deployable, the schedule is deployed on verified robustness only unless deploy.allow_unverified opts
+    in; a loop that diverged, sat at a limit or was too lightly damped to settle has failed, whatever its
+    estimate says."""
     unreliable = cand("gain schedule", 0.9, ms=40.0, reliable=False)
     fixed = cand("fixed PID", 1.0, ms=20.0, reliable=False)
     d = choose(unreliable, fixed, 2.0)
-    assert d.deploy == "gain schedule" and unreliable.unverified and math.isnan(unreliable.worst_Ms)
-    assert "could not be verified" in verdict(d, unreliable, fixed, 2.0)
+    assert d.deploy == "fixed PID" and unreliable.unverified and math.isnan(unreliable.worst_Ms)
+    assert d.reasons == ("The gain schedule is not deployed: its robustness is not verified (1 of 1 Ms estimates "
+                         "impossible to make: the plant varies faster than the margin experiment); "
+                         "deploy.allow_unverified: true deploys it anyway.",)
+    text = verdict(d, unreliable, fixed, 2.0)
+    assert "could not be verified" in text and "Its worst Ms is not verified" in text
+    d = choose(unreliable, fixed, 2.0, allow_unverified=True)
+    assert d.deploy == "gain schedule"
+    partly = Candidate("gain schedule", metrics(0.9), [], [margins(1.5), margins(40.0, reliable=False)], [0.0, 1.0])
+    assert choose(partly, cand("fixed PID", 1.0), 2.0).deploy == "fixed PID"  # one impossible estimate is enough
+    assert choose(partly, cand("fixed PID", 1.0), 2.0, allow_unverified=True).deploy == "gain schedule"
     diverged = cand("gain schedule", 0.9, ms=math.inf, reliable=False, problems=())
     assert choose(diverged, fixed, 2.0).deploy == "fixed PID"
     for kind in ("lightly_damped", "saturated"):  # failed even with an estimate inside the limit
@@ -108,4 +119,50 @@ def test_an_infinite_ms_is_said_in_words():
     assert d.deploy == "fixed PID"
     assert d.reasons == ("The gain schedule is not deployed: its loop fails the robustness check at 1 of 1 operating "
                          "points (at 0, failed: in the margin measurement the loop diverged or was held at an actuator "
-                         "limit (Ms = infinity)).",)
+                         "limit (Ms = ∞)).",)
+
+
+def test_with_a_classical_schedule_the_adaptive_one_must_beat_it_and_it_must_beat_the_fixed_pid():
+    """deliver.rule.choose_among: classical vs fixed PID first, then the adaptive schedule vs the winner, by the same
+    rule (1 % ISE, TV, held-out, load IAE, Ms)."""
+    from prlpid_fmi.deliver.rule import choose_among
+
+    fixed = cand("fixed PID", 1.0)
+    classical = cand("classical gain schedule", 0.6)
+    assert choose_among(cand("gain schedule", 0.8), classical, fixed, 2.0).deploy == "classical gain schedule"
+    d = choose_among(cand("gain schedule", 0.8), classical, fixed, 2.0)
+    assert d.reasons == ("The classical gain schedule beats the fixed PID on ISE (0.6 vs 1) within the robustness and "
+                         "effort limits.",
+                         "The gain schedule is not deployed: it does not beat the classical gain schedule on ISE by "
+                         "1% or more (0.8 vs 0.6).")
+    assert choose_among(cand("gain schedule", 0.5), classical, fixed, 2.0).deploy == "gain schedule"
+    # a classical schedule that does not beat the fixed PID leaves the adaptive one to beat the fixed PID
+    weak = cand("classical gain schedule", 0.995)
+    assert choose_among(cand("gain schedule", 0.8), weak, fixed, 2.0).deploy == "gain schedule"
+    assert choose_among(cand("gain schedule", 0.999), weak, fixed, 2.0).deploy == "fixed PID"
+    # robustness: a classical schedule above the Ms limit is not deployed, the fixed PID is
+    assert choose_among(None, cand("classical gain schedule", 0.5, ms=2.5), fixed, 2.0).deploy == "fixed PID"
+    assert choose_among(None, None, fixed, 2.0) == choose(None, fixed, 2.0)
+    # neither classical nor fixed deployable: the adaptive schedule can still be, by the rule against the fixed PID
+    d = choose_among(cand("gain schedule", 0.5), cand("classical gain schedule", 0.5, ms=3.0),
+                     cand("fixed PID", 1.0, ms=3.0), 2.0)
+    assert d.deploy == "gain schedule"
+
+
+def test_held_out_total_variation_and_unsettled_steps_refuse_a_schedule():
+    """A schedule that wins on ISE but moves the actuator more than 1.5x as much on the held-out episodes (the
+    two-tank's 2.41x), or leaves more of their setpoint steps unsettled than the fixed PID, is not deployed."""
+    def held(c, tv, unsettled):
+        c.holdout_ise, c.holdout_tv, c.holdout_unsettled = 1.0, tv, unsettled
+        return c
+
+    fixed = held(cand("fixed PID", 1.0), 10.0, 1)
+    d = choose(held(cand("gain schedule", 0.8), 24.1, 1), fixed, 2.0)
+    assert d.deploy == "fixed PID" and d.reasons == (
+        "The gain schedule is not deployed: on held-out episodes of the training distribution its control signal "
+        "varies 2.4x as much as the fixed PID's (limit 1.5x).",)
+    d = choose(held(cand("gain schedule", 0.8), 12.0, 2), fixed, 2.0)
+    assert d.deploy == "fixed PID" and d.reasons == (
+        "The gain schedule is not deployed: on held-out episodes of the training distribution it leaves a setpoint "
+        "step unsettled in 2 episodes (the fixed PID: 1).",)
+    assert choose(held(cand("gain schedule", 0.8), 14.9, 1), fixed, 2.0).deploy == "gain schedule"

@@ -183,7 +183,7 @@ def test_assessment_measures_every_row_and_the_error_zero_gains_at_every_point()
     table = error_table([-0.2, 0.3], Kp=[5.0, 7.0], Ti=[2.0, 1.5], Td=[0.0, 0.0])
     cand = assess_schedule(scenario, table)
     assert len(cand.margins) == 3 * 3  # (2 rows + gains at e = 0) x 3 setpoints
-    assert cand.breakpoints == [-1.0, 0.0, 1.0] * 3
+    assert cand.breakpoints == [f"{row} at {point:g}" for row in ("row 1", "row 2", "error 0") for point in (-1, 0, 1)]
     at_zero = ([float(np.interp(0.0, [-0.2, 0.3], [5.0, 7.0]))], [float(np.interp(0.0, [-0.2, 0.3], [2.0, 1.5]))],
                [0.0], None)
     assert cand.margins[-2].Ms == pytest.approx(margins_of(scenario.tuning, at_zero, [0.0]).Ms, rel=1e-9)

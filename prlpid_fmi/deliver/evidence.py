@@ -19,13 +19,13 @@ import dataclasses
 import math
 import warnings
 
-from prlpid_fmi.deliver.rule import Candidate, Decision, Deployed, choose
+from prlpid_fmi.deliver.rule import Candidate, Decision, Deployed, choose_among
 from prlpid_fmi.loop.evaluation import constant_gains, evaluate_gains, gains_rollout
 from prlpid_fmi.loop.gains import Gains
 from prlpid_fmi.robustness.margins import margins_of, operating_point, setpoint_range_points
 from prlpid_fmi.robustness.status import status
 from prlpid_fmi.tuning.load_design import load_experiment, parameter_samples
-from prlpid_fmi.tuning.schedule.replay import replay_schedule, training_ise
+from prlpid_fmi.tuning.schedule.replay import replay_schedule, training_metrics
 from prlpid_fmi.tuning.schedule.table import LOOP_VARIABLE, GainSchedule, fixed_schedule
 
 HOLDOUT_EPISODES = 8  # further episodes the deliverable rule compares the schedule and the fixed PID on
@@ -83,8 +83,10 @@ def assess_fixed(scenario, gains: Gains) -> Candidate:
                      load_iae=load, draws=len(parameter_samples(scenario.tuning)))
 
 
-def assess_schedule(scenario, schedule: GainSchedule) -> Candidate:
-    """The replayed schedule's evidence: evaluation, Monte-Carlo set, margins at every breakpoint."""
+def assess_schedule(scenario, schedule: GainSchedule, name: str = Deployed.SCHEDULE.value) -> Candidate:
+    """The replayed schedule's evidence: evaluation, Monte-Carlo set, margins at every breakpoint (and, for a
+    setpoint table, halfway between neighbouring breakpoints, with the interpolated gains the PID runs there).
+    name: the Candidate's (Deployed) name."""
     config = scenario.evaluation_config()
     intervals = list(scenario.evaluation.intervals) or None
     plain = dataclasses.replace(config, randomize={}) if config.randomize else config
@@ -103,20 +105,26 @@ def assess_schedule(scenario, schedule: GainSchedule) -> Candidate:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             margins = [margins_of(scenario.tuning, row, point) for row, point in pairs]
-        labels = [point[loop] for _, point in pairs]
+        def row_label(j: int, point) -> str:
+            return (f"row {j + 1}" if j < len(rows) - 1 else "error 0") + f" at {_label(point[loop])}"
+
+        labels = [row_label(j, point) for j in range(len(rows)) for point in range_points(scenario.tuning, loop)]
         middle = [operating_point(config)]
         for j, row in enumerate(rows):
-            drawn, names = _on_draws(scenario, lambda p, row=row: row, middle,
-                                     lambda p, j=j: f"row {j + 1} at {_label(p[loop])}" if j < len(rows) - 1
-                                     else f"error 0 at {_label(p[loop])}")
+            drawn, names = _on_draws(scenario, lambda p, row=row: row, middle, lambda p, j=j: row_label(j, p))
             margins, labels = margins + drawn, labels + names
-        return Candidate(Deployed.SCHEDULE.value, metrics, mc, margins, labels, load_iae=load,
+        return Candidate(name, metrics, mc, margins, labels, load_iae=load,
                          draws=len(parameter_samples(scenario.tuning)))
-    points = [operating_point(config, b) for b in schedule.breakpoints] \
-        if schedule.variable.startswith("setpoint") else [operating_point(config)]
-    drawn, labels = _on_draws(scenario, gains, points, lambda p: p[0])
-    return Candidate(Deployed.SCHEDULE.value, metrics, mc, _margins_at(scenario.tuning, gains, points) + drawn,
-                     [p[0] for p in points] + labels, load_iae=load, draws=len(parameter_samples(scenario.tuning)))
+    setpoints = schedule.variable.startswith("setpoint")
+    points = [operating_point(config, b) for b in schedule.breakpoints] if setpoints else [operating_point(config)]
+    labels = [p[0] for p in points]
+    if setpoints:  # between breakpoints too: the interpolated gains are a PID of their own
+        halves = [0.5 * (float(a) + float(b)) for a, b in zip(schedule.breakpoints[:-1], schedule.breakpoints[1:])]
+        points += [operating_point(config, h) for h in halves]
+        labels += [f"{_label(h)} (between breakpoints)" for h in halves]
+    drawn, names = _on_draws(scenario, gains, points[:len(schedule.breakpoints) if setpoints else 1], lambda p: p[0])
+    return Candidate(name, metrics, mc, _margins_at(scenario.tuning, gains, points) + drawn, labels + names,
+                     load_iae=load, draws=len(parameter_samples(scenario.tuning)))
 
 
 def error_loop(schedule: GainSchedule) -> int | None:
@@ -139,26 +147,36 @@ def range_points(config, loop: int) -> list[list[float]]:
     return points
 
 
+def holdout(scenario, schedule: GainSchedule, seed: int) -> dict:
+    """replay.training_metrics (ISE, TotalVariation, unsettled) over HOLDOUT_EPISODES seeded episodes of the training
+    distribution (scenario.tuning: its random setpoints, noise, disturbances, randomisation), replayed as a plain
+    PID. The seeds are disjoint from those the table was built and chosen on, and from the evaluation's."""
+    return training_metrics(schedule, scenario.tuning, seed, episodes=HOLDOUT_EPISODES, offset=HOLDOUT_SEED_OFFSET)
+
+
 def holdout_ise(scenario, schedule: GainSchedule, seed: int) -> float:
-    """ISE summed over HOLDOUT_EPISODES seeded episodes of the training distribution (scenario.tuning: its random
-    setpoints, noise, disturbances, randomisation), replayed as a plain PID; infinity when one diverges. The
-    seeds are disjoint from those the table was built and chosen on, and from the evaluation's."""
-    return training_ise(schedule, scenario.tuning, seed, episodes=HOLDOUT_EPISODES, offset=HOLDOUT_SEED_OFFSET)
+    """The held-out ISE (`holdout`); infinity when an episode diverges."""
+    return holdout(scenario, schedule, seed)["ISE"]
 
 
-def assess(scenario, schedule: GainSchedule | None, fixed_gains: Gains,
-           seed: int | None = None) -> tuple[Decision, Candidate | None, Candidate]:
-    """Evidence for both controllers and the decision (deliver.rule.choose) with deploy.max_sensitivity.
+def assess(scenario, schedule: GainSchedule | None, fixed_gains: Gains, seed: int | None = None,
+           classical: GainSchedule | None = None) -> tuple[Decision, Candidate | None, Candidate, Candidate | None]:
+    """Evidence for every controller and the decision (deliver.rule.choose_among) with deploy.max_sensitivity:
+    (decision, adaptive schedule's, fixed PID's, classical schedule's; None where there is none).
 
     seed: of the held-out training-distribution episodes (holdout_ise); None = scenario.agent.seed."""
     seed = scenario.agent.seed if seed is None else seed
     limit = max_sensitivity(scenario)
     fixed = assess_fixed(scenario, fixed_gains)
     sched = assess_schedule(scenario, schedule) if schedule is not None else None
-    if sched is not None:
-        sched.holdout_ise = holdout_ise(scenario, schedule, seed)
-        fixed.holdout_ise = holdout_ise(scenario, fixed_schedule(fixed_gains, scenario.tuning), seed)
-    return choose(sched, fixed, limit), sched, fixed
+    table = assess_schedule(scenario, classical, Deployed.CLASSICAL.value) if classical is not None else None
+    for c, s in ((fixed, fixed_schedule(fixed_gains, scenario.tuning) if sched or table else None),
+                 (sched, schedule), (table, classical)):
+        if c is not None and s is not None:
+            held = holdout(scenario, s, seed)
+            c.holdout_ise, c.holdout_tv, c.holdout_unsettled = held["ISE"], held["TotalVariation"], held["unsettled"]
+    decision = choose_among(sched, table, fixed, limit, scenario.deploy.allow_unverified)
+    return decision, sched, fixed, table
 
 
 def max_sensitivity(scenario) -> float:
@@ -175,5 +193,7 @@ def candidate_summary(c: Candidate) -> dict:
                         for b, m in zip(c.breakpoints, c.margins)],
             "worst_Ms": c.worst_Ms if math.isfinite(c.worst_Ms) else None, "parameter_draws": c.draws,
             "load_iae": None if math.isnan(c.load_iae) else c.load_iae,
+            "holdout_total_variation": None if math.isnan(c.holdout_tv) else c.holdout_tv
+            if math.isfinite(c.holdout_tv) else "inf", "holdout_unsettled_episodes": c.holdout_unsettled,
             "holdout_ise": None if math.isnan(c.holdout_ise) else c.holdout_ise if math.isfinite(c.holdout_ise)
             else "inf"}

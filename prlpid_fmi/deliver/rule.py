@@ -3,17 +3,24 @@
 Rule (one place; explained in docs/architecture.md "Deliverable"):
 - A controller is eligible when it never diverged (evaluation and every Monte-Carlo sample), no margin
   estimate failed (robustness.status: diverged, at a limit, too lightly damped to settle) and its worst
-  peak sensitivity Ms over the verified estimates is at most `max_sensitivity` (estimates impossible to
-  make, on a plant that varies faster than the experiment, neither qualify nor disqualify).
+  peak sensitivity Ms over the verified estimates is at most `max_sensitivity`. An estimate impossible to
+  make (a plant that varies faster than the experiment) does not disqualify the fixed PID (the verdict says
+  so), but the gain schedule is deployed on verified robustness only: every one of its estimates verified,
+  unless `allow_unverified` (deploy.allow_unverified) opts in.
 - Its score is the evaluation's ISE plus the mean ISE over the Monte-Carlo samples.
 - The schedule is deployed when it is eligible, scores at least MIN_IMPROVEMENT below the fixed PID (a
   table of gains must earn its place over one set of gains: a tie is not a win), its total variation
   of u is at most TOTAL_VARIATION_LIMIT times the fixed PID's (no ISE bought by chattering), and its
   ISE on held-out episodes of the training distribution (`holdout_ise`: seeds used for nothing else)
   is no worse than the fixed PID's (a win on one evaluation schedule must carry over to setpoints and
-  disturbances it was not measured on), and its load IAE (load steps at the plant input over the setpoint
+  disturbances it was not measured on), nor is its total variation of u there above TOTAL_VARIATION_LIMIT times
+  the fixed PID's, nor does it leave a setpoint step unsettled in more of those episodes, and its load IAE (load steps at the plant input over the setpoint
   range) is at most LOAD_TOLERANCE times the fixed PID's (setpoint ISE alone does not decide); otherwise the fixed PID when it is eligible; otherwise nothing
   is deployable.
+- With a classical gain schedule (tuning.schedule.classical, on nonlinear plants) there are three candidates:
+  the classical schedule must first win over the fixed PID by the rule above (`choose_among`); the winner is
+  the incumbent the adaptive schedule must then beat by the same rule. So the adaptive policy is deployed only
+  where it beats classical gain scheduling, and classical scheduling only where it beats one fixed PID.
 """
 from __future__ import annotations
 
@@ -29,6 +36,7 @@ class Deployed(str, enum.Enum):
     """What a run deploys. The value is the word metrics.json, schedule.csv's report and the sweep tables write."""
 
     SCHEDULE = "gain schedule"
+    CLASSICAL = "classical gain schedule"
     FIXED_PID = "fixed PID"
     NONE = "none"
 
@@ -67,6 +75,8 @@ class Candidate:
     margins: list = field(default_factory=list)
     breakpoints: list = field(default_factory=list)
     holdout_ise: float = math.nan  # ISE over held-out training-distribution episodes (NaN: not measured)
+    holdout_tv: float = math.nan  # total variation of u over the same episodes (NaN: not measured)
+    holdout_unsettled: int | None = None  # how many of them leave a setpoint step unsettled (None: not measured)
     load_iae: float = math.nan  # load IAE per unit load of tuning.load_design's experiment (NaN: not measured)
     draws: int = 0  # Monte-Carlo parameter draws the margins were also measured on (labelled in words; deliver.evidence)
 
@@ -148,38 +158,71 @@ class Decision:
     reasons: tuple[str, ...]
 
 
-def choose(schedule: Candidate | None, fixed: Candidate, max_sensitivity: float) -> Decision:
-    """Apply the rule of the module docstring."""
+def choose(schedule: Candidate | None, fixed: Candidate, max_sensitivity: float,
+           allow_unverified: bool = False) -> Decision:
+    """Apply the rule of the module docstring to a schedule and an incumbent (`fixed`: the fixed PID, or the
+    classical schedule that beat it; its name is what the reasons compare with)."""
     reasons = []
+    against = fixed.name
     if schedule is not None:
         problems = schedule.problems(max_sensitivity)
+        impossible = sum(status(m) == Robustness.IMPOSSIBLE for m in schedule.margins)
+        if not problems and impossible and not allow_unverified:
+            problems.append(f"its robustness is not verified ({impossible} of {len(schedule.margins)} Ms estimates "
+                            "impossible to make: the plant varies faster than the margin experiment); "
+                            "deploy.allow_unverified: true deploys it anyway")
         if not problems:
             if not schedule.score <= (1 - MIN_IMPROVEMENT) * fixed.score:
-                problems.append(f"it does not beat the fixed PID on ISE by {MIN_IMPROVEMENT:.0%} or more "
+                problems.append(f"it does not beat the {against} on ISE by {MIN_IMPROVEMENT:.0%} or more "
                                 f"({schedule.score:.4g} vs {fixed.score:.4g})")
             tv_s, tv_f = _total_variation(schedule), _total_variation(fixed)
             if tv_s > TOTAL_VARIATION_LIMIT * tv_f:
-                problems.append(f"its control signal varies {tv_s / tv_f:.1f}x as much as the fixed PID's "
+                problems.append(f"its control signal varies {tv_s / tv_f:.1f}x as much as the {against}'s "
                                 f"(limit {TOTAL_VARIATION_LIMIT}x)")
             l_s, l_f = schedule.load_iae, fixed.load_iae
             if not (math.isnan(l_s) or math.isnan(l_f)) and not l_s <= LOAD_TOLERANCE * l_f:
-                problems.append(f"it rejects load steps worse than the fixed PID (load IAE {l_s:.4g} against "
+                problems.append(f"it rejects load steps worse than the {against} (load IAE {l_s:.4g} against "
                                 f"{l_f:.4g}, limit {LOAD_TOLERANCE}x): better setpoint tracking does not make up "
                                 "for that")
+            v_s, v_f = schedule.holdout_tv, fixed.holdout_tv
+            if not (math.isnan(v_s) or math.isnan(v_f) or math.isinf(v_s)) and v_s > TOTAL_VARIATION_LIMIT * v_f:
+                problems.append(f"on held-out episodes of the training distribution its control signal varies "
+                                f"{v_s / v_f:.1f}x as much as the {against}'s (limit {TOTAL_VARIATION_LIMIT}x)")
+            n_s, n_f = schedule.holdout_unsettled, fixed.holdout_unsettled
+            if n_s is not None and n_f is not None and n_s > n_f:
+                problems.append(f"on held-out episodes of the training distribution it leaves a setpoint step "
+                                f"unsettled in {n_s} episodes (the {against}: {n_f})")
             h_s, h_f = schedule.holdout_ise, fixed.holdout_ise
             if not (math.isnan(h_s) or math.isnan(h_f)) and not h_s <= h_f:
                 problems.append("its win does not carry over: on held-out episodes of the training distribution "
                                 + ("it diverged" if math.isinf(h_s) else
-                                   f"its ISE is {h_s:.4g} against the fixed PID's {h_f:.4g}"))
+                                   f"its ISE is {h_s:.4g} against the {against}'s {h_f:.4g}"))
         if not problems:
-            return Decision(Deployed.SCHEDULE, (f"it beats the fixed PID on ISE ({schedule.score:.4g} vs "
-                                              f"{fixed.score:.4g}) within the robustness and effort limits",))
-        reasons += [f"The gain schedule is not deployed: {p}." for p in problems]
+            return Decision(Deployed(schedule.name), (f"The {schedule.name} beats the {against} on ISE "
+                                                    f"({schedule.score:.4g} vs {fixed.score:.4g}) within the "
+                                                    "robustness and effort limits.",))
+        reasons += [f"The {schedule.name} is not deployed: {p}." for p in problems]
     problems = fixed.problems(max_sensitivity)
     if not problems:
-        return Decision(Deployed.FIXED_PID, tuple(reasons))
-    reasons += [f"The fixed PID is not deployable either: {p}." for p in problems]
+        return Decision(Deployed(fixed.name), tuple(reasons))
+    reasons += [f"The {fixed.name} is not deployable either: {p}." for p in problems]
     return Decision(Deployed.NONE, tuple(reasons))
+
+
+def choose_among(schedule: Candidate | None, classical: Candidate | None, fixed: Candidate, max_sensitivity: float,
+                 allow_unverified: bool = False) -> Decision:
+    """The three-candidate rule of the module docstring (classical None: `choose` of the schedule and the fixed
+    PID). The reasons of both comparisons are kept, in order."""
+    if classical is None:
+        return choose(schedule, fixed, max_sensitivity, allow_unverified)
+    first = choose(classical, fixed, max_sensitivity, allow_unverified)
+    if schedule is None:
+        return first
+    incumbent = classical if first.deploy == Deployed.CLASSICAL else fixed  # NONE: the fixed PID's measures
+    second = choose(schedule, incumbent, max_sensitivity, allow_unverified)
+    if second.deploy == Deployed.SCHEDULE:
+        return Decision(Deployed.SCHEDULE, second.reasons + first.reasons)
+    return Decision(first.deploy, first.reasons + tuple(r for r in second.reasons if r not in first.reasons))
 
 
 def _total_variation(c: Candidate) -> float:

@@ -83,21 +83,18 @@ def _sample_time_note(key: str, ts: float, r) -> Optional[str]:
 
 def check_loops(tuning, source: Optional[str | Path] = None) -> list[str]:
     """Refuse a scenario whose loops cannot be closed (ScenarioError, one line naming the file and each
-    problem's key), else return the warnings. Runs in a worker process where the scenario isolates the plant
-    (plant.isolation: process) or the FMU may be instantiated once per process; an FMU that cannot be probed
-    (it crashes, fails a step) gives a warning only: tune's own fault handling then reports it."""
-    from prlpid_fmi.fmu import describe_fmu
+    problem's key), else return the warnings. Always in a worker process (fmu.worker.call_in_worker): the check
+    runs before the run directory exists, so an FMU that crashes or hangs here must not take the tool with it;
+    an FMU that cannot be probed (it crashes, hangs, fails a step) gives a warning only: tune's own fault
+    handling, with its run directory and --resume, then deals with it."""
     from prlpid_fmi.fmu.resolve import resolve_fmu
+    from prlpid_fmi.fmu.worker import call_in_worker
 
     where = f"{source}: " if source else ""
     try:
         path = resolve_fmu(tuning.fmu, tuning.fmi_version)
-        if tuning.isolation == "process" or describe_fmu(path).once_per_process:
-            from prlpid_fmi.fmu.worker import call_in_worker
-
-            problems, notes = call_in_worker(loop_findings, tuning, fmus=[path], what="the loop check")
-        else:
-            problems, notes = loop_findings(tuning)
+        problems, notes = call_in_worker(loop_findings, tuning, fmus=[path], what="the loop check",
+                                         step_timeout_s=tuning.step_timeout_s)
     except (PlantError, OSError) as exc:
         return [f"{where}the loops could not be measured before the search ({exc}); tuning without the check"]
     if problems:

@@ -18,7 +18,7 @@ from prlpid_fmi.deliver.rule import Candidate, Deployed
 from prlpid_fmi.fmu.resolve import loop_units as units_of_loops
 from prlpid_fmi.loop.core import pid_structure
 from prlpid_fmi.metrics import overall_metric
-from prlpid_fmi.robustness.status import why
+from prlpid_fmi.robustness.status import INFINITE_MS, ms_text, why
 
 METRIC_COLUMNS = ("ISE", "IAE", "ITAE", "Overshoot", "SettlingTime", "RiseTime", "SteadyStateError",
                   "PeakDeviation", "RecoveryTime", "ControlEffort", "TotalVariation", "Chatter")
@@ -136,10 +136,11 @@ def deployed_section(deployed: Deployed, schedule_m: dict | None, fixed_m: dict 
                      units: tuple[str, str] = ("", "")) -> str:
     """An evaluation report's opening: what the run deployed (schedule.csv) and how it does on this evaluation."""
     lines = ["## Deployed controller on this evaluation", ""]
-    if deployed == Deployed.SCHEDULE and schedule_m is not None:
-        lines += ["The run deployed its adaptive gain schedule (schedule.csv, replayed here as a plain gain-scheduled "
+    if deployed in (Deployed.SCHEDULE, Deployed.CLASSICAL) and schedule_m is not None:
+        kind = "adaptive" if deployed == Deployed.SCHEDULE else "classical"
+        lines += [f"The run deployed its {kind} gain schedule (schedule.csv, replayed here as a plain gain-scheduled "
                   "PID, no neural network), beside the fixed PID:", "",
-                  candidates_table(Candidate("gain schedule (deployed)", schedule_m),
+                  candidates_table(Candidate(f"{deployed} (deployed)", schedule_m),
                                    Candidate("fixed PID", fixed_m) if fixed_m else None, units, margins=False)]
     elif deployed == Deployed.FIXED_PID:
         lines += ["The run deployed the fixed PID (schedule.csv holds it as a one-row table): its column below is "
@@ -150,21 +151,22 @@ def deployed_section(deployed: Deployed, schedule_m: dict | None, fixed_m: dict 
     return "\n".join(lines)
 
 
-def candidates_table(sched, fixed, units: tuple[str, str] = ("", ""), margins: bool = True) -> str:
-    """Both deployable controllers side by side (plain PIDs, no neural network), metrics with units; margins:
-    with the worst-Ms row (their Candidates carry margins)."""
+def candidates_table(sched, fixed, units: tuple[str, str] = ("", ""), margins: bool = True, classical=None) -> str:
+    """The deployable controllers side by side (plain PIDs, no neural network: the adaptive schedule, the classical
+    one when built, the fixed PID), metrics with units; margins: with the worst-Ms row (their Candidates carry
+    margins)."""
     y_unit, u_unit = units
     rows = [("ISE", "ISE"), ("IAE", "IAE"), ("Overshoot", "overshoot"), ("SettlingTime", "settling time"),
             ("PeakDeviation", "peak deviation (regulation)"), ("RecoveryTime", "recovery time (regulation)"),
             ("TotalVariation", "total variation of u"), ("Chatter", "chatter (u reversing, fraction of samples)")]
-    cands = [c for c in (sched, fixed) if c is not None]
+    cands = [c for c in (sched, classical, fixed) if c is not None]
     lines = ["| metric (evaluation) | unit | " + " | ".join(c.name for c in cands) + " |",
              "|---|---|" + "---|" * len(cands)]
     for key, label in rows:
         cells = [number(overall_metric(c.metrics["overall"], key)) for c in cands]
         lines.append(f"| {label} | {unit_label(key, y_unit, u_unit)} | " + " | ".join(cells) + " |")
     if margins:
-        lines.append("| worst Ms (limit in the verdict) | – | " + " | ".join(number(c.worst_Ms, 3) for c in cands)
+        lines.append("| worst Ms (limit in the verdict) | – | " + " | ".join(ms_text(c.worst_Ms) for c in cands)
                      + " |")
     if all(not math.isnan(c.load_iae) for c in cands):
         lines.append(f"| load IAE per unit load, load steps at the plant input (low / mid / high setpoint) | "
@@ -174,6 +176,12 @@ def candidates_table(sched, fixed, units: tuple[str, str] = ("", ""), margins: b
         lines.append(f"| ISE, {HOLDOUT_EPISODES} held-out training-distribution episodes | "
                      f"{unit_label('ISE', y_unit, u_unit)} | " + " | ".join(
                          "diverged" if math.isinf(c.holdout_ise) else number(c.holdout_ise) for c in cands) + " |")
+    if all(not math.isnan(c.holdout_tv) for c in cands):
+        lines.append(f"| total variation of u, the same episodes | {u_unit or 'u-unit'} | " + " | ".join(
+            "diverged" if math.isinf(c.holdout_tv) else number(c.holdout_tv) for c in cands) + " |")
+    if all(c.holdout_unsettled is not None for c in cands):
+        lines.append(f"| episodes with a setpoint step left unsettled, of {HOLDOUT_EPISODES} | – | "
+                     + " | ".join(str(c.holdout_unsettled) for c in cands) + " |")
     if any(c.monte_carlo for c in cands):
         ise = unit_label("ISE", y_unit, u_unit)
         lines.append(f"| mean ISE, Monte-Carlo set | {ise} | " + " | ".join(
@@ -201,9 +209,9 @@ def margins_table(candidates, limit: float, point_unit: str = "") -> str:
 
 
 def _margin(value: float) -> str:
-    """A margin as text: 3 significant digits, "∞" / "-∞" for infinite ones, "–" for NaN."""
+    """A margin as text: 3 significant digits, INFINITE_MS / "-∞" for infinite ones, "–" for NaN."""
     if math.isinf(value):
-        return "∞" if value > 0 else "-∞"
+        return INFINITE_MS if value > 0 else "-∞"
     return number(value, 3)
 
 

@@ -4,10 +4,11 @@ from __future__ import annotations
 import math
 
 from prlpid_fmi.deliver.rule import Candidate, Decision, Deployed
+from prlpid_fmi.robustness.status import ms_text
 
 
 def _ms(c: Candidate) -> str:
-    return "not verified" if math.isnan(c.worst_Ms) else f"{c.worst_Ms:.2f}"
+    return ms_text(c.worst_Ms)
 
 
 def _points(c: Candidate) -> str:
@@ -22,10 +23,20 @@ def _ratio(a: float, b: float) -> str:
 
 
 def verdict(decision: Decision, schedule: Candidate | None, fixed: Candidate, max_sensitivity: float,
-            gain_mapping: str = "anchored") -> str:
-    """The report's opening paragraph, in words (markdown); gain_mapping: the run's controller.gain_mapping."""
+            gain_mapping: str = "anchored", classical: Candidate | None = None) -> str:
+    """The report's opening paragraph, in words (markdown); gain_mapping: the run's controller.gain_mapping;
+    classical: the classical gain schedule's evidence when one was built."""
     lines = ["## Verdict", ""]
-    if decision.deploy == Deployed.SCHEDULE:
+    if decision.deploy == Deployed.CLASSICAL:
+        c, f = classical, fixed
+        lines.append(f"**Deploy the classical gain schedule** (schedule.csv: a local PID design at each of "
+                     f"{len([b for b in c.breakpoints if isinstance(b, (int, float))])} operating points, "
+                     f"interpolated over the setpoint; a plain gain-scheduled PID). On the evaluation its ISE is "
+                     f"{_ratio(c.overall('ISE'), f.overall('ISE'))} the fixed PID's and its worst Ms {_ms(c)} (fixed "
+                     f"PID {_ms(f)}; limit {max_sensitivity:g}). Ratios are classical schedule ÷ fixed PID.")
+        if schedule is not None:
+            lines.append("The adaptive schedule did not beat it (why: below).")
+    elif decision.deploy == Deployed.SCHEDULE:
         s, f = schedule, fixed
         if math.isfinite(s.overall("Overshoot")) and f.overall("Overshoot") > 0:
             shape = f"its overshoot {_ratio(s.overall('Overshoot'), f.overall('Overshoot'))}"
@@ -52,7 +63,7 @@ def verdict(decision: Decision, schedule: Candidate | None, fixed: Candidate, ma
         lines.append(f"**Nothing here is safe to deploy**: no controller meets the robustness limit Ms <= "
                      f"{max_sensitivity:g} without diverging. Narrow the gain ranges, lower the sample time, or "
                      "check the plant's limits and operating range.")
-    unverified = [c.name for c in (schedule, fixed) if c is not None and c.unverified]
+    unverified = [c.name for c in (schedule, classical, fixed) if c is not None and c.unverified]
     if unverified:
         lines.append(f"Robustness could not be verified for: {', '.join(unverified)} (the frequency-response "
                      "estimate on the FMU was unreliable, e.g. a time-varying or strongly nonlinear plant); "

@@ -45,6 +45,17 @@ def meets_limit(margins, limit: float) -> bool:
     return state == Robustness.IMPOSSIBLE or (state == Robustness.VERIFIED and margins.Ms <= limit)
 
 
+INFINITE_MS = "∞"  # the one word for an infinite Ms (a diverged loop) in tables, verdict and notes
+
+
+def ms_text(value: float, digits: int = 3) -> str:
+    """An Ms as text: INFINITE_MS for +inf, "not verified" for NaN (no estimate counts), else `digits` significant
+    digits."""
+    if math.isnan(value):
+        return "not verified"
+    return INFINITE_MS if math.isinf(value) else f"{value:.{digits}g}"
+
+
 def why(margins, limit: float) -> str:
     """One sentence on the state, for the report."""
     state = status(margins)
@@ -54,6 +65,6 @@ def why(margins, limit: float) -> str:
     if state == Robustness.FAILED:
         if not math.isfinite(margins.Ms):
             return ("failed: in the margin measurement the loop diverged or was held at an actuator limit (Ms = "
-                    "infinity" + (f"; {margins.note}" if margins.note else "") + ")")
+                    f"{INFINITE_MS}" + (f"; {margins.note}" if margins.note else "") + ")")
         return f"failed: {margins.note}"
     return f"impossible: {margins.note}"

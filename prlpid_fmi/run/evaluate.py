@@ -101,9 +101,31 @@ def evaluate_run(run_dir: str | Path, scenario_path: str | Path | None = None) -
     opening = ()
     if deployed is not None:
         metrics["deployed"] = deployed
-        metrics["deployed_schedule"] = ev.schedule if deployed == Deployed.SCHEDULE else None
+        metrics["deployed_schedule"] = ev.schedule if deployed in (Deployed.SCHEDULE, Deployed.CLASSICAL) else None
         opening = (deployed_section(deployed, ev.schedule, ev.fixed, loop_units(ev.config)),)
+    metrics.update(other_tables(run_dir, ev.config, scenario, deployed))
     write_json(out_dir / rd.METRICS, metrics)
     write_atomic(out_dir / rd.REPORT, evaluation_report(scenario, ev, fixed, source, learning_curve=False,
                                                         opening=opening))
     return out_dir
+
+
+def other_tables(run_dir: Path, config: TuningConfig, scenario: Scenario, deployed) -> dict:
+    """{"adaptive_schedule", "classical_schedule"}: the metrics of the run's gain tables on this evaluation (replayed
+    as plain PIDs) where the run has them (adaptive_schedule.csv, classical_schedule.csv), None where not; the
+    deployed one is deployed_schedule already."""
+    from prlpid_fmi.tuning.schedule.csv_file import read_schedule_csv
+    from prlpid_fmi.tuning.schedule.replay import replay_schedule
+
+    out = {}
+    for key, name, kind in (("adaptive_schedule", rd.ADAPTIVE_SCHEDULE, Deployed.SCHEDULE),
+                            ("classical_schedule", rd.CLASSICAL_SCHEDULE, Deployed.CLASSICAL)):
+        path = run_dir / name
+        if not path.is_file():
+            out[key] = None
+            continue
+        table = read_schedule_csv(path)
+        out[key] = replay_schedule(table, config, seed=scenario.evaluation.seed,
+                                   intervals=list(scenario.evaluation.intervals) or None)[0]
+        out[key]["deployed"] = deployed == kind
+    return out

@@ -2,6 +2,7 @@
 
     start        the scenario, seed and budget -> run.json and scenario.yaml (resume: read back)
     fixed_pid    the scenario -> the tuned fixed PID, fixed_pid.json and .csv (resume: read back)
+    classical    on a nonlinear plant: local PID designs across the setpoint range -> classical_schedule.csv
     training     the scenario and the anchor -> the trained policy, model.zip and checkpoints
     schedule     the policy -> the candidate gain table (deliver.candidates), or why there is none
     evaluation   policy, fixed PID and table on the evaluation -> metrics, gains.csv, plots
@@ -97,6 +98,7 @@ class Choice:
     decision: Decision
     schedule: object | None
     fixed: object
+    classical: object | None = None
 
 
 @dataclass
@@ -118,14 +120,15 @@ def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None
     fixed = fixed_pid_stage(scenario, run_dir, progress_bar, baseline)
     scenario = with_structure(scenario, fixed)  # the tuned b, c, Tf from here on
     started = dataclasses.replace(started, scenario=scenario)
+    classical = classical_stage(scenario, run_dir, fixed, info, progress_bar) if fixed is not None else None
     anchor = anchor_gains(scenario, fixed)
     training_stage(scenario, run_dir, info, resume, anchor, progress_bar)
     policy = load_policy(run_dir, scenario.agent.algorithm)
     table = schedule_stage(policy, scenario, anchor, progress_bar)
     info.update(table.info)
     ev = evaluation_stage(run_dir, scenario, started.source, policy, fixed, anchor, table.table, progress_bar)
-    choice = choice_stage(scenario, table.table, fixed, progress_bar) if fixed is not None else None
-    files_stage(run_dir, started, ev, fixed, table, choice)
+    choice = choice_stage(scenario, table.table, fixed, progress_bar, classical) if fixed is not None else None
+    files_stage(run_dir, started, ev, fixed, table, choice, classical)
     return run_dir
 
 
@@ -167,7 +170,7 @@ def fixed_pid_stage(scenario: Scenario, run_dir: Path, progress_bar: bool, basel
     content ({"action", "gains", "cost", "evaluations"}); read back when the run has one (resume); None when
     `baseline` is off and the gain map is absolute."""
     from prlpid_fmi.deliver.evidence import max_sensitivity
-    from prlpid_fmi.progress import Progress
+    from prlpid_fmi.progress import Steps
     from prlpid_fmi.tuning import fixed_pid as search_module
     from prlpid_fmi.tuning.schedule.csv_file import write_schedule_csv
     from prlpid_fmi.tuning.schedule.table import fixed_schedule
@@ -177,19 +180,54 @@ def fixed_pid_stage(scenario: Scenario, run_dir: Path, progress_bar: bool, basel
     if not baseline and scenario.tuning.gain_mapping != "anchored":
         return None
     b = scenario.baseline
-    search = Progress("fixed-PID search", "evaluations") if progress_bar else None
+    search = Steps("fixed-PID search", enabled=progress_bar)
     result = search_module.tune_fixed_pid(scenario.tuning, seed=scenario.agent.seed, episodes=b.episodes,
-                                          maxiter=b.maxiter, popsize=b.popsize,
-                                          callback=search.update if search else None,
+                                          maxiter=b.maxiter, popsize=b.popsize, progress=search,
                                           max_sensitivity=max_sensitivity(scenario), baseline=b,
                                           deploy=scenario.deploy)
-    if search:
-        search.close()
+    search.close()
     fixed = {"action": result.action.tolist(), "gains": result.gains.as_dict(), "cost": result.cost,
              "evaluations": result.evaluations, "structure": result.structure_dict(), "design": result.info}
     write_json(run_dir / rd.FIXED_PID, fixed)
     write_schedule_csv(fixed_schedule(result.gains, with_structure(scenario, fixed).tuning), run_dir / rd.FIXED_PID_CSV)
     return fixed
+
+
+def classical_stage(scenario: Scenario, run_dir: Path, fixed: dict, info: dict, progress_bar: bool):
+    """The classical gain schedule (tuning.schedule.classical) where deploy.classical_schedule asks for it (auto: a
+    plant nonlinear over the setpoint range), written to classical_schedule.csv; run.json records why it was or
+    was not built (resume: read back). None when not built or when it could not be (said in run.json)."""
+    from prlpid_fmi.loop.gains import gains_from_dict
+    from prlpid_fmi.progress import Steps
+    from prlpid_fmi.tuning.schedule.classical import classical_schedule, wanted
+    from prlpid_fmi.tuning.schedule.csv_file import read_schedule_csv, write_schedule_csv
+
+    path = run_dir / rd.CLASSICAL_SCHEDULE
+    if path.is_file():
+        return read_schedule_csv(path)
+    if "classical_schedule" in info:  # decided before (resume): not built
+        return None
+    build, variation = wanted(scenario.deploy.classical_schedule, scenario.tuning,
+                              gains_from_dict(fixed["gains"]).values())
+    record = {"built": build, "gain_variation": variation if variation == variation else None}
+    table = None
+    if build and scenario.tuning.coupled:
+        record.update(built=False, why="the classical schedule is built for independent loops (controller.coupled)")
+        build = False
+    if build:
+        steps = Steps("classical gain schedule", enabled=progress_bar)
+        try:
+            table, details = classical_schedule(scenario, fixed, steps)
+            record.update(details)
+            write_schedule_csv(table, path)
+        except PrlPidError as exc:
+            record.update(built=False, why=str(exc))
+            table = None
+        finally:
+            steps.close()
+    info["classical_schedule"] = record
+    write_json(run_dir / rd.RUN_INFO, info)
+    return table
 
 
 def training_stage(scenario: Scenario, run_dir: Path, info: dict, resume: bool, anchor, progress_bar: bool) -> None:
@@ -235,18 +273,19 @@ def evaluation_stage(run_dir: Path, scenario: Scenario, source: Path, policy, fi
     return ev
 
 
-def choice_stage(scenario: Scenario, table, fixed: dict, progress_bar: bool) -> Choice:
-    """The evidence for both plain PIDs (replays, Monte-Carlo set, held-out episodes, margins) and the decision."""
+def choice_stage(scenario: Scenario, table, fixed: dict, progress_bar: bool, classical=None) -> Choice:
+    """The evidence for every plain PID (replays, Monte-Carlo set, held-out episodes, margins) and the decision."""
     from prlpid_fmi.deliver.evidence import assess
     from prlpid_fmi.progress import stage
 
     with stage("choice of the deployed controller (replays, Monte-Carlo set, margins)", progress_bar):
-        decision, sched_c, fixed_c = assess(scenario, table, gains_from_dict(fixed["gains"]))
-    return Choice(decision, sched_c, fixed_c)
+        decision, sched_c, fixed_c, classical_c = assess(scenario, table, gains_from_dict(fixed["gains"]),
+                                                         classical=classical)
+    return Choice(decision, sched_c, fixed_c, classical_c)
 
 
 def files_stage(run_dir: Path, started: Started, ev: Evaluation, fixed: dict | None, table: ScheduleResult,
-                choice: Choice | None) -> None:
+                choice: Choice | None, classical=None) -> None:
     """schedule.csv (the deployed controller), metrics.json and report.md built once from the stages' results,
     the learning curve, and run.json marked finished."""
     from prlpid_fmi.deliver.evidence import candidate_summary, max_sensitivity
@@ -259,22 +298,28 @@ def files_stage(run_dir: Path, started: Started, ev: Evaluation, fixed: dict | N
     scenario, info = started.scenario, started.info
     metrics, opening = evaluation_metrics(ev, fixed), ()
     if choice is not None:
-        deployed = {Deployed.SCHEDULE: table.table,
+        deployed = {Deployed.SCHEDULE: table.table, Deployed.CLASSICAL: classical,
                     Deployed.FIXED_PID: fixed_schedule(gains_from_dict(fixed["gains"]), scenario.tuning)
                     }.get(choice.decision.deploy)
         if deployed is not None:
             write_schedule_csv(deployed, run_dir / rd.SCHEDULE)
         metrics.update(deployed=choice.decision.deploy, decision=list(choice.decision.reasons),
                        schedule_replay=candidate_summary(choice.schedule) if choice.schedule is not None else None,
-                       fixed_pid_assessment=candidate_summary(choice.fixed))
+                       fixed_pid_assessment=candidate_summary(choice.fixed),
+                       classical_schedule_replay=candidate_summary(choice.classical)
+                       if choice.classical is not None else None)
         units = loop_units(scenario.tuning)
         opening = (verdict(choice.decision, choice.schedule, choice.fixed, max_sensitivity(scenario),
-                           scenario.tuning.gain_mapping).rstrip(), "",
-                   candidates_table(choice.schedule, choice.fixed, units), "### Robustness at each operating point", "",
-                   margins_table((choice.fixed, choice.schedule), max_sensitivity(scenario), units[0]),
+                           scenario.tuning.gain_mapping, choice.classical).rstrip(), "",
+                   candidates_table(choice.schedule, choice.fixed, units, classical=choice.classical),
+                   "### Robustness at each operating point", "",
+                   margins_table((choice.fixed, choice.classical, choice.schedule), max_sensitivity(scenario),
+                                 units[0]),
                    design_section(fixed, [l.output for l in scenario.tuning.loops]))
     elif table.table is not None:
         write_schedule_csv(table.table, run_dir / rd.SCHEDULE)
+    if table.table is not None:  # deployed or not: `evaluate` replays it on held-out schedules
+        write_schedule_csv(table.table, run_dir / rd.ADAPTIVE_SCHEDULE)
     write_json(run_dir / rd.METRICS, metrics)
     report = evaluation_report(scenario, ev, fixed, started.source, learning_curve=True, opening=opening)
     if table.note:

@@ -271,10 +271,13 @@ def _read(path: Path, file: str) -> str:
                             f"(got {file!r}; expected a readable file)") from None
 
 
-def load_scenario(path: str | Path) -> Scenario:
+def load_scenario(path: str | Path, base: str | Path | None = None) -> Scenario:
     """Read, validate and build a scenario file.
 
-    Raises ScenarioError listing every mistake, one line each, in file order.
+    base: a complete scenario file the file's sections are laid over (each section the file has replaces the
+    base's whole; the file may then hold only, say, `evaluation:`); paths resolve against base's folder, and the
+    scenario keeps base's name unless the file gives one. Raises ScenarioError listing every mistake, one line
+    each, in file order.
     """
     p = Path(path)
     file = str(path)
@@ -284,16 +287,21 @@ def load_scenario(path: str | Path) -> Scenario:
     except yaml.YAMLError as exc:
         raise ScenarioError(syntax_error_line(file, exc)) from None
     lines = list(zip((d[0] for d in document.duplicates), document.duplicate_lines(file)))
+    data, folder, name = document.data, p.resolve().parent, p.stem
+    if base is not None:
+        under = parse_yaml(_read(Path(base), str(base))).data
+        if isinstance(data, dict) and isinstance(under, dict):
+            data, folder, name = {**under, **data}, Path(base).resolve().parent, str(under.get("name") or Path(base).stem)
     model = None
     try:
-        model = ScenarioModel.model_validate(document.data, context={"state": State(p.resolve().parent)})
+        model = ScenarioModel.model_validate(data, context={"state": State(folder)})
     except ValidationError as exc:
-        lines += [(tuple(err["loc"]), error_line(file, document.data, err)) for err in exc.errors()]
+        lines += [(tuple(err["loc"]), error_line(file, data, err)) for err in exc.errors()]
     if lines:
         ordered = sorted(range(len(lines)), key=lambda i: (document.line_of(lines[i][0]) or 10**9, i))
         unique = list(dict.fromkeys(lines[i][1] for i in ordered))
         raise ScenarioError("\n".join(unique))
-    return build_scenario(model, p.stem, file)
+    return build_scenario(model, name, file)
 
 
 def validate_scenario(path: str | Path) -> Scenario:

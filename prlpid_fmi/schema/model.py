@@ -749,6 +749,7 @@ class BaselineModel(Section):
     popsize: Count = Field(10, description="population = popsize x number of gains searched")
 
 
+ClassicalSchedule = Literal["auto", "on", "off"]  # deploy.classical_schedule (prlpid_fmi.tuning.schedule.classical)
 ScheduleBy = Literal["auto", "setpoint", "measurement", "error"]  # deploy.schedule_by (prlpid_fmi.tuning.schedule.trajectories)
 
 
@@ -762,6 +763,14 @@ class DeployModel(Section):
     max_noise_gain: Positive = Field(
         0.02, description="limit of the standard deviation of u caused by the scenario's measurement noise, a fraction "
                           "of the loop's control span (from |C S| over the Nyquist band at each operating point)")
+    allow_unverified: Flag = Field(False, description="deploy a gain schedule whose robustness could not be verified "
+                                                      "(an Ms estimate impossible to make: the plant varies faster "
+                                                      "than the margin experiment); default false: such a schedule "
+                                                      "is not deployed (the fixed PID may be, said in the verdict)")
+    classical_schedule: ClassicalSchedule = Field(
+        "auto", description="the classical gain schedule (local load designs at setpoints across the range, "
+                            "interpolated over the setpoint) as a candidate: on, off, or auto: where the plant's "
+                            "frequency response varies over the setpoint range by more than 25 %")
     schedule_points: Count = Field(9, description="operating points (rows) of the gain schedule `tune` reads from "
                                                   "the policy: setpoints evenly spaced over the first loop's "
                                                   "setpoint_range; Ms is measured at each")

@@ -54,6 +54,7 @@ def controller_metrics(metrics: dict) -> dict:
     out = {"policy": metrics.get("policy"), "schedule": inner(metrics.get("schedule_replay")),
            "fixed_pid": inner(metrics.get("fixed_pid"))}
     out["deployed"] = {Deployed.SCHEDULE: out["schedule"],
+                       Deployed.CLASSICAL: inner(metrics.get("classical_schedule_replay")),
                        Deployed.FIXED_PID: inner(metrics.get("fixed_pid_assessment"))}.get(Deployed.read(metrics.get("deployed")))
     return out
 
@@ -144,7 +145,8 @@ def _cell(stat: dict | None) -> str:
 
 
 def _deployed_counts(choices: list[str]) -> str:
-    names = {Deployed.SCHEDULE: "schedule", Deployed.FIXED_PID: "fixed PID", Deployed.NONE: "none"}
+    names = {Deployed.SCHEDULE: "schedule", Deployed.CLASSICAL: "classical schedule", Deployed.FIXED_PID: "fixed PID",
+             Deployed.NONE: "none"}
     return ", ".join(f"{names.get(c, c)} {choices.count(c)}" for c in dict.fromkeys(choices)) or "—"
 
 

@@ -40,6 +40,7 @@ from prlpid_fmi.loop.core import LoopCore, pid_structure
 from prlpid_fmi.loop.evaluation import Trajectory, gains_rollout
 from prlpid_fmi.loop.gains import Gains, gains_from_values
 from prlpid_fmi.loop.isolated import make_core
+from prlpid_fmi.progress import QUIET, Steps, counted
 from prlpid_fmi.robustness.margins import margins_of, setpoint_range_points
 from prlpid_fmi.robustness.status import meets_limit
 from prlpid_fmi.tuning.load_design import LoadDesign, SetpointDesign, parameter_samples, setpoint_weight
@@ -180,12 +181,13 @@ def _robust(config: TuningConfig, gain_map: ActionMap, population, energies, lim
 
 
 def tune_fixed_pid(config: TuningConfig, seed: int = 0, episodes: int | None = None, maxiter: int | None = None,
-                   popsize: int | None = None, callback=None, max_sensitivity: float | None = None,
+                   popsize: int | None = None, progress: Steps = QUIET, max_sensitivity: float | None = None,
                    baseline: BaselineConfig = BaselineConfig(), deploy: DeployConfig = DeployConfig()) -> FixedPid:
     """The fixed PID of baseline.objective: "load" (tuning.load_design: load IAE under the Ms and noise limits,
     then the setpoint weight) or "setpoint" (J of the module docstring over `episodes` seeded training episodes).
 
-    callback(evaluations_done, evaluations_expected): progress, called after every generation.
+    progress: a prlpid_fmi.progress.Steps the search shows its steps on (each search counted per cost evaluation,
+    its polish included; the Ms checks and experiments as steps of their own).
     max_sensitivity: the Ms limit the result must meet (None: no robustness requirement).
     baseline: objective, load_step, load_tolerance, widen_ranges, and the budget (episodes, maxiter, popsize) where
     those arguments are None; deploy: max_overshoot and max_noise_gain.
@@ -194,32 +196,26 @@ def tune_fixed_pid(config: TuningConfig, seed: int = 0, episodes: int | None = N
     maxiter = baseline.maxiter if maxiter is None else maxiter
     popsize = baseline.popsize if popsize is None else popsize
     if baseline.objective == "load":
-        return _load_pid(config, seed, episodes, maxiter, popsize, callback, max_sensitivity, baseline, deploy)
-    return _setpoint_pid(config, seed, episodes, maxiter, popsize, callback, max_sensitivity)
+        return _load_pid(config, seed, episodes, maxiter, popsize, progress, max_sensitivity, baseline, deploy)
+    return _setpoint_pid(config, seed, episodes, maxiter, popsize, progress, max_sensitivity)
 
 
-def _setpoint_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, popsize: int, callback,
-                  max_sensitivity: float | None, progress=None) -> FixedPid:
+def _setpoint_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, popsize: int, progress: Steps,
+                  max_sensitivity: float | None, name: str = "setpoint search") -> FixedPid:
     search = dataclasses.replace(config, forecast_horizon=0)
     gain_map = ActionMap(config.loops, config.coupled, config.coupling_range)
     seeds = [seed + i for i in range(episodes)]
     core = make_core(search)
     n = gain_map.size
-    expected = (maxiter + 1) * popsize * n
-    done = [popsize * n]
-
-    def step(*_args, **_kwargs):
-        done[0] += popsize * n
-        if callback is not None:
-            callback(min(done[0], expected), expected)
-
+    progress.step(name, (maxiter + 1) * popsize * n)
     try:
-        result = differential_evolution(_cost, [(-1.0, 1.0)] * n, args=(core, gain_map, seeds),
-                                        maxiter=maxiter, popsize=popsize, seed=seed, polish=False, tol=1e-6,
-                                        callback=progress or step)
+        result = differential_evolution(counted(_cost, progress), [(-1.0, 1.0)] * n, args=(core, gain_map, seeds),
+                                        maxiter=maxiter, popsize=popsize, seed=seed, polish=False, tol=1e-6)
         vector, gains = result.x, gain_map.values(result.x.tolist())
         cost = float(result.fun)
         if max_sensitivity is not None:
+            progress.step(f"Ms check on the FMU of the {name}'s best ({len(setpoint_range_points(config))} "
+                          "operating points" + (", parameter draws" if parameter_samples(config) else "") + ")")
             vector, gains = _robust(search, gain_map, result.population, result.population_energies, max_sensitivity,
                                     core, seeds)
             cost = _cost_of(gains, core, seeds)
@@ -231,37 +227,21 @@ def _setpoint_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, 
 STABILISING_GENERATIONS = 6  # generations of the setpoint search that finds the PID the plant is measured with
 
 
-def _load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, popsize: int, callback,
+def _load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, popsize: int, progress: Steps,
               max_sensitivity: float | None, baseline: BaselineConfig, deploy: DeployConfig) -> FixedPid:
     """tuning.load_design's three steps, then the Ms check on the FMU with the final controller (detuned by
     `detune_over` where a point fails: the plant-response estimate is an estimate)."""
     design = LoadDesign(config, baseline.load_step, max_sensitivity, deploy.max_noise_gain, baseline.widen_ranges)
-    n_first = 3 * config.n_loops + (6 if config.coupled else 0)
-    expected = (STABILISING_GENERATIONS + 1) * popsize * n_first + (maxiter + 1) * popsize * design.n
-    done = [0]
-
-    def advance(count):
-        def step(*_args, **_kwargs):
-            done[0] += count
-            if callback is not None:
-                callback(min(done[0], expected), expected)
-        return step
-
-    def reached(count):  # a stage ended (DE may stop before its last generation): its whole share is done
-        done[0] = count
-        if callback is not None:
-            callback(count, expected)
-
-    reached(popsize * n_first)  # the initial population of the first search
     # robust too (its Ms checked and detuned as the setpoint search does): a lightly damped loop does not settle in
     # the frequency-response experiment, and an unverified response gives the design no constraint
-    first = _setpoint_pid(config, seed, episodes, STABILISING_GENERATIONS, popsize, None, max_sensitivity,
-                          progress=advance(popsize * n_first))
-    reached((STABILISING_GENERATIONS + 1) * popsize * n_first + popsize * design.n)
+    first = _setpoint_pid(config, seed, episodes, STABILISING_GENERATIONS, popsize, progress, max_sensitivity,
+                          name="stabilising PID (setpoint search)")
     try:
+        progress.step(f"frequency response of the plant at {len(design.points)} operating points"
+                      + (f" and {len(parameter_samples(config))} parameter draws" if parameter_samples(config) else ""))
         design.prepare(first.gains.values())
-        result = design.search(seed, maxiter, popsize, callback=advance(popsize * design.n))
-        reached(expected)
+        progress.step("load design (differential evolution, then Nelder-Mead)", design.budget(maxiter, popsize))
+        result = design.search(seed, maxiter, popsize, progress=progress)
         vector = np.asarray(result.x)
         gains, tf = design.gains(vector), design.filters(vector)
         best_load = float(result.fun)
@@ -269,13 +249,15 @@ def _load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, pops
         choices, traded = [], None
         seeds = [seed + i for i in range(episodes)]
         if config.setpoint_weight == "tuned":
+            progress.step("setpoint weight b")
             weight, choices = setpoint_weight(config, gains, (b, c, tf), seeds, deploy.max_overshoot)
             b = [weight] * config.n_loops
             if not any(r["Overshoot"] <= 100.0 * deploy.max_overshoot for r in choices):
                 trade = SetpointDesign(design, best_load, baseline.load_tolerance, deploy.max_overshoot, seeds)
+                progress.step("setpoint ISE within the overshoot limit (no b met it)", trade.budget(maxiter, popsize))
                 try:
                     second = trade.search(np.append(vector, 2.0 * weight - 1.0), seed, maxiter, popsize,
-                                          callback=None)  # within the 100 % of the load search
+                                          progress=progress)
                     feasible = bool(np.max(trade.constraint_values(second.x)) <= 0)
                     load, ise, overshoot = trade.evaluate(second.x)
                     traded = {"load_cost": load, "ISE": ise, "Overshoot": overshoot, "feasible": feasible,
@@ -291,10 +273,13 @@ def _load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, pops
         fallback = None
         if max_sensitivity is not None:
             points = setpoint_range_points(config)
+            progress.step(f"Ms check on the FMU ({len(points)} operating points"
+                          + (", parameter draws" if parameter_samples(config) else "") + "; detuned where one fails)")
             repaired = detune_over(tuned, gains, points, max_sensitivity, draws=parameter_samples(tuned))
             if repaired is None:  # the design's estimate misled it (several coupled loops, a nonlinear plant):
                 # the setpoint search's robust PID, as before the load design, rather than an undeployable one
-                fallback = _setpoint_pid(config, seed, episodes, maxiter, popsize, None, max_sensitivity)
+                fallback = _setpoint_pid(config, seed, episodes, maxiter, popsize, progress, max_sensitivity,
+                                         name="setpoint search (the load design could not meet the Ms limit)")
                 gains, structure = fallback.gains.values(), fallback.structure
                 tf = list(structure[2])
             else:
@@ -304,7 +289,8 @@ def _load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, pops
                     # the check on the FMU cost more load rejection than the design may give up (its estimate
                     # misled it: interacting loops, measured loop at a time): the setpoint search's robust PID
                     # when it rejects loads better
-                    alternative = _setpoint_pid(config, seed, episodes, maxiter, popsize, None, max_sensitivity)
+                    alternative = _setpoint_pid(config, seed, episodes, maxiter, popsize, progress, max_sensitivity,
+                                                name="setpoint search (the Ms check detuned the load design)")
                     if design.load_cost(alternative.gains.values(), list(alternative.structure[2])) < cost:
                         fallback = alternative
                         gains, structure = fallback.gains.values(), fallback.structure

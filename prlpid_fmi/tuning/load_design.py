@@ -6,11 +6,15 @@ Astrom & Hagglund's design, on the FMU (baseline.objective "load"):
    noise) minimise the load cost, by differential evolution inside the scenario's gain ranges widened by
    baseline.widen_ranges (log ranges [low/f, high*f], Td's high end * f)::
 
-       J_load = mean over operating points p and loops i of  sum_k Ts |r_k - y_k| / |d_i|   [output units * s / input unit]
+       J_load = mean over operating points p and loops i of  sum_k Ts |y0_k - y_k| / |d_i|   [output units * s / input unit]
 
    the IAE per unit load of a step d_i at loop i's plant input (baseline.load_step x the loop's control span,
    signed away from the nearer actuator limit), after the loop held setpoint p for setpoint_hold_steps samples;
-   loops are loaded one after another, setpoint_hold_steps apart. Points: the low end, the middle and the high end
+   loops are loaded one after another, setpoint_hold_steps apart. y0 is the same controller's run without the
+   load (the load response by superposition): the FMU starts where its start values put it, not at p, and a
+   loop still settling onto p when the load comes would otherwise have the tail of that transient counted as
+   load response (the two-tank at 5 cm, starting at 10 cm: y 4.68 cm at the load with a slow PID). Where the loop
+   has settled, y0 = r and this is the IAE of r - y. Points: the low end, the middle and the high end
    of the setpoint range (robustness.margins.setpoint_range_points). No noise, no randomisation: the cost is
    deterministic. A diverging episode costs DIVERGED_COST.
 2. Subject to, at every point, Ms <= deploy.max_sensitivity, a stable closed loop and std(u) from the scenario's
@@ -46,6 +50,7 @@ from prlpid_fmi.loop.core import LoopCore, control_scales, pid_structure, random
 from prlpid_fmi.loop.evaluation import gains_rollout
 from prlpid_fmi.loop.isolated import make_core
 from prlpid_fmi.metrics import chatter_fraction
+from prlpid_fmi.progress import QUIET, Steps, counted
 from prlpid_fmi.robustness.margins import margins_of, pid_frequency_response, setpoint_range_points
 from prlpid_fmi.robustness.plant_response import MeasuredPlant
 from prlpid_fmi.robustness.status import Robustness, status
@@ -143,12 +148,15 @@ def signed_loads(config: TuningConfig, probe, load_step: float) -> list[float]:
     return loads
 
 
-def load_iae(traj, config: TuningConfig) -> float:
-    """sum over loops of Ts * sum_k |r_k - y_k| / |d_i| from the first load on (one experiment, module docstring);
-    DIVERGED_COST (more for an earlier end) when the episode ended early."""
-    if traj.terminated:
-        return DIVERGED_COST * (1.0 + (config.episode_steps - traj.steps) / config.episode_steps)
-    e = np.abs(traj.setpoint - traj.measurement)[config.setpoint_hold_steps:]
+def load_iae(traj, config: TuningConfig, unloaded=None) -> float:
+    """sum over loops of Ts * sum_k |y0_k - y_k| / |d_i| from the first load on (one experiment, module docstring),
+    y0 the measurement of `unloaded` (the same controller's run without the load; None: the setpoint);
+    DIVERGED_COST (more for an earlier end) when either episode ended early."""
+    for t in (traj, unloaded):
+        if t is not None and t.terminated:
+            return DIVERGED_COST * (1.0 + (config.episode_steps - t.steps) / config.episode_steps)
+    reference = traj.setpoint if unloaded is None else unloaded.measurement
+    e = np.abs(reference - traj.measurement)[config.setpoint_hold_steps:]
     loads = np.array([abs(d.value) for d in config.disturbances])
     return float(np.sum(e / loads) * config.sample_time_s) / len(loads)
 
@@ -161,7 +169,7 @@ def load_experiment(config: TuningConfig, load_step: float, run) -> float:
     for p in points:
         probe = run(_load_config(config, p, [0.0] * config.n_loops))
         loaded = _load_config(config, p, signed_loads(config, probe, load_step))
-        total += load_iae(run(loaded), loaded)
+        total += load_iae(run(loaded), loaded, probe)
     return total / len(points)
 
 
@@ -187,7 +195,8 @@ class LoadDesign:
         self.tune_filter = config.measurement_filter == "tuned" and config.measurement_noise_std > 0
         self.n = self.gain_map.size + (config.n_loops if self.tune_filter else 0)
         self.spans = control_scales(self.config)
-        self.cores: list[LoopCore] = []
+        self.cores: list[LoopCore] = []  # per point: the load experiment ...
+        self.quiet_cores: list[LoopCore] = []  # ... and the same without the load (load_iae's reference)
         self.plants: list = []
         self._seen: dict = {}
         self._intervals: dict = {}
@@ -322,23 +331,23 @@ class LoadDesign:
         self.reference = [None if plants is None else
                           [pl.winding(self.controller(gains, list(self.tf), i)) for i, pl in enumerate(plants)]
                           for plants in self.plants]
-        for p in self.points:
+        for p in self.points:  # per point: the unloaded run (kept open: every candidate's reference) and the loaded
             quiet = _load_config(self.config, p, [0.0] * self.config.n_loops)
             core = _open_core(quiet)
-            try:
-                probe = gains_rollout(lambda c: gains, quiet, seed=0, core=core)
-            finally:
-                core.close()
+            self.quiet_cores.append(core)
+            probe = gains_rollout(lambda c: gains, quiet, seed=0, core=core)
             self.cores.append(_open_core(_load_config(self.config, p, signed_loads(self.config, probe, self.load_step))))
 
     def load_response(self, gains: tuple, tf: list[float]) -> tuple[float, float]:
         """(J_load, worst chatter) of constant gains with measurement filter tf: the load cost of the module
         docstring and the largest fraction of samples where a loop's u reverses (metrics.chatter_fraction)."""
         total, chatter = 0.0, 0.0
-        for core in self.cores:
+        for core, quiet in zip(self.cores, self.quiet_cores):
             core.set_structure(self.b, self.c, tf)
+            quiet.set_structure(self.b, self.c, tf)
             traj = gains_rollout(lambda c: gains, core.config, seed=0, core=core)
-            total += load_iae(traj, core.config)
+            unloaded = gains_rollout(lambda c: gains, quiet.config, seed=0, core=quiet)
+            total += load_iae(traj, core.config, unloaded)
             if not traj.terminated:
                 chatter = max(chatter, max(chatter_fraction(traj.pid_output[:, i], self.spans[i])
                                            for i in range(self.config.n_loops)))
@@ -367,13 +376,18 @@ class LoadDesign:
         load, chatter = self.evaluate(vector)
         return load * (1.0 + CHATTER_PENALTY * max(0.0, chatter - MAX_CHATTER) / MAX_CHATTER)
 
-    def search(self, seed: int, maxiter: int, popsize: int, callback=None):
+    def budget(self, maxiter: int, popsize: int) -> int:
+        """The most cost evaluations `search` makes: DE's (maxiter + 1) * popsize * n, then the polish's."""
+        return (maxiter + 1) * popsize * self.n + POLISH_EVALUATIONS * self.n
+
+    def search(self, seed: int, maxiter: int, popsize: int, progress: Steps = QUIET):
         """Differential evolution of `cost`, then a Nelder-Mead polish from its result (POLISH_EVALUATIONS per
-        parameter at most); scipy's OptimizeResult of the better."""
-        result = differential_evolution(self.cost, [(-1.0, 1.0)] * self.n, maxiter=maxiter, popsize=popsize,
-                                        seed=seed, polish=False, tol=1e-6, callback=callback)
+        parameter at most); scipy's OptimizeResult of the better. progress: counts every cost evaluation."""
+        cost = counted(self.cost, progress)
+        result = differential_evolution(cost, [(-1.0, 1.0)] * self.n, maxiter=maxiter, popsize=popsize,
+                                        seed=seed, polish=False, tol=1e-6)
         if result.fun < DIVERGED_COST:
-            polished = minimize(self.cost, result.x, method="Nelder-Mead", bounds=[(-1.0, 1.0)] * self.n,
+            polished = minimize(cost, result.x, method="Nelder-Mead", bounds=[(-1.0, 1.0)] * self.n,
                                 options={"maxfev": POLISH_EVALUATIONS * self.n, "xatol": 1e-4, "fatol": 1e-7})
             if polished.fun < result.fun:
                 result.x, result.fun = polished.x, float(polished.fun)
@@ -381,9 +395,9 @@ class LoadDesign:
         return result
 
     def close(self) -> None:
-        for core in self.cores:
+        for core in self.cores + self.quiet_cores:
             core.close()
-        self.cores = []
+        self.cores, self.quiet_cores = [], []
 
 
 def setpoint_response(core, gains: tuple, seeds: list[int]) -> tuple[float, float]:
@@ -468,16 +482,21 @@ class SetpointDesign:
         _, ise, _ = self.evaluate(vector)
         return ise if math.isfinite(ise) else DIVERGED_COST
 
-    def search(self, start, seed: int, maxiter: int, popsize: int, callback=None):
+    def budget(self, maxiter: int, popsize: int) -> int:
+        """The most cost evaluations `search` makes (DE with maxiter halved, as there)."""
+        return (max(5, maxiter // 2) + 1) * popsize * self.n
+
+    def search(self, start, seed: int, maxiter: int, popsize: int, progress: Steps = QUIET):
         """DE from a population around `start` (the load optimum with its best b: the feasible set lies near it, within
-        load_tolerance of its load cost), spread INIT_SPREAD in the [-1, 1] coordinates; maxiter halved."""
+        load_tolerance of its load cost), spread INIT_SPREAD in the [-1, 1] coordinates; maxiter halved.
+        progress: counts every cost evaluation."""
         maxiter = max(5, maxiter // 2)
         rng = np.random.default_rng(seed)
         start = np.clip(np.asarray(start, float), -1.0, 1.0)
         init = np.clip(start + rng.normal(0.0, INIT_SPREAD, (popsize * self.n, self.n)), -1.0, 1.0)
         init[0] = start
-        return differential_evolution(self.cost, [(-1.0, 1.0)] * self.n, maxiter=maxiter, seed=seed, polish=False,
-                                      tol=1e-6, callback=callback, init=init,
+        return differential_evolution(counted(self.cost, progress), [(-1.0, 1.0)] * self.n, maxiter=maxiter,
+                                      seed=seed, polish=False, tol=1e-6, init=init,
                                       constraints=NonlinearConstraint(self.constraint_values, -np.inf, 0.0))
 
     def close(self) -> None:

@@ -20,15 +20,25 @@ def training_ise(schedule: GainSchedule, config: TuningConfig, seed: int = 0,
                  episodes: int = SELECTION_EPISODES, offset: int = SELECTION_SEED_OFFSET) -> float:
     """ISE (summed over loops) of the replayed table, summed over seeded training-distribution episodes
     (seeds seed + offset + i); infinity when an episode diverges."""
-    from prlpid_fmi.metrics import overall_metric
-    from prlpid_fmi.tuning.schedule.replay import replay_schedule
+    return training_metrics(schedule, config, seed, episodes, offset)["ISE"]
 
-    total = 0.0
+
+def training_metrics(schedule: GainSchedule, config: TuningConfig, seed: int = 0,
+                     episodes: int = SELECTION_EPISODES, offset: int = SELECTION_SEED_OFFSET) -> dict:
+    """Over seeded training-distribution episodes (seeds seed + offset + i) of the replayed table:
+    {"ISE": summed over loops and episodes, "TotalVariation": of u, likewise, "unsettled": episodes with a setpoint
+    step that never settles (metrics: SettlingTime inf)}; ISE and TotalVariation infinity when an episode diverges
+    (the rest is not run)."""
+    from prlpid_fmi.metrics import overall_metric
+
+    total = {"ISE": 0.0, "TotalVariation": 0.0, "unsettled": 0}
     for i in range(episodes):
         metrics, _ = replay_schedule(schedule, config, seed=seed + offset + i)
         if metrics.get("terminated"):
-            return math.inf
-        total += overall_metric(metrics["overall"], "ISE")
+            return {"ISE": math.inf, "TotalVariation": math.inf, "unsettled": total["unsettled"]}
+        total["ISE"] += overall_metric(metrics["overall"], "ISE")
+        total["TotalVariation"] += overall_metric(metrics["overall"], "TotalVariation")
+        total["unsettled"] += int(overall_metric(metrics["overall"], "SettlingTime") == math.inf)
     return total
 
 

@@ -1,0 +1,164 @@
+"""The classical gain schedule: a local PID design at operating points across the setpoint range, interpolated.
+
+What a control engineer does by hand on a nonlinear plant, from the FMU alone (no linearisation by the user):
+
+1. Operating points: `points` setpoints evenly over the first loop's setpoint_range (the other loops at the
+   middle of theirs).
+2. At each point the plant is measured in closed loop with the fixed PID (robustness.margins: a small multisine
+   around the trim the loop itself holds, so an open-loop unstable branch needs no open-loop trim), and the
+   fixed PID's load design (tuning.load_design, the same objective, limits and budget) is made for that point
+   alone: Kp, Ti, Td minimise the IAE of a load step at the plant input there, under Ms <= deploy.max_sensitivity
+   and the noise bound of the local plant. The structure (b, c, Tf) is the fixed PID's for every row: Tf is a
+   noise choice, and b acts on setpoint steps, which cross operating points.
+3. The table is interpolated linearly over the setpoint (GainSchedule: held outside the breakpoints) and its Ms
+   is checked on the FMU at every breakpoint and halfway between neighbours, with the interpolated gains (what
+   the PID runs there). Where a halfway point fails, a local design is made there too and becomes a breakpoint
+   (once per interval); a breakpoint that still fails is detuned (tuning.fixed_pid.detune_over).
+
+Whether to build it (`deploy.classical_schedule`): "auto" builds it where the plant is nonlinear over the
+setpoint range: the magnitude of the plant's frequency response measured with the fixed PID at the low end and
+the high end differs from the middle by more than NONLINEAR_GAIN_RATIO somewhere below the gain crossover
+(`gain_variation`). On a linear plant every local design is the fixed PID's, at several times its cost.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+
+from prlpid_fmi.config import TuningConfig
+from prlpid_fmi.loop.gains import gains_from_dict
+from prlpid_fmi.progress import QUIET, Steps
+from prlpid_fmi.robustness.margins import margins_of, operating_point, setpoint_range_points
+from prlpid_fmi.robustness.status import Robustness, meets_limit, status
+from prlpid_fmi.tuning.load_design import LoadDesign
+from prlpid_fmi.tuning.schedule.extraction import operating_setpoints
+from prlpid_fmi.tuning.schedule.table import GainSchedule, schedule_from_rows
+
+CLASSICAL_POINTS = 5  # breakpoints of the classical schedule before refinement
+NONLINEAR_GAIN_RATIO = 1.25  # |P| at the ends of the range vs the middle, beyond which "auto" builds the schedule
+
+
+def gain_variation(config: TuningConfig, gains: tuple) -> float:
+    """Largest ratio (>= 1) between |P(jw)| measured with `gains` at the low or high end of the setpoint range and at
+    its middle, over the frequencies below the middle's gain crossover (where a PID design is decided); NaN when no
+    two verified measurements exist. Every loop's effective plant counts."""
+    points = setpoint_range_points(config)
+    if len(points) < 3:
+        return 1.0
+    measured = [margins_of(config, gains, p) for p in points]
+    if any(status(m) != Robustness.VERIFIED for m in measured):
+        return math.nan
+    worst = 1.0
+    for loops in zip(*[m.per_loop or (m,) for m in measured]):
+        low, mid, high = loops
+        band = mid.frequencies_rad_s <= (mid.gain_crossover_rad_s if math.isfinite(mid.gain_crossover_rad_s)
+                                         else mid.frequencies_rad_s[-1])
+        if not np.any(band):
+            continue
+        w = mid.frequencies_rad_s[band]
+        ref = np.abs(mid.plant_response[band])
+        for end in (low, high):  # the grids may differ in length (each experiment sizes its own): |P| interpolated
+            inside = (w >= end.frequencies_rad_s[0]) & (w <= end.frequencies_rad_s[-1])
+            if not np.any(inside):
+                continue
+            ratio = np.interp(w[inside], end.frequencies_rad_s, np.abs(end.plant_response)) / ref[inside]
+            worst = max(worst, float(np.max(np.maximum(ratio, 1.0 / ratio))))
+    return worst
+
+
+def wanted(setting, config: TuningConfig, gains: tuple) -> tuple[bool, float]:
+    """(build it?, gain_variation) for deploy.classical_schedule = setting ("auto" | True | False)."""
+    if setting is False or setting == "off":
+        return False, math.nan
+    variation = gain_variation(config, gains)
+    if setting is True or setting == "on":
+        return True, variation
+    return bool(variation > NONLINEAR_GAIN_RATIO), variation
+
+
+def _at(config: TuningConfig, setpoints: list[float]) -> TuningConfig:
+    """The tuning problem held at one operating point: every loop's setpoint_range shrunk to its setpoint there,
+    the measurement filter held (the fixed PID's Tf, in config.tuned_structure)."""
+    loops = tuple(dataclasses.replace(l, setpoint_range=(float(s), float(s))) for l, s in zip(config.loops, setpoints))
+    return dataclasses.replace(config, loops=loops, measurement_filter=0.0)
+
+
+def local_design(config: TuningConfig, setpoint: float, start: tuple, baseline, deploy, limit: float, seed: int,
+                 progress: Steps = QUIET) -> tuple[tuple, dict]:
+    """(gains, info) of the load design at loop 0's setpoint `setpoint`, the plant measured with `start` in the loop;
+    info: {"setpoint", "load_cost", "Ms_estimate", "detuned", "kept_fixed"}."""
+    from prlpid_fmi.tuning.fixed_pid import detune_over
+
+    point = operating_point(config, setpoint)
+    local = _at(config, point)
+    design = LoadDesign(local, baseline.load_step, limit, deploy.max_noise_gain, baseline.widen_ranges)
+    try:
+        design.prepare(start)
+        progress.step(f"local load design at {setpoint:.4g}", design.budget(baseline.maxiter, baseline.popsize))
+        result = design.search(seed, baseline.maxiter, baseline.popsize, progress=progress)
+        gains = design.gains(np.asarray(result.x))
+        estimate = design.estimates(gains, list(design.tf))[0]["Ms"]
+        repaired = detune_over(dataclasses.replace(design.search_config, tuned_structure=config.tuned_structure),
+                               gains, [point], limit)
+        kept = repaired is None
+        final = start if kept else repaired
+        cost = design.load_cost(final, list(design.tf))
+    finally:
+        design.close()
+    return final, {"setpoint": float(setpoint), "load_cost": float(cost), "Ms_estimate": estimate,
+                   "detuned": (not kept) and repaired != gains, "kept_fixed": kept}
+
+
+def _row(gains: tuple) -> dict:
+    return {"Kp": np.asarray(gains[0], float), "Ti": np.asarray(gains[1], float), "Td": np.asarray(gains[2], float)}
+
+
+def _between(schedule: GainSchedule, config: TuningConfig, limit: float) -> list[float]:
+    """Halfway points between neighbouring breakpoints where the interpolated gains fail the Ms limit."""
+    out = []
+    for lo, hi in zip(schedule.breakpoints[:-1], schedule.breakpoints[1:]):
+        mid = 0.5 * (float(lo) + float(hi))
+        gains = tuple(list(a) for a in schedule.gains_at(mid)) + (None,)
+        if not meets_limit(margins_of(config, gains, operating_point(config, mid)), limit):
+            out.append(mid)
+    return out
+
+
+def classical_schedule(scenario, fixed: dict, progress: Steps = QUIET,
+                       points: int = CLASSICAL_POINTS) -> tuple[GainSchedule, dict]:
+    """The classical gain schedule of the module docstring over loop 0's setpoint, and what run.json records of it
+    ({"rows": local_design infos, "refined": halfway points added, "failing_between": those still failing}).
+    scenario.tuning must carry the fixed PID's structure (run.trained.with_structure)."""
+    from prlpid_fmi.fmu.resolve import loop_units
+
+    config = dataclasses.replace(scenario.tuning, forecast_horizon=0)
+    if config.coupled:
+        raise ValueError("the classical schedule is built for independent loops (controller.coupled is set)")
+    limit = float(scenario.deploy.max_sensitivity)
+    start = gains_from_dict(fixed["gains"]).values()
+    seed = scenario.agent.seed
+    infos, rows = [], []
+    for s in operating_setpoints(config.loops[0].setpoint_range, points):
+        gains, info = local_design(config, s, start, scenario.baseline, scenario.deploy, limit, seed, progress)
+        infos.append(info)
+        rows.append((float(s), _row(gains)))
+    output_units, input_units = loop_units(config)
+    meta = dict(loop_inputs=tuple(l.input for l in config.loops), output_units=tuple(output_units),
+                input_units=tuple(input_units))
+    variable = f"setpoint[{config.loops[0].output}]"
+    schedule = schedule_from_rows(config, variable, output_units[0], rows, meta)
+    progress.step(f"Ms check between the {len(rows)} breakpoints")
+    refined = _between(schedule, config, limit)
+    for s in refined:  # a local design where the interpolation fails, from the table's own gains there
+        here = tuple(list(a) for a in schedule.gains_at(s)) + (None,)
+        gains, info = local_design(config, s, here, scenario.baseline, scenario.deploy, limit, seed, progress)
+        infos.append(info)
+        rows.append((float(s), _row(gains)))
+    if refined:
+        schedule = schedule_from_rows(config, variable, output_units[0], rows, meta)
+        progress.step(f"Ms check between the {len(rows)} breakpoints")
+    failing = _between(schedule, config, limit)
+    return schedule, {"rows": sorted(infos, key=lambda i: i["setpoint"]), "refined": refined,
+                      "failing_between": failing}
