@@ -230,9 +230,10 @@ REPLAY_CASES = {
 @pytest.mark.parametrize("name", list(REPLAY_CASES))
 def test_forecast_reward_equals_hand_replay(name, horizon):
     overrides, schedule = REPLAY_CASES[name]
-    # the paper's law (b = c = 1, no filter: eq. 2, what HandPID computes)
+    # the paper's law (b = c = 1, no filter, positional gain change: eq. 2, what HandPID computes)
     env = prlpid_fmi.make_env(name, forecast_horizon=horizon, smoothing="none", setpoint_schedule=schedule,
-                              setpoint_weight=1.0, derivative_weight=1.0, measurement_filter=0.0, **overrides)
+                              setpoint_weight=1.0, derivative_weight=1.0, measurement_filter=0.0,
+                              gain_change="positional", **overrides)
     c = env.config
     assert c.n_loops == 1 and not c.disturbances
     loop = c.loops[0]

@@ -9,9 +9,10 @@ from prlpid_fmi.loop.evaluation import evaluate, model_policy
 from prlpid_fmi.scenario.presets import preset
 from prlpid_fmi.tuning.agent import build_model, make_vec_env, train
 
-# the paper's PRL-PID: eq. 2 (b = c = 1, no filter) and its episodes (no random load steps)
+# the paper's PRL-PID: eq. 2 (b = c = 1, no filter, positional gain change) and its episodes (no random load steps)
 CONFIG = dataclasses.replace(preset("first_order"), forecast_horizon=3, smoothing="era", setpoint_weight=1.0,
-                             derivative_weight=1.0, measurement_filter=0.0, load_disturbance=0.0)
+                             derivative_weight=1.0, measurement_filter=0.0, load_disturbance=0.0,
+                             gain_change="positional")
 SERVO = dataclasses.replace(CONFIG, setpoint_schedule=((0, (1.0,)), (100, (-0.5,))), episode_steps=200)
 
 
