@@ -131,7 +131,7 @@ def _start_values(pairs: list[str]) -> dict:
 
 
 def _init(args: argparse.Namespace) -> int:
-    from prlpid_fmi.fmu.isolate import init_isolated
+    from prlpid_fmi.scenario.draft import init_isolated
 
     text = init_isolated(args.fmu, args.step_timeout, output=args.output, start_values=_start_values(args.set))
     sys.stdout.write(text)  # only a complete scenario reaches stdout
@@ -141,7 +141,7 @@ def _init(args: argparse.Namespace) -> int:
 def _probe(args: argparse.Namespace) -> int:
     from pathlib import Path
 
-    from prlpid_fmi.fmu.isolate import probe_isolated
+    from prlpid_fmi.probe.isolated import probe_isolated
     from prlpid_fmi.probe.step_test import format_probe, plot_probe
 
     result = probe_isolated(args.fmu, args.step_timeout, output=args.output, inputs=args.input or None,

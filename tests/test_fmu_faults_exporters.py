@@ -102,8 +102,8 @@ def test_a_hang_in_a_worker_ends_the_episode_like_a_crash(fault_fmus, tmp_path, 
     try:
         core.reset(np.random.default_rng(0))
         started, terminated = time.monotonic(), False
-        while not terminated:
-            _, terminated = core.step([1.0], [1.0], [0.0])
+        while not terminated:  # Kp 3, Ti 1 on 1/(s - 1): well damped, so only the hang can end the episode
+            _, terminated = core.step([3.0], [1.0], [0.0])
         assert time.monotonic() - started <= 2 * TIMEOUT_S + 0.5
         term = core.termination
         assert term.kind == "crash" and abs(term.time_s - HANG_S) <= TS / 2
@@ -111,7 +111,7 @@ def test_a_hang_in_a_worker_ends_the_episode_like_a_crash(fault_fmus, tmp_path, 
         gate.unlink()
         core.reset(np.random.default_rng(0))
         for _ in range(40):
-            core.step([1.0], [1.0], [0.0])
+            core.step([3.0], [1.0], [0.0])
         assert core.termination is None and core.crashes == 1
     finally:
         core.close()

@@ -94,8 +94,10 @@ def _tune_settles(scenario: Path, out: Path) -> dict:
     """A short tune ends with exit 0 and deploys a controller that settles at every evaluation setpoint."""
     assert main(["-q", "tune", str(scenario), "--timesteps", TIMESTEPS, "--out", str(out)]) == 0
     metrics = json.loads((out / "metrics.json").read_text())
-    assert metrics["deployed"] in ("fixed PID", "gain schedule"), metrics.get("decision")
-    deployed = metrics["fixed_pid_assessment" if metrics["deployed"] == "fixed PID" else "schedule_replay"]["metrics"]
+    evidence = {"fixed PID": "fixed_pid_assessment", "gain schedule": "schedule_replay",
+                "classical gain schedule": "classical_schedule_replay"}
+    assert metrics["deployed"] in evidence, metrics.get("decision")
+    deployed = metrics[evidence[metrics["deployed"]]]["metrics"]
     assert not deployed["terminated"]
     s = load_scenario(scenario)
     interval_s = [(b - a) * s.tuning.sample_time_s for a, b in s.evaluation.intervals]

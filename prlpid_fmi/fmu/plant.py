@@ -355,10 +355,8 @@ class FmuPlant:
             verdict = self.check_reset()
             verdicts.put(self.path, "reset", verdict)
         if verdict != "ok" and str(self.path) not in _warned_resets:
-            from prlpid_fmi.fmu.worker import in_worker
-
             _warned_resets.add(str(self.path))
-            if not in_worker():
+            if not watchdog.in_worker():
                 warnings.warn(f"{self.path.name}: its reset does not restore the start ({verdict}); every episode "
                               "instantiates the FMU afresh instead (checked once, remembered for this file)",
                               stacklevel=4)

@@ -44,6 +44,20 @@ reporter = None               # in a worker: callable(line) that hands the line 
 default_timeout_s: float | None = None   # a process-wide plant.step_timeout_s (the CLI's --step-timeout)
 
 
+_worker_process = False  # set by fmu.worker.become_worker (here, below both worker and plant: no import cycle)
+
+
+def in_worker() -> bool:
+    """True inside a worker process (fmu.worker.call_in_worker's, or an isolated loop core's)."""
+    return _worker_process
+
+
+def mark_worker() -> None:
+    """This process is a worker from now on (fmu.worker.become_worker)."""
+    global _worker_process
+    _worker_process = True
+
+
 class _Watch:
     """What the thread knows of one plant: the counter it saw last, since when [monotonic s], and the
     measured costs of its calls [s]."""

@@ -24,12 +24,7 @@ JOIN_TIMEOUT_S = 5.0
 _context = None
 
 
-_in_worker = False
-
-
-def in_worker() -> bool:
-    """True inside a worker process (call_in_worker's, or an isolated loop core's)."""
-    return _in_worker
+in_worker = watchdog.in_worker  # True inside a worker process (call_in_worker's, or an isolated loop core's)
 
 
 def become_worker(conn=None, crumb_path: str | None = None, step_timeout_s: float | None = None,
@@ -40,8 +35,7 @@ def become_worker(conn=None, crumb_path: str | None = None, step_timeout_s: floa
     (a call that does not return) goes to the parent over `conn` as ("hang", line); the FMI call under
     way is kept in the crumb file for the parent (crash_text); step_timeout_s: the watchdog's timeout
     for every plant [s] (None: each plant's own); check_outputs: garbage outputs raise (FmuPlant)."""
-    global _in_worker
-    _in_worker = True
+    watchdog.mark_worker()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         os.dup2(2, 1)

@@ -127,3 +127,11 @@ evaluation:
     - {{at_step: {n_eval // 2}, value: {sp2!r}}}
   intervals: [[0, {n_eval // 2}], [{n_eval // 2}, {n_eval}]]
 """
+
+
+def init_isolated(fmu: str | Path, step_timeout_s: float | None = None, **kwargs) -> str:
+    """init_scenario(fmu, **kwargs) in a worker process (fmu.isolate.run_isolated): the scenario's text; a crash, a
+    hang or garbage outputs are one line (PlantError) and the FMU's stdout never reaches the text."""
+    from prlpid_fmi.fmu.isolate import run_isolated
+
+    return run_isolated(init_scenario, fmu, "init (the probe of the FMU)", step_timeout_s, **kwargs)
