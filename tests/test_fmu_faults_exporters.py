@@ -93,7 +93,12 @@ def test_a_hang_in_a_worker_ends_the_episode_like_a_crash(fault_fmus, tmp_path, 
     from prlpid_fmi.loop.isolated import IsolatedCore
     from prlpid_fmi.scenario.load import load_scenario
 
-    gate = tmp_path / "gate"
+    import os
+
+    from prlpid_fmi.fmu.worker import call_in_worker
+
+    call_in_worker(os.getpid)  # workers fork from a server started once per process, here before the variable is set:
+    gate = tmp_path / "gate"   # the worker must still see the caller's environment (fmu.worker.become_worker)
     gate.write_text("")
     monkeypatch.setenv("PRLPID_FAULT_GATE", str(gate))
     config = load_scenario(scenario_file(tmp_path, fault_fmus["hang"], forecast_horizon=0,
@@ -102,8 +107,10 @@ def test_a_hang_in_a_worker_ends_the_episode_like_a_crash(fault_fmus, tmp_path, 
     try:
         core.reset(np.random.default_rng(0))
         started, terminated = time.monotonic(), False
-        while not terminated:  # Kp 3, Ti 1 on 1/(s - 1): well damped, so only the hang can end the episode
+        for _ in range(200):  # Kp 3, Ti 1 on 1/(s - 1): well damped, so only the hang can end the episode
             _, terminated = core.step([3.0], [1.0], [0.0])
+            if terminated:
+                break
         assert time.monotonic() - started <= 2 * TIMEOUT_S + 0.5
         term = core.termination
         assert term.kind == "crash" and abs(term.time_s - HANG_S) <= TS / 2

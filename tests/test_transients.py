@@ -247,3 +247,31 @@ def test_a_row_whose_margins_cannot_be_judged_is_not_detuned(monkeypatch):
     assert all(math.isfinite(m.Ms) and not counts(m) for m in seen) and max(m.Ms for m in seen) > 2.0
     assert detunes == [] and notes == []
     assert projected.Kp.tolist() == table.Kp.tolist() and projected.Ti.tolist() == table.Ti.tolist()
+
+
+def test_a_setpoint_table_is_made_robust_between_its_breakpoints_too():
+    """Two rows within a limit of 2.8 on 1/(s - 1) (Ms 2.70 and less, by python-control), but the gains halfway
+    between them, which the PID runs at setpoint 0, have Ms 2.91: robust_schedule detunes both neighbours by the
+    lambda the halfway gains need (Kp / lambda, Ti and Td * lambda commute with linear interpolation), so the
+    halfway gains meet the limit."""
+    from test_load_design import sensitivity_peak
+
+    from prlpid_fmi.deliver.candidates import robust_schedule
+
+    config = preset("first_order")
+    rows = [(6.0, 0.5, 0.05), (10.0, 0.2, 0.0)]
+    assert all(sensitivity_peak(1.0, *r) <= 2.71 for r in rows)
+    assert sensitivity_peak(1.0, 8.0, 0.35, 0.025) > 2.9
+    col = lambda i: np.array([[r[i]] for r in rows])  # noqa: E731
+    table = GainSchedule(
+        variable="setpoint[y]", unit="", breakpoints=np.array([-1.0, 1.0]), Kp=col(0), Ti=col(1), Td=col(2),
+        coupling=None, sample_time_s=TS, loop_names=("y",), loop_inputs=("u",), output_units=("",),
+        input_units=("",), anti_windup="clamping", u_min=np.array([-10.0]), u_max=np.array([10.0]))
+    robust, notes = robust_schedule(table, config, 2.8)
+    lam = table.Kp[:, 0] / robust.Kp[:, 0]
+    assert lam[0] == pytest.approx(lam[1], rel=1e-12) and lam[0] > 1.0
+    np.testing.assert_allclose(robust.Ti[:, 0], table.Ti[:, 0] * lam[0], rtol=1e-12)
+    np.testing.assert_allclose(robust.Td[:, 0], table.Td[:, 0] * lam[0], rtol=1e-12)
+    kp, ti, td = (float(g[0]) for g in robust.gains_at(0.0)[:3])
+    assert sensitivity_peak(1.0, kp, ti, td) <= 2.8 * 1.01
+    assert len(notes) == 1 and "rows -1 and 1" in notes[0]

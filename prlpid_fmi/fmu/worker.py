@@ -28,13 +28,21 @@ in_worker = watchdog.in_worker  # True inside a worker process (call_in_worker's
 
 
 def become_worker(conn=None, crumb_path: str | None = None, step_timeout_s: float | None = None,
-                  check_outputs: bool = False) -> None:
+                  check_outputs: bool = False, environ: dict | None = None) -> None:
     """Mark this process as a worker (in_worker() is then True) that leaves Ctrl-C to its parent.
 
     Its stdout goes to stderr (an FMU's own printf never reaches the tool's results); a watchdog line
     (a call that does not return) goes to the parent over `conn` as ("hang", line); the FMI call under
     way is kept in the crumb file for the parent (crash_text); step_timeout_s: the watchdog's timeout
-    for every plant [s] (None: each plant's own); check_outputs: garbage outputs raise (FmuPlant)."""
+    for every plant [s] (None: each plant's own); check_outputs: garbage outputs raise (FmuPlant). environ: the
+    parent's environment when it asked for the worker: workers fork from a server started once per process, so
+    without it an FMU would see the environment of whenever that server started, not the caller's."""
+    if environ is not None:
+        for name in set(os.environ) - set(environ):
+            del os.environ[name]
+        for name, value in environ.items():
+            if os.environ.get(name) != value:
+                os.environ[name] = value
     watchdog.mark_worker()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
@@ -174,7 +182,8 @@ def call_in_worker(fn, *args, fmus=(), what: str = "the call", step_timeout_s: f
     ctx = mp_context()
     parent, child = ctx.Pipe()
     crumb = new_crumb_file()
-    options = {"crumb_path": crumb, "step_timeout_s": step_timeout_s, "check_outputs": check_outputs}
+    options = {"crumb_path": crumb, "step_timeout_s": step_timeout_s, "check_outputs": check_outputs,
+               "environ": dict(os.environ)}
     proc = ctx.Process(target=_run_one, args=(child, fn, args, extracted_folders(fmus), options), daemon=True)
     proc.start()
     child.close()

@@ -18,6 +18,7 @@ restart costs a fork and the FMU's instantiation, not an interpreter start.
 from __future__ import annotations
 
 import dataclasses
+import os
 import statistics
 import time
 import warnings
@@ -60,9 +61,11 @@ def _snapshot(core: LoopCore) -> tuple:
 SETUP_ALLOWANCE_S = 30.0  # a reset or start message may take this much longer than a step one [s]
 
 
-def _serve(conn, config: TuningConfig, forecast_path: str, extracted: dict, crumb_path: str) -> None:
-    """Worker main: build a LoopCore, then answer (operation, arguments) messages until "close" or EOF."""
-    become_worker(conn, crumb_path)  # the parent decides when to stop
+def _serve(conn, config: TuningConfig, forecast_path: str, extracted: dict, crumb_path: str,
+           environ: dict | None = None) -> None:
+    """Worker main: build a LoopCore, then answer (operation, arguments) messages until "close" or EOF; environ: the
+    parent's environment (fmu.worker.become_worker)."""
+    become_worker(conn, crumb_path, environ=environ)  # the parent decides when to stop
     reuse_extracted(extracted)
     try:
         core = LoopCore(config, forecast_path)
@@ -169,7 +172,8 @@ class IsolatedCore(LoopConstants):
         parent, child = ctx.Pipe()
         remove_crumb_file(self._crumb)
         self._crumb = new_crumb_file()
-        proc = ctx.Process(target=_serve, args=(child, self.config, self.forecast_path, self._extracted, self._crumb),
+        proc = ctx.Process(target=_serve, args=(child, self.config, self.forecast_path, self._extracted, self._crumb,
+                                                dict(os.environ)),
                            name=f"prlpid-fmi plant {self.plant.path.name}", daemon=True)
         proc.start()
         child.close()
