@@ -19,6 +19,7 @@ from prlpid_fmi.errors import PrlPidError
 from prlpid_fmi.loop.evaluation import Policy
 from prlpid_fmi.loop.gains import Gains
 from prlpid_fmi.robustness.margins import margins_of, operating_point
+from prlpid_fmi.tuning.schedule.classical import robust_between
 from prlpid_fmi.tuning.schedule.extraction import extract
 from prlpid_fmi.tuning.schedule.replay import SELECTION_EPISODES, training_ise
 from prlpid_fmi.tuning.schedule.table import GainSchedule
@@ -35,7 +36,7 @@ def robust_schedule(schedule: GainSchedule, config, limit: float) -> tuple[GainS
     unreliable estimate (a time-varying or nonlinear plant) cannot be judged, so it neither justifies a
     detune nor can confirm one. Rows that cannot be detuned to the limit stay as they are (the deliverable
     then refuses the schedule). Returns (schedule, one note per detuned row). Setpoint tables: each row
-    at its own setpoint, then halfway between neighbours with the interpolated gains (`_robust_between`), where
+    at its own setpoint, then halfway between neighbours with the interpolated gains (tuning.schedule.classical.robust_between), where
     the deliverable checks them too. Error tables: each row at every point of range_points, detuned at its worst
     failing point until it meets the limit at all of them. Other variables: unchanged.
     """
@@ -64,35 +65,9 @@ def robust_schedule(schedule: GainSchedule, config, limit: float) -> tuple[GainS
                          f"Ti {np.round(Ti[j], 4).tolist()}")
     schedule = dataclasses.replace(schedule, Kp=Kp, Ti=Ti)
     if loop is None:  # a setpoint table is also run between its breakpoints, with interpolated gains
-        schedule, between = _robust_between(schedule, config, limit)
+        schedule, between = robust_between(schedule, config, limit)
         notes += between
     return schedule, notes
-
-
-def _robust_between(schedule: GainSchedule, config, limit: float) -> tuple[GainSchedule, list[str]]:
-    """Where the interpolated gains halfway between two breakpoints fail the Ms limit, both neighbours detuned by the
-    factor lambda that `detune` (Kp / lambda, Ti and Td * lambda) finds for the gains there: linear interpolation
-    commutes with that scaling, so the halfway gains become exactly the detuned ones."""
-    from prlpid_fmi.tuning.fixed_pid import detune
-
-    Kp, Ti, Td, notes = schedule.Kp.copy(), schedule.Ti.copy(), schedule.Td.copy(), []
-    bp = schedule.breakpoints
-    for j in range(len(bp) - 1):
-        mid = 0.5 * (float(bp[j]) + float(bp[j + 1]))
-        current = dataclasses.replace(schedule, Kp=Kp, Ti=Ti, Td=Td)
-        gains = tuple(list(a) for a in current.gains_at(mid)) + (None,)
-        point = operating_point(config, mid)
-        if meets(margins_of(config, gains, point), limit):
-            continue
-        fixed = detune(config, gains, point, limit)
-        if fixed is None:
-            continue  # the deliverable then refuses the table, saying where
-        lam = np.asarray(gains[0], float) / np.asarray(fixed[0], float)
-        for row in (j, j + 1):
-            Kp[row], Ti[row], Td[row] = Kp[row] / lam, Ti[row] * lam, Td[row] * lam
-        notes.append(f"rows {bp[j]:g} and {bp[j + 1]:g}: Ms between them (at {mid:g}) above {limit:g}, both detuned "
-                     f"by lambda {np.round(lam, 3).tolist()}")
-    return dataclasses.replace(schedule, Kp=Kp, Ti=Ti, Td=Td), notes
 
 
 def deliverable_schedule(policy: Policy, scenario, seed: int, anchor: Gains | None = None

@@ -13,7 +13,8 @@ What a control engineer does by hand on a nonlinear plant, from the FMU alone (n
 3. The table is interpolated linearly over the setpoint (GainSchedule: held outside the breakpoints) and its Ms
    is checked on the FMU at every breakpoint and halfway between neighbours, with the interpolated gains (what
    the PID runs there). Where a halfway point fails, a local design is made there too and becomes a breakpoint
-   (once per interval); a breakpoint that still fails is detuned (tuning.fixed_pid.detune_over).
+   (once per interval); where a halfway point still fails, both neighbours are detuned by the factor its gains need
+   (`robust_between`).
 
 Whether to build it (`deploy.classical_schedule`): "auto" builds it where the plant is nonlinear over the
 setpoint range: the magnitude of the plant's frequency response measured with the fixed PID at the low end and
@@ -126,6 +127,32 @@ def _between(schedule: GainSchedule, config: TuningConfig, limit: float) -> list
     return out
 
 
+def robust_between(schedule: GainSchedule, config, limit: float) -> tuple[GainSchedule, list[str]]:
+    """Where the interpolated gains halfway between two breakpoints fail the Ms limit, both neighbours detuned by the
+    factor lambda that `detune` (Kp / lambda, Ti and Td * lambda) finds for the gains there: linear interpolation
+    commutes with that scaling, so the halfway gains become exactly the detuned ones."""
+    from prlpid_fmi.tuning.fixed_pid import detune
+
+    Kp, Ti, Td, notes = schedule.Kp.copy(), schedule.Ti.copy(), schedule.Td.copy(), []
+    bp = schedule.breakpoints
+    for j in range(len(bp) - 1):
+        mid = 0.5 * (float(bp[j]) + float(bp[j + 1]))
+        current = dataclasses.replace(schedule, Kp=Kp, Ti=Ti, Td=Td)
+        gains = tuple(list(a) for a in current.gains_at(mid)) + (None,)
+        point = operating_point(config, mid)
+        if meets_limit(margins_of(config, gains, point), limit):
+            continue
+        fixed = detune(config, gains, point, limit)
+        if fixed is None:
+            continue  # the deliverable then refuses the table, saying where
+        lam = np.asarray(gains[0], float) / np.asarray(fixed[0], float)
+        for row in (j, j + 1):
+            Kp[row], Ti[row], Td[row] = Kp[row] / lam, Ti[row] * lam, Td[row] * lam
+        notes.append(f"rows {bp[j]:g} and {bp[j + 1]:g}: Ms between them (at {mid:g}) above {limit:g}, both detuned "
+                     f"by lambda {np.round(lam, 3).tolist()}")
+    return dataclasses.replace(schedule, Kp=Kp, Ti=Ti, Td=Td), notes
+
+
 def classical_schedule(scenario, fixed: dict, progress: Steps = QUIET,
                        points: int = CLASSICAL_POINTS) -> tuple[GainSchedule, dict]:
     """The classical gain schedule of the module docstring over loop 0's setpoint, and what run.json records of it
@@ -159,6 +186,7 @@ def classical_schedule(scenario, fixed: dict, progress: Steps = QUIET,
     if refined:
         schedule = schedule_from_rows(config, variable, output_units[0], rows, meta)
         progress.step(f"Ms check between the {len(rows)} breakpoints")
+    schedule, detuned = robust_between(schedule, config, limit)  # what refinement left: both neighbours detuned
     failing = _between(schedule, config, limit)
     return schedule, {"rows": sorted(infos, key=lambda i: i["setpoint"]), "refined": refined,
-                      "failing_between": failing}
+                      "detuned_between": detuned, "failing_between": failing}
