@@ -222,6 +222,6 @@ class DeployConfig:
     max_overshoot: float = _d(_m.DeployModel, "max_overshoot")  # fraction of the setpoint step
     max_noise_gain: float = _d(_m.DeployModel, "max_noise_gain")  # std(u) from measurement noise / control span
     allow_unverified: bool = _d(_m.DeployModel, "allow_unverified")  # a schedule with an impossible Ms estimate
-    classical_schedule: str = _d(_m.DeployModel, "classical_schedule")  # auto | on | off
+    classical_schedule: object = _d(_m.DeployModel, "classical_schedule")  # "auto" | True | False
     schedule_points: int = _d(_m.DeployModel, "schedule_points")
     schedule_by: str = _d(_m.DeployModel, "schedule_by")  # auto | setpoint | measurement | error

@@ -166,3 +166,24 @@ def test_held_out_total_variation_and_unsettled_steps_refuse_a_schedule():
         "The gain schedule is not deployed: on held-out episodes of the training distribution it leaves a setpoint "
         "step unsettled in 2 episodes (the fixed PID: 1).",)
     assert choose(held(cand("gain schedule", 0.8), 14.9, 1), fixed, 2.0).deploy == "gain schedule"
+
+
+def test_classical_schedule_setting_is_auto_or_a_boolean_with_one_message(tmp_path):
+    """deploy.classical_schedule: auto, true or false (YAML reads on/off as booleans too); anything else is one line
+    naming the key, the value and what was expected."""
+    import pytest
+
+    from prlpid_fmi.errors import ScenarioError
+    from prlpid_fmi.scenario.load import load_scenario
+
+    base = "plant:\n  fmu: FirstOrderUnstable\n  loops: [{input: u, output: y}]\n"
+    for text, value in (("auto", "auto"), ("true", True), ("off", False)):
+        path = tmp_path / f"{text}.yaml"
+        path.write_text(base + f"deploy: {{classical_schedule: {text}}}\n")
+        assert load_scenario(path).deploy.classical_schedule == value
+    path = tmp_path / "bad.yaml"
+    path.write_text(base + "deploy: {classical_schedule: maybe}\n")
+    with pytest.raises(ScenarioError) as err:
+        load_scenario(path)
+    assert str(err.value) == (f"{path}: deploy.classical_schedule: neither 'auto' nor true/false (got 'maybe'; "
+                              "expected auto, true or false)")

@@ -35,6 +35,7 @@ from prlpid_fmi.schema.types import (
     LOOP_TARGETS,
     Algorithm,
     AntiWindup,
+    AutoOrFlag,
     Count,
     DisturbanceType,
     Finite,
@@ -749,7 +750,7 @@ class BaselineModel(Section):
     popsize: Count = Field(10, description="population = popsize x number of gains searched")
 
 
-ClassicalSchedule = Literal["auto", "on", "off"]  # deploy.classical_schedule (prlpid_fmi.tuning.schedule.classical)
+ClassicalSchedule = AutoOrFlag  # deploy.classical_schedule (prlpid_fmi.tuning.schedule.classical)
 ScheduleBy = Literal["auto", "setpoint", "measurement", "error"]  # deploy.schedule_by (prlpid_fmi.tuning.schedule.trajectories)
 
 
@@ -769,7 +770,7 @@ class DeployModel(Section):
                                                       "is not deployed (the fixed PID may be, said in the verdict)")
     classical_schedule: ClassicalSchedule = Field(
         "auto", description="the classical gain schedule (local load designs at setpoints across the range, "
-                            "interpolated over the setpoint) as a candidate: on, off, or auto: where the plant's "
+                            "interpolated over the setpoint) as a candidate: true, false, or auto: where the plant's "
                             "frequency response varies over the setpoint range by more than 25 %")
     schedule_points: Count = Field(9, description="operating points (rows) of the gain schedule `tune` reads from "
                                                   "the policy: setpoints evenly spaced over the first loop's "

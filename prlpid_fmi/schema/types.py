@@ -100,6 +100,16 @@ def tuned_or_number(low: float, high: float = math.inf) -> Any:
                                          **({"maximum": high} if math.isfinite(high) else {})}]})]
 
 
+def _auto_or_flag(value: Any) -> Any:
+    if value == "auto" or isinstance(value, bool):
+        return value
+    raise problem("neither 'auto' nor true/false", "auto, true or false")
+
+
+AutoOrFlag = Annotated[Union[str, bool], PlainValidator(_auto_or_flag), WithJsonSchema(
+    {"anyOf": [{"const": "auto"}, {"type": "boolean"}]})]  # "auto" or a boolean: one value type with one message
+
+
 def integer(**bounds: int) -> Any:
     """An int type with pydantic bounds; 200.0 is read as 200, true/false and 1.5 are refused."""
     return Annotated[int, Field(**bounds), BeforeValidator(as_integer)]

@@ -71,10 +71,10 @@ def gain_variation(config: TuningConfig, gains: tuple) -> float:
 
 def wanted(setting, config: TuningConfig, gains: tuple) -> tuple[bool, float]:
     """(build it?, gain_variation) for deploy.classical_schedule = setting ("auto" | True | False)."""
-    if setting is False or setting == "off":
+    if setting is False:
         return False, math.nan
     variation = gain_variation(config, gains)
-    if setting is True or setting == "on":
+    if setting is True:
         return True, variation
     return bool(variation > NONLINEAR_GAIN_RATIO), variation
 
