@@ -16,6 +16,7 @@ from prlpid_fmi.schema import model as _m
 from prlpid_fmi.schema.model import default as _d
 from prlpid_fmi.schema.types import (
     Algorithm,
+    AnchorOn,
     AntiWindup,
     DisturbanceKind,
     GainChange,
@@ -137,6 +138,7 @@ class TuningConfig:
     coupled: bool = _d(_m.ControllerModel, "coupled")  # cross-axis coupled PID (paper eq. 26-27), needs 3 loops
     coupling_range: float = _d(_m.ControllerModel, "coupling_range")  # coupling coefficients in [-c, c]
     gain_mapping: GainMapping = _d(_m.ControllerModel, "gain_mapping")  # anchored (action 0 = tuned fixed PID) | absolute
+    anchor_on: AnchorOn = _d(_m.ControllerModel, "anchor_on")  # auto (the classical schedule where built) | fixed_pid
     anchor_bands: AnchorBands = AnchorBands()
     # strategies
     forecast_horizon: int = _d(_m.StrategiesModel, "forecast_horizon")  # N; 0 = plain one-step reward

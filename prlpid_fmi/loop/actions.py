@@ -14,6 +14,11 @@ result is clipped into the loop's gain range::
     Td = Td0 + a * b_Td * (Td.high - Td.low)         (additive, a fraction of the Td range)
     c  = c0 + a * b_c                                (additive, coupling coefficients)
 
+Scheduled anchor (ScheduledActionMap, the default where `tune` builds a classical gain schedule): the same
+bands around the schedule's gains at the current value z of its scheduling variable (GainSchedule.gains_at,
+the function every replay and export of the table runs), so action 0 gives the classical schedule bit for bit;
+a gain is clipped into [min(low, g0(z)), max(high, g0(z))] so that an anchor outside the loop's range is kept.
+
 `values(action list) -> (Kp, Ti, Td, coupling)` lists is the per-step path; `__call__` returns Gains.
 """
 from __future__ import annotations
@@ -96,4 +101,38 @@ class AnchoredActionMap(ActionMap):
             a = -1.0 if a < -1.0 else 1.0 if a > 1.0 else a
             g = value * math.exp(a * band) if multiplicative else value + a * band
             out.append(low if g < low else high if g > high else g)
+        return split_values(out, len(self.loops), self.coupled)
+
+
+class ScheduledActionMap(AnchoredActionMap):
+    """Action 0 -> exactly a gain table's gains at the scheduling value z; the bands of AnchoredActionMap around them.
+
+    Args:
+        loops, bands, coupled, coupling_range: as AnchoredActionMap.
+        schedule: the anchor table (tuning.schedule.table.GainSchedule: breakpoints, Kp, Ti, Td, its variable).
+    `values_at(action, z)` is the per-step path (z read before the step, as a replay of the table reads it);
+    `values(action)` looks the table up at its first breakpoint.
+    """
+
+    scheduled = True
+
+    def __init__(self, loops: tuple[LoopConfig, ...], schedule, bands, coupled: bool = False,
+                 coupling_range: float = 0.5):
+        self.schedule = schedule
+        super().__init__(loops, schedule.gains_object(float(schedule.breakpoints[0])), bands, coupled, coupling_range)
+
+    def values(self, action: list) -> tuple[list, list, list, list | None]:
+        return self.values_at(action, float(self.schedule.breakpoints[0]))
+
+    def values_at(self, action: list, z: float) -> tuple[list, list, list, list | None]:
+        """Action (size floats) at scheduling value z -> Kp, Ti, Td lists (n_loops,), coupling (6,) or None."""
+        g = self.schedule.gains_at(z)
+        anchor = [float(x) for i in range(len(self.loops)) for x in (g[0][i], g[1][i], g[2][i])]
+        anchor += [float(x) for x in g[3]] if self.coupled else []
+        out = []
+        for a, value, (multiplicative, _, band, low, high) in zip(action, anchor, self._anchored):
+            a = -1.0 if a < -1.0 else 1.0 if a > 1.0 else a
+            v = value * math.exp(a * band) if multiplicative else value + a * band
+            low, high = min(low, value), max(high, value)
+            out.append(low if v < low else high if v > high else v)
         return split_values(out, len(self.loops), self.coupled)

@@ -8,9 +8,10 @@ to [-10, 10]: setpoint r, measurement y, error e = r - y, and error rate (e_k - 
 (r, y) locate the operating point the gains should depend on; (e, de/dt) are what a PID tuner reads
 to decide between more proportional, integral or derivative action.
 
-Gain map: with `config.gain_mapping == "anchored"` and anchor gains given (`anchor=`, what `tune`
-passes after tuning the fixed PID), action 0 gives exactly those gains; without anchor gains, or with
-"absolute", the action maps over the whole gain ranges (paper).
+Gain map: with `config.gain_mapping == "anchored"` and an anchor given (`anchor=`: the tuned fixed PID's Gains,
+or a gain table, the classical gain schedule `tune` builds on a nonlinear plant), action 0 gives exactly the
+anchor's gains (a table's at its scheduling variable's value, read before the step as a replay of the table
+reads it); without an anchor, or with "absolute", the action maps over the whole gain ranges (paper).
 """
 from __future__ import annotations
 
@@ -19,22 +20,30 @@ import numpy as np
 
 from prlpid_fmi.config import TuningConfig
 from prlpid_fmi.control import make_smoother
-from prlpid_fmi.loop.actions import ActionMap, AnchoredActionMap
-from prlpid_fmi.loop.gains import Gains, gains_from_values
+from prlpid_fmi.loop.actions import ActionMap, AnchoredActionMap, ScheduledActionMap
+from prlpid_fmi.loop.gains import gains_from_values
 from prlpid_fmi.loop.isolated import make_core
+from prlpid_fmi.loop.scheduling import SchedulingVariable
 
 OBS_CLIP = 10.0
 
 
-def is_anchored(config: TuningConfig, anchor: Gains | None) -> bool:
-    """Whether the gain map is anchored: anchor gains given and config.gain_mapping is "anchored"."""
+def is_anchored(config: TuningConfig, anchor) -> bool:
+    """Whether the gain map is anchored: an anchor given and config.gain_mapping is "anchored"."""
     return anchor is not None and config.gain_mapping == "anchored"
 
 
-def make_action_map(config: TuningConfig, anchor: Gains | None = None) -> ActionMap:
-    """The gain map of `config`: anchored at `anchor` when given and config.gain_mapping is "anchored"."""
+def is_table(anchor) -> bool:
+    """Whether an anchor is a gain table (tuning.schedule.table.GainSchedule), not one set of Gains."""
+    return hasattr(anchor, "gains_at")
+
+
+def make_action_map(config: TuningConfig, anchor=None) -> ActionMap:
+    """The gain map of `config`: anchored at `anchor` (Gains, or a gain table) when given and config.gain_mapping is
+    "anchored"."""
     if is_anchored(config, anchor):
-        return AnchoredActionMap(config.loops, anchor, config.anchor_bands, config.coupled, config.coupling_range)
+        kind = ScheduledActionMap if is_table(anchor) else AnchoredActionMap
+        return kind(config.loops, anchor, config.anchor_bands, config.coupled, config.coupling_range)
     return ActionMap(config.loops, config.coupled, config.coupling_range)
 
 
@@ -43,7 +52,7 @@ class PidTuningEnv(gym.Env):
 
     Args:
         config: the tuning problem (see prlpid_fmi.config.TuningConfig).
-        anchor: the tuned fixed PID's Gains the anchored map is centred on (None: absolute map).
+        anchor: the tuned fixed PID's Gains, or a gain table, the anchored map is centred on (None: absolute map).
         info: True (default) puts every signal of the step in the info dict; training passes False
             (SB3's Monitor needs none of them).
         forecast_path: "auto" | "fmi" (see LoopCore).
@@ -54,12 +63,14 @@ class PidTuningEnv(gym.Env):
 
     metadata = {"render_modes": []}
 
-    def __init__(self, config: TuningConfig, render_mode: str | None = None, anchor: Gains | None = None,
+    def __init__(self, config: TuningConfig, render_mode: str | None = None, anchor=None,
                  info: bool = True, forecast_path: str = "auto"):
         self.config = c = config
         self.render_mode = render_mode
         self.core = make_core(config, forecast_path)  # in this process, or in a worker (plant.isolation)
         self.action_map = make_action_map(config, anchor)
+        self._scheduling = (SchedulingVariable(anchor.variable, self.core)
+                            if isinstance(self.action_map, ScheduledActionMap) else None)
         self.smoother = make_smoother(c.smoothing, window=c.smoothing_window, alpha=c.smoothing_alpha,
                                       n_params=self.action_map.size)
         self._info = info
@@ -120,7 +131,11 @@ class PidTuningEnv(gym.Env):
 
     def step(self, action):
         raw = [-1.0 if a < -1.0 else 1.0 if a > 1.0 else a for a in np.asarray(action, dtype=float).tolist()]
-        gains = self.gains = self.action_map.values(self.smoother.values(raw))
+        smoothed = self.smoother.values(raw)
+        if self._scheduling is None:
+            gains = self.gains = self.action_map.values(smoothed)
+        else:  # the table's gains at the scheduling variable's value before the step
+            gains = self.gains = self.action_map.values_at(smoothed, self._scheduling())
         reward, terminated = self.core.step(*gains)
         truncated = self.core.k >= self.config.episode_steps
         info = {}

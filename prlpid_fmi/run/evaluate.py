@@ -11,7 +11,7 @@ from prlpid_fmi.config import TuningConfig
 from prlpid_fmi.deliver.rule import Deployed
 from prlpid_fmi.report.markdown import deployed_section, loop_units, render_report
 from prlpid_fmi.run.gains_csv import trajectory_csv
-from prlpid_fmi.run.trained import anchor_gains, deployed_controller, load_policy, load_trained, on_other_evaluation
+from prlpid_fmi.run.trained import deployed_controller, load_policy, load_trained, on_other_evaluation, run_anchor
 from prlpid_fmi.rundir import write_atomic, write_json
 from prlpid_fmi.scenario.load import Scenario, scenario_to_yaml
 
@@ -95,7 +95,7 @@ def evaluate_run(run_dir: str | Path, scenario_path: str | Path | None = None) -
     deployed, schedule = deployed_controller(run_dir)
     write_atomic(out_dir / rd.SCENARIO, scenario_to_yaml(scenario))
     source = Path(scenario_path) if scenario_path is not None else run_dir / rd.SCENARIO
-    ev = evaluate_controllers(scenario, policy, fixed, anchor=anchor_gains(trained, fixed), schedule=schedule)
+    ev = evaluate_controllers(scenario, policy, fixed, anchor=run_anchor(run_dir, trained, fixed), schedule=schedule)
     write_evaluation_files(out_dir, scenario, ev, fixed)
     metrics = evaluation_metrics(ev, fixed)
     opening = ()

@@ -50,11 +50,34 @@ def with_isolation(scenario: Scenario, isolation: str) -> Scenario:
     return dataclasses.replace(scenario, tuning=dataclasses.replace(scenario.tuning, isolation=isolation))
 
 
-def anchor_gains(scenario: Scenario, fixed: dict | None):
-    """The fixed PID's Gains when the scenario's gain map is anchored (None: absolute map)."""
+def training_anchor(scenario: Scenario, fixed: dict | None, classical=None):
+    """What action 0 of the anchored gain map gives (loop.env): the classical gain table when one was built and
+    controller.anchor_on is auto, else the fixed PID's Gains; None for the absolute map or without a fixed PID."""
     if fixed is None or scenario.tuning.gain_mapping != "anchored":
         return None
+    if classical is not None and scenario.tuning.anchor_on == "auto":
+        return classical
     return gains_from_dict(fixed["gains"])
+
+
+def anchor_name(anchor) -> str | None:
+    """run.json's "anchor": "classical gain schedule", "fixed PID", or None (absolute map)."""
+    if anchor is None:
+        return None
+    return str(Deployed.CLASSICAL if hasattr(anchor, "gains_at") else Deployed.FIXED_PID)
+
+
+def run_anchor(run_dir: Path, scenario: Scenario, fixed: dict | None):
+    """The anchor a finished run trained around, read back (run.json's "anchor"; classical_schedule.csv)."""
+    from prlpid_fmi.tuning.schedule.csv_file import read_schedule_csv
+
+    try:
+        named = json.loads((run_dir / rd.RUN_INFO).read_text()).get("anchor")
+    except (OSError, ValueError, AttributeError):
+        named = None
+    path = run_dir / rd.CLASSICAL_SCHEDULE
+    classical = read_schedule_csv(path) if named == str(Deployed.CLASSICAL) and path.is_file() else None
+    return training_anchor(scenario, fixed, classical)
 
 
 def with_structure(scenario: Scenario, fixed: dict | None) -> Scenario:

@@ -3,7 +3,8 @@
     start        the scenario, seed and budget -> run.json and scenario.yaml (resume: read back)
     fixed_pid    the scenario -> the tuned fixed PID, fixed_pid.json and .csv (resume: read back)
     classical    on a nonlinear plant: local PID designs across the setpoint range -> classical_schedule.csv
-    training     the scenario and the anchor -> the trained policy, model.zip and checkpoints
+    training     the scenario and the anchor (the classical schedule where built, else the fixed PID) -> the
+                 trained policy, model.zip and checkpoints
     schedule     the policy -> the candidate gain table (deliver.candidates), or why there is none
     evaluation   policy, fixed PID and table on the evaluation -> metrics, gains.csv, plots
     choice       the evidence -> the deployed controller and why (deliver.evidence, deliver.rule)
@@ -34,7 +35,7 @@ from prlpid_fmi.run.evaluate import (
     evaluation_report,
     write_evaluation_files,
 )
-from prlpid_fmi.run.trained import anchor_gains, load_policy, with_isolation, with_structure
+from prlpid_fmi.run.trained import anchor_name, load_policy, training_anchor, with_isolation, with_structure
 from prlpid_fmi.rundir import write_atomic, write_json
 from prlpid_fmi.scenario.load import Scenario, load_scenario, scenario_to_yaml
 from prlpid_fmi.schema.types import MAX_SEED
@@ -121,7 +122,9 @@ def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None
     scenario = with_structure(scenario, fixed)  # the tuned b, c, Tf from here on
     started = dataclasses.replace(started, scenario=scenario)
     classical = classical_stage(scenario, run_dir, fixed, info, progress_bar) if fixed is not None else None
-    anchor = anchor_gains(scenario, fixed)
+    anchor = training_anchor(scenario, fixed, classical)
+    info["anchor"] = anchor_name(anchor)
+    write_json(run_dir / rd.RUN_INFO, info)
     training_stage(scenario, run_dir, info, resume, anchor, progress_bar)
     policy = load_policy(run_dir, scenario.agent.algorithm)
     table = schedule_stage(policy, scenario, anchor, progress_bar)
@@ -220,6 +223,7 @@ def classical_stage(scenario: Scenario, run_dir: Path, fixed: dict, info: dict, 
             table, details = classical_schedule(scenario, fixed, steps)
             record.update(details)
             write_schedule_csv(table, path)
+            table = read_schedule_csv(path)  # the file is the table: training's anchor, resume and evaluate read it
         except PrlPidError as exc:
             record.update(built=False, why=str(exc))
             table = None

@@ -147,7 +147,7 @@ def build_scenario(model: ScenarioModel, name: str, path: Optional[str] = None) 
         prior=PriorConfig(fmu=model.prior.fmu, parameters=dict(model.prior.parameters),
                           state_map=dict(model.prior.state_map)),
         **_fields(c, ("anti_windup", "derivative_filter_N", "setpoint_weight", "derivative_weight", "measurement_filter",
-                     "measurement_filter_order", "coupled", "coupling_range", "gain_mapping", "gain_change")),
+                     "measurement_filter_order", "coupled", "coupling_range", "gain_mapping", "gain_change", "anchor_on")),
         anchor_bands=AnchorBands(**c.anchor_bands.model_dump()),
         **_fields(st, ("forecast_horizon", "smoothing", "smoothing_window", "smoothing_alpha")),
         reward=RewardWeights(**_fields(r, reward_keys)), divergence_penalty=r.divergence_penalty,

@@ -34,6 +34,7 @@ from prlpid_fmi.schema.checks import check_variable, state_of
 from prlpid_fmi.schema.types import (
     LOOP_TARGETS,
     Algorithm,
+    AnchorOn,
     AntiWindup,
     AutoOrFlag,
     Count,
@@ -378,8 +379,13 @@ class ControllerModel(Section):
                                              "pitch, yaw); adds 6 coupling actions")
     coupling_range: Positive = Field(0.5, description="coupling coefficients lie in [-c, c]")
     gain_mapping: GainMapping = Field(
-        "anchored", description="anchored: action 0 gives exactly the tuned fixed PID's gains and each action moves "
-                                "its gain within anchor_bands; absolute: the paper's map over the whole gain range")
+        "anchored", description="anchored: action 0 gives exactly the anchor's gains (anchor_on) and each action "
+                                "moves its gain within anchor_bands; absolute: the paper's map over the whole gain range")
+    anchor_on: AnchorOn = Field(
+        "auto", description="what action 0 of the anchored gain map gives: auto: the classical gain schedule's gains "
+                            "at the current setpoint where tune builds one (deploy.classical_schedule), else the "
+                            "tuned fixed PID's; fixed_pid: always the tuned fixed PID's (the map before the classical "
+                            "schedule)")
     anchor_bands: AnchorBandsModel = section("bands of the anchored gain map")
 
     @field_validator("coupled")

@@ -26,6 +26,7 @@ GainChange = Literal[GAIN_CHANGE_MODES]  # bumpless | positional (control.pid)
 Smoothing = Literal[SMOOTHING_METHODS]  # none | sma | lwma | era
 GainScale = Literal["log", "linear"]
 GainMapping = Literal["anchored", "absolute"]
+AnchorOn = Literal["auto", "fixed_pid"]  # controller.anchor_on: what action 0 reproduces (loop.actions)
 Algorithm = Literal["ppo", "sac", "td3"]
 VecEnv = Literal["dummy", "subproc"]
 Isolation = Literal["auto", "process", "none"]  # where the plant FMU runs (prlpid_fmi.loop.isolated)

@@ -15,7 +15,8 @@ from prlpid_fmi.loop.evaluation import GAIN_NAMES, Policy
 from prlpid_fmi.loop.gains import Gains
 from prlpid_fmi.tuning.schedule.table import LOOP_VARIABLE, GainSchedule, exact_mean, schedule_from_rows, table_meta
 from prlpid_fmi.tuning.schedule.trajectories import trajectory_schedule
-from prlpid_fmi.tuning.schedule.variable import SchedulingVariable, variable_name
+from prlpid_fmi.loop.scheduling import SchedulingVariable
+from prlpid_fmi.tuning.schedule.variable import variable_name
 
 SETTLED_FRACTION = 0.2  # gains and breakpoint: mean over the last 20 % of each hold
 

@@ -10,7 +10,7 @@ import numpy as np
 from prlpid_fmi.config import TuningConfig
 from prlpid_fmi.errors import PrlPidError
 from prlpid_fmi.tuning.schedule.table import GainSchedule
-from prlpid_fmi.tuning.schedule.variable import SchedulingVariable
+from prlpid_fmi.loop.scheduling import SchedulingVariable
 
 SELECTION_EPISODES = 8  # further episodes the candidate tables are scored on (auto)
 SELECTION_SEED_OFFSET = 20_000

@@ -40,6 +40,7 @@ import numpy as np
 from prlpid_fmi.config import TuningConfig
 from prlpid_fmi.control import COUPLING_NAMES, parallel_gains
 from prlpid_fmi.loop.gains import Gains
+from prlpid_fmi.loop.scheduling import LOOP_SIGNALS, LOOP_VARIABLE
 
 # The discrete law of prlpid_fmi.control.pid, written in its evaluation order (the exports compute it so)
 PID_EQUATION = ("u = Kp*(ep + Td*D) + (Kp/Ti)*I; I = I_prev + e*Ts; D = (ed - ed_prev)/Ts; "
@@ -60,8 +61,6 @@ GAIN_CHANGE_EQUATION = {  # what a change of (Kp, Ti, Td) between samples does (
                  "jump (D_prev: the derivative as kept, filtered with N; Ki = 0: I_prev kept); not at the first sample"),
     "positional": "none: a gain change acts on the whole sum I (the paper's eq. 2)",
 }
-LOOP_SIGNALS = ("setpoint", "measurement", "error")  # scheduling variables read from a loop, not the FMU
-LOOP_VARIABLE = re.compile(r"^(setpoint|measurement|error)\[(.+)\]$")  # <signal>[<loop output>]
 
 __all__ = ["GainSchedule", "schedule_from_rows", "fixed_schedule", "table_meta", "exact_mean", "LOOP_SIGNALS",
            "LOOP_VARIABLE", "PID_EQUATION", "MEASUREMENT_FILTER_EQUATION", "INTERPOLATION", "STRUCTURE_COLUMNS",

@@ -31,7 +31,8 @@ from prlpid_fmi.errors import PrlPidError
 from prlpid_fmi.loop.evaluation import GAIN_NAMES, Policy
 from prlpid_fmi.loop.gains import Gains
 from prlpid_fmi.tuning.schedule.table import GainSchedule, schedule_from_rows, table_meta
-from prlpid_fmi.tuning.schedule.variable import SchedulingVariable, variable_name
+from prlpid_fmi.loop.scheduling import SchedulingVariable
+from prlpid_fmi.tuning.schedule.variable import variable_name
 
 TRAJECTORY_EPISODES = 8  # training-distribution episodes the trajectory table is binned from
 EXTRACTION_SEED_OFFSET = 10_000
