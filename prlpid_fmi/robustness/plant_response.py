@@ -9,7 +9,10 @@ new experiment (Astrom & Hagglund's loop-shaping view of PID design):
   linearly in log w between the measured frequencies (INTERPOLATED_POINTS points);
 - noise gain(C) = std(u) / std(n) for white measurement noise n on every sample, u = -C S n:
   sqrt((1/pi) * integral_0^pi |C S(e^{j theta})|^2 d theta), theta = w Ts, by the trapezoid rule on that
-  grid (below the lowest measured frequency |C S| is taken as flat at its lowest value).
+  grid (below the lowest measured frequency |C S| is taken as flat at its lowest value);
+- increment noise gain(C) = std(u_k - u_{k-1}) / std(n): the same integral weighted by |1 - e^{-j theta}|^2 =
+  2 - 2 cos theta (what the chatter metric counts: sample-to-sample moves of u, which a derivative on noise makes
+  large while std(u) stays small).
 
 - stability: a bounded |S| on the unit circle does not make the loop stable (a huge gain keeps |S| small
   and still destabilises a sampled loop). By Nyquist, the closed loop of C is stable when 1 + C P winds around
@@ -62,16 +65,12 @@ class MeasuredPlant:
         w, P = self.grid()
         return float(np.max(np.abs(1.0 / (1.0 + controller(w) * P))))
 
-    def noise_gain(self, controller) -> float:
-        """std(u) / std(n) for white measurement noise on every sample (module docstring)."""
+    def noise_gain(self, controller, increments: bool = False) -> float:
+        """std(u) / std(n) for white measurement noise on every sample; increments: std(u_k - u_{k-1}) / std(n)
+        (module docstring)."""
         w, P = self.grid()
         C = controller(w)
-        cs2 = np.abs(C / (1.0 + C * P)) ** 2
-        theta = w * self.sample_time_s
-        integral = cs2[0] * theta[0] + float(np.sum(0.5 * (cs2[1:] + cs2[:-1]) * np.diff(theta)))
-        if theta[-1] < np.pi:  # the grid stops short of Nyquist: |C S| flat from there
-            integral += cs2[-1] * (np.pi - theta[-1])
-        return float(np.sqrt(integral / np.pi))
+        return float(_noise_gains(np.abs(C / (1.0 + C * P))[None, :] ** 2, w * self.sample_time_s, increments)[0])
 
     def winding(self, controller) -> float:
         """The phase change [rad] of 1 + C P from the lowest grid frequency to Nyquist (unwrapped): twice it over
@@ -79,10 +78,10 @@ class MeasuredPlant:
         w, P = self.grid()
         return float(np.diff(np.unwrap(np.angle(1.0 + controller(w) * P))[[0, -1]])[0])
 
-    def scan(self, gains: np.ndarray, shape, noise: bool = True) -> tuple[np.ndarray, np.ndarray | None, np.ndarray]:
-        """(Ms, noise gain, winding) of the PIDs K * shape(w) for every K in `gains` (m,) at once: shape(w) is the
-        feedback response of the PID with Kp = 1 (Kp scales C as a whole). Arrays of shape (m,); the noise gain
-        None unless `noise`."""
+    def scan(self, gains: np.ndarray, shape, noise: bool = True) -> tuple:
+        """(Ms, noise gain, winding, increment noise gain) of the PIDs K * shape(w) for every K in `gains` (m,) at
+        once: shape(w) is the feedback response of the PID with Kp = 1 (Kp scales C as a whole). Arrays of shape
+        (m,); the noise gains None unless `noise`."""
         w, P = self.grid()
         G = shape(w)
         C = np.asarray(gains, float)[:, None] * G[None, :]
@@ -91,11 +90,20 @@ class MeasuredPlant:
         phase = np.unwrap(np.angle(1.0 + C * P[None, :]), axis=1)
         winding = phase[:, -1] - phase[:, 0]
         if not noise:
-            return ms, None, winding
-        cs2 = np.abs(C * S) ** 2
-        theta = w * self.sample_time_s
-        integral = cs2[:, 0] * theta[0] + np.sum(0.5 * (cs2[:, 1:] + cs2[:, :-1]) * np.diff(theta)[None, :], axis=1)
-        if theta[-1] < np.pi:
-            integral = integral + cs2[:, -1] * (np.pi - theta[-1])
-        return ms, np.sqrt(integral / np.pi), winding
+            return ms, None, winding, None
+        cs2, theta = np.abs(C * S) ** 2, w * self.sample_time_s
+        return ms, _noise_gains(cs2, theta, False), winding, _noise_gains(cs2, theta, True)
 
+
+
+def _noise_gains(cs2: np.ndarray, theta: np.ndarray, increments: bool) -> np.ndarray:
+    """sqrt((1/pi) integral_0^pi |C S|^2 (x (2 - 2 cos theta) for increments) d theta) per row of cs2 (m, K), by the
+    trapezoid rule on theta (K,) [rad/sample]; |C S| flat below the grid and from its end to Nyquist."""
+    weight = 2.0 - 2.0 * np.cos(theta) if increments else np.ones_like(theta)
+    f = cs2 * weight[None, :]
+    integral = (cs2[:, 0] * (theta[0] - np.sin(theta[0])) * 2.0 if increments else f[:, 0] * theta[0]) \
+        + np.sum(0.5 * (f[:, 1:] + f[:, :-1]) * np.diff(theta)[None, :], axis=1)
+    if theta[-1] < np.pi:  # the grid stops short of Nyquist: |C S| flat from there
+        tail = (np.pi - theta[-1]) if not increments else 2.0 * (np.pi - theta[-1]) + 2.0 * np.sin(theta[-1])
+        integral = integral + cs2[:, -1] * tail
+    return np.sqrt(integral / np.pi)

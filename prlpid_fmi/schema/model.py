@@ -770,6 +770,11 @@ class DeployModel(Section):
     max_noise_gain: Positive = Field(
         0.02, description="limit of the standard deviation of u caused by the scenario's measurement noise, a fraction "
                           "of the loop's control span (from |C S| over the Nyquist band at each operating point)")
+    max_noise_increment: Positive = Field(
+        0.005, description="limit of the standard deviation of the sample-to-sample change of u caused by the "
+                           "scenario's measurement noise, a fraction of the loop's control span (from |C S| weighted "
+                           "by |1 - exp(-j w Ts)| over the Nyquist band); 0.005: twice it is the chatter metric's "
+                           "1 % threshold, so noise alone reverses u by more than that on a few % of samples at most")
     allow_unverified: Flag = Field(False, description="deploy a gain schedule whose robustness could not be verified "
                                                       "(an Ms estimate impossible to make: the plant varies faster "
                                                       "than the margin experiment); default false: such a schedule "

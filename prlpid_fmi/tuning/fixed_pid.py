@@ -231,7 +231,8 @@ def _load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, pops
               max_sensitivity: float | None, baseline: BaselineConfig, deploy: DeployConfig) -> FixedPid:
     """tuning.load_design's three steps, then the Ms check on the FMU with the final controller (detuned by
     `detune_over` where a point fails: the plant-response estimate is an estimate)."""
-    design = LoadDesign(config, baseline.load_step, max_sensitivity, deploy.max_noise_gain, baseline.widen_ranges)
+    design = LoadDesign(config, baseline.load_step, max_sensitivity, deploy.max_noise_gain, baseline.widen_ranges,
+                        deploy.max_noise_increment)
     # robust too (its Ms checked and detuned as the setpoint search does): a lightly damped loop does not settle in
     # the frequency-response experiment, and an unverified response gives the design no constraint
     first = _setpoint_pid(config, seed, episodes, STABILISING_GENERATIONS, popsize, progress, max_sensitivity,

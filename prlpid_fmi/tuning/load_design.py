@@ -18,7 +18,8 @@ Astrom & Hagglund's design, on the FMU (baseline.objective "load"):
    of the setpoint range (robustness.margins.setpoint_range_points). No noise, no randomisation: the cost is
    deterministic. A diverging episode costs DIVERGED_COST.
 2. Subject to, at every point, Ms <= deploy.max_sensitivity, a stable closed loop and std(u) from the scenario's
-   measurement noise <= deploy.max_noise_gain x the control span, all from the plant's frequency response
+   measurement noise <= deploy.max_noise_gain x the control span, std(u_k - u_{k-1}) from it <=
+   deploy.max_noise_increment x the span (the moves the chatter metric counts), all from the plant's frequency response
    measured at that point (robustness.plant_response; measured once, with a stabilising PID, `plant_responses`;
    stability by Nyquist: the same winding as that PID's). The search keeps every candidate inside them by
    construction: Ti, Td (Tf) are searched, and Kp as a position inside the interval of Kp that meets the limits
@@ -177,17 +178,19 @@ class LoadDesign:
     """The load cost, its constraints and the setpoint-weight choice for one tuning problem (module docstring).
 
     Args: config (the scenario's tuning problem, forecast off), load_step (fraction of the control span),
-    max_sensitivity, max_noise_gain (fraction of the span), widen (factor on the gain ranges). Tf is searched
+    max_sensitivity, max_noise_gain and max_noise_increment (fractions of the span), widen (factor on the gain
+    ranges). Tf is searched
     (`tune_filter`) when controller.measurement_filter is "tuned" and the scenario has measurement noise. Call
     `prepare(gains)` with a stabilising PID first; `close()` at the end.
     """
 
     def __init__(self, config: TuningConfig, load_step: float, max_sensitivity: float | None, max_noise_gain: float,
-                 widen: float):
+                 widen: float, max_noise_increment: float = math.inf):
         self.config = dataclasses.replace(config, forecast_horizon=0)
         self.load_step = float(load_step)
         self.limit = max_sensitivity
         self.max_noise = float(max_noise_gain)
+        self.max_increment = float(max_noise_increment)
         self.points = setpoint_range_points(self.config)
         self.search_config = widened(self.config, widen)
         self.gain_map = ActionMap(self.search_config.loops, config.coupled, config.coupling_range)
@@ -248,10 +251,11 @@ class LoadDesign:
         def ok(mags: np.ndarray) -> np.ndarray:
             good = np.ones(len(mags), bool)
             for plant, reference in plants:
-                ms, noise, winding = plant.scan(sign * mags, shape, noise=sigma > 0)
+                ms, noise, winding, increments = plant.scan(sign * mags, shape, noise=sigma > 0)
                 good &= (ms <= limit) & (np.abs(winding - reference) < 0.5 * math.pi)  # stable: Nyquist
                 if sigma > 0:
                     good &= sigma * noise / self.spans[loop] <= self.max_noise
+                    good &= sigma * increments / self.spans[loop] <= self.max_increment
             return good
 
         grid = np.geomspace(lo, hi, KP_SCAN)
@@ -293,9 +297,10 @@ class LoadDesign:
 
     # -- constraints -------------------------------------------------------------------------------------------
     def constraint_values(self, vector) -> np.ndarray:
-        """[max Ms - limit, max noise share - max_noise_gain] over points and loops (<= 0: feasible)."""
+        """[max Ms - limit, max noise share - max_noise_gain, max increment share - max_noise_increment] over points
+        and loops (<= 0: feasible)."""
         gains, tf = self.gains(vector), self.filters(vector)
-        ms, noise = 0.0, 0.0
+        ms, noise, increment = 0.0, 0.0, 0.0
         sigma = self.config.measurement_noise_std
         for plants in self.plants:
             if plants is None:
@@ -305,8 +310,10 @@ class LoadDesign:
                 ms = max(ms, plant.sensitivity_peak(C))
                 if sigma > 0:
                     noise = max(noise, sigma * plant.noise_gain(C) / self.spans[i])
+                    increment = max(increment, sigma * plant.noise_gain(C, increments=True) / self.spans[i])
         limit = self.limit if self.limit is not None else math.inf
-        return np.array([ms - limit, noise - self.max_noise])
+        extra = increment - self.max_increment if math.isfinite(self.max_increment) else -1.0
+        return np.array([ms - limit, noise - self.max_noise, extra])
 
     def estimates(self, gains: tuple, tf: list[float]) -> list[dict]:
         """Per point: {"point", "Ms", "noise_gain"} estimated from the measured plant responses (None: none)."""

@@ -94,7 +94,8 @@ def local_design(config: TuningConfig, setpoint: float, start: tuple, baseline, 
 
     point = operating_point(config, setpoint)
     local = _at(config, point)
-    design = LoadDesign(local, baseline.load_step, limit, deploy.max_noise_gain, baseline.widen_ranges)
+    design = LoadDesign(local, baseline.load_step, limit, deploy.max_noise_gain, baseline.widen_ranges,
+                        deploy.max_noise_increment)
     try:
         design.prepare(start)
         progress.step(f"local load design at {setpoint:.4g}", design.budget(baseline.maxiter, baseline.popsize))
