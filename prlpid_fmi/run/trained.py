@@ -107,7 +107,7 @@ def load_trained(run_dir: Path) -> Scenario:
 def on_other_evaluation(trained: Scenario, scenario_path: str | Path) -> Scenario:
     """Another scenario's evaluation (setpoints, disturbances, ...) around the trained run's loops. A file without a
     `plant:` section (e.g. only `evaluation:`) is laid over the run's own scenario.yaml (load_scenario's base)."""
-    other = load_scenario(scenario_path, base=None if _has_plant(scenario_path) else trained.path)
+    other = load_scenario(scenario_path, base=trained.path)
     if [(l.input, l.output) for l in other.tuning.loops] != [(l.input, l.output) for l in trained.tuning.loops] \
             or other.tuning.coupled != trained.tuning.coupled:
         raise RunError(f"{scenario_path}: plant.loops differ from the trained run's "
@@ -117,18 +117,6 @@ def on_other_evaluation(trained: Scenario, scenario_path: str | Path) -> Scenari
         coupling_range=trained.tuning.coupling_range, tuned_structure=trained.tuning.tuned_structure,
         measurement_filter_order=trained.tuning.measurement_filter_order,
         derivative_filter_N=trained.tuning.derivative_filter_N)), trained.tuning.isolation)
-
-
-def _has_plant(path: str | Path) -> bool:
-    """Whether a scenario file has a top-level `plant:` key (unreadable or malformed files: True, so that
-    load_scenario reports them as they are)."""
-    from prlpid_fmi.schema.document import parse_yaml
-
-    try:
-        data = parse_yaml(Path(path).read_text()).data
-    except Exception:  # noqa: BLE001 - load_scenario gives the one clear error
-        return True
-    return not isinstance(data, dict) or "plant" in data
 
 
 def deployed_controller(run_dir: Path):

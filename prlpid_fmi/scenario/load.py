@@ -274,10 +274,10 @@ def _read(path: Path, file: str) -> str:
 def load_scenario(path: str | Path, base: str | Path | None = None) -> Scenario:
     """Read, validate and build a scenario file.
 
-    base: a complete scenario file the file's sections are laid over (each section the file has replaces the
-    base's whole; the file may then hold only, say, `evaluation:`); paths resolve against base's folder, and the
-    scenario keeps base's name unless the file gives one. Raises ScenarioError listing every mistake, one line
-    each, in file order.
+    base: a complete scenario file that a file without a `plant:` section is laid over (each section the file has
+    replaces the base's whole; the file may then hold only, say, `evaluation:`); paths then resolve against base's
+    folder, and the scenario keeps base's name unless the file gives one. A file with a `plant:` section is complete
+    by itself: base is not read. Raises ScenarioError listing every mistake, one line each, in file order.
     """
     p = Path(path)
     file = str(path)
@@ -288,7 +288,7 @@ def load_scenario(path: str | Path, base: str | Path | None = None) -> Scenario:
         raise ScenarioError(syntax_error_line(file, exc)) from None
     lines = list(zip((d[0] for d in document.duplicates), document.duplicate_lines(file)))
     data, folder, name = document.data, p.resolve().parent, p.stem
-    if base is not None:
+    if base is not None and isinstance(data, dict) and "plant" not in data:
         under = parse_yaml(_read(Path(base), str(base))).data
         if isinstance(data, dict) and isinstance(under, dict):
             data, folder, name = {**under, **data}, Path(base).resolve().parent, str(under.get("name") or Path(base).stem)

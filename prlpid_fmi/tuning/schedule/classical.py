@@ -117,15 +117,19 @@ def _row(gains: tuple) -> dict:
     return {"Kp": np.asarray(gains[0], float), "Ti": np.asarray(gains[1], float), "Td": np.asarray(gains[2], float)}
 
 
+def _failing_halfway(schedule: GainSchedule, config: TuningConfig, limit: float, j: int):
+    """(mid, gains, point) halfway between breakpoints j and j + 1 when the interpolated gains there fail the Ms limit
+    on the FMU; None when they meet it."""
+    mid = 0.5 * (float(schedule.breakpoints[j]) + float(schedule.breakpoints[j + 1]))
+    gains = tuple(list(a) for a in schedule.gains_at(mid)) + (None,)
+    point = operating_point(config, mid)
+    return None if meets_limit(margins_of(config, gains, point), limit) else (mid, gains, point)
+
+
 def _between(schedule: GainSchedule, config: TuningConfig, limit: float) -> list[float]:
     """Halfway points between neighbouring breakpoints where the interpolated gains fail the Ms limit."""
-    out = []
-    for lo, hi in zip(schedule.breakpoints[:-1], schedule.breakpoints[1:]):
-        mid = 0.5 * (float(lo) + float(hi))
-        gains = tuple(list(a) for a in schedule.gains_at(mid)) + (None,)
-        if not meets_limit(margins_of(config, gains, operating_point(config, mid)), limit):
-            out.append(mid)
-    return out
+    failing = (_failing_halfway(schedule, config, limit, j) for j in range(len(schedule.breakpoints) - 1))
+    return [f[0] for f in failing if f is not None]
 
 
 def robust_between(schedule: GainSchedule, config, limit: float) -> tuple[GainSchedule, list[str]]:
@@ -137,12 +141,10 @@ def robust_between(schedule: GainSchedule, config, limit: float) -> tuple[GainSc
     Kp, Ti, Td, notes = schedule.Kp.copy(), schedule.Ti.copy(), schedule.Td.copy(), []
     bp = schedule.breakpoints
     for j in range(len(bp) - 1):
-        mid = 0.5 * (float(bp[j]) + float(bp[j + 1]))
-        current = dataclasses.replace(schedule, Kp=Kp, Ti=Ti, Td=Td)
-        gains = tuple(list(a) for a in current.gains_at(mid)) + (None,)
-        point = operating_point(config, mid)
-        if meets_limit(margins_of(config, gains, point), limit):
+        failing = _failing_halfway(dataclasses.replace(schedule, Kp=Kp, Ti=Ti, Td=Td), config, limit, j)
+        if failing is None:
             continue
+        mid, gains, point = failing
         fixed = detune(config, gains, point, limit)
         if fixed is None:
             continue  # the deliverable then refuses the table, saying where
