@@ -13,6 +13,7 @@ docstring with b = 1, c = 0, no filter; clamping at the actuator limits).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 
 import control
@@ -34,6 +35,7 @@ U_MIN, U_MAX = 0.0, 50.0
 LOAD = 0.1 * (U_MAX - U_MIN)
 
 
+@functools.lru_cache(maxsize=None)
 def local_model(h2: float):
     """(Phi, Gamma, q0) of the ZOH-sampled linearisation at level h2 (module docstring)."""
     q0 = K2 * math.sqrt(h2)
@@ -74,11 +76,16 @@ def load_iae(h2: float, Kp: float, Ti: float, Td: float) -> float:
 _GRID = np.geomspace(1e-4, math.pi / TS, 3000)
 
 
+@functools.lru_cache(maxsize=None)
+def _plant_on_grid(h2: float):
+    """(P, z) on _GRID: the local model's frequency response (python-control) and z = exp(j w Ts)."""
+    return np.squeeze(control.frequency_response(local_model(h2)[3], _GRID).complex), np.exp(1j * _GRID * TS)
+
+
 def sensitivity_peak(h2: float, Kp: float, Ti: float, Td: float) -> float:
     """max |1/(1 + C P)| on a grid to Nyquist, P the local model's ZOH sampling (python-control), C the law's
     feedback part Kp (1 + Ts/Ti z/(z - 1) + Td/Ts (z - 1)/z)."""
-    P = np.squeeze(control.frequency_response(local_model(h2)[3], _GRID).complex)
-    z = np.exp(1j * _GRID * TS)
+    P, z = _plant_on_grid(h2)
     C = Kp * (1 + TS / Ti * z / (z - 1) + Td / TS * (z - 1) / z)
     return float(np.max(np.abs(1 / (1 + C * P))))
 
