@@ -81,3 +81,44 @@ def test_a_fixed_pid_is_detuned_until_it_meets_the_limit_at_every_operating_poin
     assert all(everywhere[0][0] * (1 + p[0]) / 4 <= 2.0 for p in points)
     assert everywhere[0][0] == pytest.approx(4.0, rel=0.1)  # just enough: Kp * 2/4 <= 2 at the high end
     assert fixed_pid.detune_over(CONFIG, start, [[0.0]], 2.0) == start  # already meets a mid-range-only limit
+
+
+def test_the_ms_of_other_gains_is_predicted_from_the_plant_response_measured_once():
+    """robustness.margins.predicted_ms: after one measurement at a point, the Ms of other PIDs there follows from the
+    measured plant response alone; checked against python-control's exact loop on 1/(s - 1), and a PID too weak to
+    hold the unstable plant (Kp < 1) is predicted unstable (Nyquist), not given the small |S| it has on the circle."""
+    from prlpid_fmi.robustness.margins import margins_of, predicted_ms
+
+    point = [0.5]  # a point no other test of this file measures first
+    assert predicted_ms(CONFIG, TOGETHER, point) is None  # nothing measured there yet
+    margins_of(CONFIG, ([4.0], [1.0], [0.1], None), point)
+    for gains in (TOGETHER, ([6.0], [0.5], [0.0], None), ([3.0], [2.0], [0.05], None)):
+        assert predicted_ms(CONFIG, gains, point) == pytest.approx(exact_ms(gains), rel=5e-3)
+    weak = ([0.6], [5.0], [0.0], None)
+    loop = pid_by_hand(0.6, 5.0, 0.0) * first_order_zoh(1.0)
+    assert np.any(np.abs(control.feedback(loop, 1).poles()) > 1.0)  # unstable: the prediction must say so
+    assert predicted_ms(CONFIG, weak, point) == float("inf")
+
+
+@pytest.mark.parametrize("start, keep_ti", [(TOGETHER, False), (AGGRESSIVE, True)])
+def test_detune_with_predictions_finds_what_measurements_alone_find_with_fewer_experiments(monkeypatch, start,
+                                                                                           keep_ti):
+    """detune decides its scan and bisection from predicted Ms where they lie clearly on one side of the limit and
+    measures the rest and its result: the same gains as the search on measurements alone, from fewer experiments."""
+    import prlpid_fmi.robustness.margins as margins
+    import prlpid_fmi.tuning.fixed_pid as fixed_pid
+
+    point = [-0.5]
+    measured = []
+    real = margins.loop_margins
+    monkeypatch.setattr(margins, "loop_margins", lambda *a, **k: measured.append(a[1:4]) or real(*a, **k))
+    monkeypatch.setattr(margins, "_MEASURED", {})
+    monkeypatch.setattr(margins, "_REFERENCES", {})
+    fixed_pid.margins_of(CONFIG, start, point)  # the caller has measured the gains it detunes
+    fast = fixed_pid.detune(CONFIG, start, point, 2.0, keep_ti=keep_ti)
+    with_predictions = len(measured)
+    monkeypatch.setattr(margins, "_MEASURED", {})
+    monkeypatch.setattr(fixed_pid, "predicted_ms", lambda *a: None)
+    slow = fixed_pid.detune(CONFIG, start, point, 2.0, keep_ti=keep_ti)
+    assert fast == slow
+    assert with_predictions < len(measured) - 1  # the measurement-only count includes the start's measurement again

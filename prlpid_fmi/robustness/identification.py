@@ -42,6 +42,20 @@ DECAY_RATIO = 0.5            # PlantResponse.decaying: last change between perio
 AMPLITUDE_RETRIES = 4       # halvings of the amplitude when the control signal hits a limit
 
 
+_FMU_FILES: dict = {}  # (fmu, fmi_version) -> the FMU file resolve_fmu named (a bundled plant's check reads its
+# sources: milliseconds per call, and the margins code asks for every measurement)
+
+
+def fmu_file(config: TuningConfig):
+    """resolve_fmu(config.fmu, config.fmi_version), remembered for the process while the file exists (a rebuilt
+    bundled FMU keeps its path; its size and time tell a changed file)."""
+    key = (config.fmu, config.fmi_version)
+    path = _FMU_FILES.get(key)
+    if path is None or not path.is_file():
+        path = _FMU_FILES[key] = resolve_fmu(config.fmu, config.fmi_version)
+    return path
+
+
 def multisine(bins: Sequence[int], period: int, amplitude: float, iterations: int = 20) -> np.ndarray:
     """One period (shape (period,)) of a sum of cosines at DFT bins `bins` (1 <= bin <= period/2).
 
@@ -149,7 +163,7 @@ class ClosedLoopRig:
             self.coupling = None
             self.coupling_matrix = np.zeros((n, n))
         self.pid = make_pid(c)
-        path = resolve_fmu(c.fmu, c.fmi_version)
+        path = fmu_file(c)
         self.plant = FmuPlant(path, [l.input for l in c.loops], [l.output for l in c.loops], c.sample_time_s,
                               c.plant_parameters, "margins")
         self._snapshots = snapshots

@@ -39,11 +39,13 @@ import numpy as np
 
 from prlpid_fmi.config import TuningConfig
 from prlpid_fmi.loop.core import pid_structure
+from prlpid_fmi.robustness.plant_response import MeasuredPlant
 from prlpid_fmi.robustness.identification import (
     CONVERGENCE_TOLERANCE,
     ClosedLoopRig,
     PlantResponse,
     default_amplitude,
+    fmu_file,
     measure_response,
 )
 
@@ -56,6 +58,7 @@ CROSSING_RANGE = 20.0        # phase crossings with 1/20 < |L| < 20 count as poi
 DC_PEAK_GAP = 0.003          # an |S| peak at the lowest grid point may sit this far (relative) below |S(0)|
 MEASURED_LIMIT = 512         # margins_of keeps this many measurements per process
 _MEASURED: dict = {}         # margins_of's measurements: (config, FMU file, gains, point) -> Margins
+_REFERENCES: dict = {}       # predicted_ms's plants: (config, FMU file, point) -> (gains, MeasuredPlant)
 DISTORTION_LIMIT = 0.02      # relative response at non-excited bins above which the estimate is flagged
 
 
@@ -384,9 +387,8 @@ def loop_margins(config: TuningConfig, Kp: Sequence[float], Ti: Sequence[float],
     # in a worker process when the FMU runs isolated (a crash: no margins, not a dead tool) or may be
     # instantiated only once per process (the caller may hold an instance, e.g. the fixed-PID search)
     from prlpid_fmi.fmu import describe_fmu
-    from prlpid_fmi.fmu.resolve import resolve_fmu
 
-    path = resolve_fmu(c.fmu, c.fmi_version)
+    path = fmu_file(c)
     from prlpid_fmi.fmu.worker import WorkerCrashed, call_in_worker, in_worker
 
     if not in_worker() and (c.isolation == "process" or describe_fmu(path).once_per_process):
@@ -468,17 +470,61 @@ def margins_of(config: TuningConfig, gains: tuple, point: list[float]) -> Margin
 
     The experiment is deterministic (identification: no noise, no disturbances), so each measurement is kept
     for the life of the process, keyed by the config, the FMU file's size and time, the gains and the point:
-    a table row measured while it is projected onto the Ms limit and again as evidence is measured once.
+    a table row measured while it is projected onto the Ms limit and again as evidence is measured once. The
+    first measurement at a config, FMU and point that predicts others (`_predicts`) is also kept as that point's
+    plant response, for `predicted_ms`.
     """
-    from prlpid_fmi.fmu.resolve import resolve_fmu
-
-    fmu = resolve_fmu(config.fmu, config.fmi_version).stat()
-    key = (repr(config), fmu.st_size, fmu.st_mtime_ns, tuple(None if g is None else tuple(float(v) for v in g)
-                                                              for g in gains), tuple(float(v) for v in point))
+    place = _place(config, point)
+    key = place + (tuple(None if g is None else tuple(float(v) for v in g) for g in gains),)
     found = _MEASURED.get(key)
     if found is None:
         found = loop_margins(config, gains[0], gains[1], gains[2], point, coupling=gains[3])
         if len(_MEASURED) >= MEASURED_LIMIT:
             _MEASURED.pop(next(iter(_MEASURED)))  # the oldest
         _MEASURED[key] = found
+        if place not in _REFERENCES and _predicts(config, found):
+            if len(_REFERENCES) >= MEASURED_LIMIT:
+                _REFERENCES.pop(next(iter(_REFERENCES)))
+            _REFERENCES[place] = (gains, MeasuredPlant(found.frequencies_rad_s, found.plant_response,
+                                                       config.sample_time_s, tuple(point), ()))
     return found
+
+
+def _place(config: TuningConfig, point) -> tuple:
+    """What a measurement depends on besides the controller: the config, the FMU file (size, time), the point."""
+    fmu = fmu_file(config).stat()
+    return repr(config), fmu.st_size, fmu.st_mtime_ns, tuple(float(v) for v in point)
+
+
+def _predicts(config: TuningConfig, m: Margins) -> bool:
+    """A measurement that other controllers' Ms can be computed from: one independent loop (with several, the
+    effective plant a loop sees depends on the other loops' PIDs), verified, on a finite response."""
+    from prlpid_fmi.robustness.status import Robustness, status
+
+    return (config.n_loops == 1 and not config.coupled and len(m.frequencies_rad_s) >= 2
+            and bool(np.all(np.isfinite(m.plant_response))) and status(m) == Robustness.VERIFIED)
+
+
+def predicted_ms(config: TuningConfig, gains: tuple, point: list[float]) -> float | None:
+    """Ms of constant gains at `point` computed, without an experiment, from the plant response measured there
+    before (the first verified margins_of measurement of one independent loop at this config, FMU and point); None
+    when there is none. The plant is the same whatever PID runs it (its linearisation at the point), so
+    Ms = max |1 / (1 + C P)| on robustness.plant_response.MeasuredPlant's interpolated grid, and inf when the
+    Nyquist winding of 1 + C P differs from the measured PID's (unstable). An estimate for deciding what to
+    measure (tuning.fixed_pid.detune), never a margin to report: on a linear plant it is within 0.1 % of the
+    measured Ms, while a nonlinear plant's response can differ with the controller."""
+    found = _REFERENCES.get(_place(config, point))
+    if found is None or len(gains[0]) != 1:
+        return None
+    reference, plant = found
+    if math.isfinite(reference[1][0]) != math.isfinite(gains[1][0]):
+        return None  # with and without an integrator the windings differ by the arc at w = 0
+
+    def controller(g):
+        tf = pid_structure(config)[2][0]
+        return lambda w: pid_frequency_response(g[0][0], g[1][0], g[2][0], config.sample_time_s, w,
+                                                config.derivative_filter_N, tf, config.measurement_filter_order)
+    C = controller(gains)
+    if abs(plant.winding(C) - plant.winding(controller(reference))) >= 0.5 * math.pi:
+        return math.inf
+    return plant.sensitivity_peak(C)

@@ -41,7 +41,7 @@ from prlpid_fmi.loop.evaluation import Trajectory, gains_rollout
 from prlpid_fmi.loop.gains import Gains, gains_from_values
 from prlpid_fmi.loop.isolated import make_core
 from prlpid_fmi.progress import QUIET, Steps, counted
-from prlpid_fmi.robustness.margins import margins_of, setpoint_range_points
+from prlpid_fmi.robustness.margins import margins_of, predicted_ms, setpoint_range_points
 from prlpid_fmi.robustness.status import meets_limit
 from prlpid_fmi.tuning.load_design import LoadDesign, SetpointDesign, parameter_samples, setpoint_weight
 
@@ -96,10 +96,23 @@ DETUNE_SCAN = (1, 2, 4, 8, 16, 30)  # ... scanned at these k (lambda 1.15 to 66)
 DETUNE_BISECTIONS = 4
 
 
+PREDICTION_MARGIN = 0.005  # an Ms predicted this far (relative) from the limit decides without an experiment
+
+
 def _meets(config: TuningConfig, gains: tuple, point: list[float], limit: float) -> bool:
     """The deliverable's rule at the point (robustness.status.meets_limit): verified within the limit, or impossible
     to measure there (a time-varying plant); a failed estimate (diverged, saturated, lightly damped) does not."""
     return meets_limit(margins_of(config, gains, point), limit)
+
+
+def _likely_meets(config: TuningConfig, gains: tuple, point: list[float], limit: float) -> bool:
+    """`_meets` as predicted from the plant response measured at the point before (robustness.margins.predicted_ms)
+    where the prediction lies more than PREDICTION_MARGIN (relative) from the limit, else measured. A search step,
+    never a verdict: what a search returns is measured (`detune`, `_robust`)."""
+    ms = predicted_ms(config, gains, point)
+    if ms is not None and abs(ms - limit) > PREDICTION_MARGIN * limit:
+        return ms <= limit
+    return _meets(config, gains, point, limit)
 
 
 def detune(config: TuningConfig, gains: tuple, point: list[float], limit: float,
@@ -110,9 +123,25 @@ def detune(config: TuningConfig, gains: tuple, point: list[float], limit: float,
     and crossover moved down together. A scan of k in DETUNE_SCAN,
     then bisection on k between the last failing and the first passing value. None when no k in the scan
     passes (an unstable plant fails at both ends, so the scan starts small). plant: the config whose FMU
-    parameters Ms is measured with (a Monte-Carlo draw; default `config`), the gain ranges are `config`'s."""
-    Kp, Ti, Td, coupling = gains
+    parameters Ms is measured with (a Monte-Carlo draw; default `config`), the gain ranges are `config`'s.
+
+    The scan and the bisection decide each step from the Ms predicted from the plant response measured at the
+    point (`_likely_meets`; one independent loop) and measure on the FMU only where the prediction lies near the
+    limit; the result is then measured. Where that measurement fails the limit, or no k passes, the whole search
+    runs again on measurements alone (the search before predictions): same result whenever the predictions decide
+    as the measurements would."""
     plant = config if plant is None else plant
+    if predicted_ms(plant, gains, point) is not None:
+        found = _detune(config, gains, point, limit, keep_ti, plant, _likely_meets)
+        if found is not None and _meets(plant, found, point, limit):
+            return found
+    return _detune(config, gains, point, limit, keep_ti, plant, _meets)
+
+
+def _detune(config: TuningConfig, gains: tuple, point: list[float], limit: float, keep_ti: bool, plant: TuningConfig,
+            meets) -> tuple | None:
+    """`detune`'s scan and bisection with meets(plant, gains, point, limit) deciding each step."""
+    Kp, Ti, Td, coupling = gains
     ti_factor = 0.0 if keep_ti else 1.0
 
     def detuned(k):
@@ -123,11 +152,11 @@ def detune(config: TuningConfig, gains: tuple, point: list[float], limit: float,
 
     low = 0.0  # k known to fail (the gains themselves)
     for k in DETUNE_SCAN:
-        if _meets(plant, detuned(k), point, limit):
+        if meets(plant, detuned(k), point, limit):
             high = float(k)
             for _ in range(DETUNE_BISECTIONS):
                 mid = 0.5 * (low + high)
-                if _meets(plant, detuned(mid), point, limit):
+                if meets(plant, detuned(mid), point, limit):
                     high = mid
                 else:
                     low = mid
@@ -169,9 +198,12 @@ def _robust(config: TuningConfig, gain_map: ActionMap, population, energies, lim
     reports its Ms)."""
     points, draws = setpoint_range_points(config), parameter_samples(config)
     order = np.argsort(energies)
+    checks = [(plant, p) for plant in (config, *draws) for p in points]
     for i in order[:ROBUST_CANDIDATES]:
         g = gain_map.values(population[i].tolist())
-        if all(_meets(plant, g, p, limit) for plant in (config, *draws) for p in points):
+        # a member predicted to fail clearly (_likely_meets) is not measured; the one taken is, at every check
+        if all(_likely_meets(plant, g, p, limit) for plant, p in checks) and \
+                all(_meets(plant, g, p, limit) for plant, p in checks):
             return population[i], g
     best = population[order[0]]
     g = gain_map.values(best.tolist())

@@ -496,15 +496,17 @@ class SetpointDesign:
     def search(self, start, seed: int, maxiter: int, popsize: int, progress: Steps = QUIET):
         """DE from a population around `start` (the load optimum with its best b: the feasible set lies near it, within
         load_tolerance of its load cost), spread INIT_SPREAD in the [-1, 1] coordinates; maxiter halved.
-        progress: counts every cost evaluation."""
+        progress: counts every constraint evaluation (the simulations: DE computes the constraints of every trial and
+        the cost of the feasible ones only, so counting the cost would stop far short of the total)."""
         maxiter = max(5, maxiter // 2)
         rng = np.random.default_rng(seed)
         start = np.clip(np.asarray(start, float), -1.0, 1.0)
         init = np.clip(start + rng.normal(0.0, INIT_SPREAD, (popsize * self.n, self.n)), -1.0, 1.0)
         init[0] = start
-        return differential_evolution(counted(self.cost, progress), [(-1.0, 1.0)] * self.n, maxiter=maxiter,
+        return differential_evolution(self.cost, [(-1.0, 1.0)] * self.n, maxiter=maxiter,
                                       seed=seed, polish=False, tol=1e-6, init=init,
-                                      constraints=NonlinearConstraint(self.constraint_values, -np.inf, 0.0))
+                                      constraints=NonlinearConstraint(counted(self.constraint_values, progress),
+                                                                      -np.inf, 0.0))
 
     def close(self) -> None:
         self.core.close()
