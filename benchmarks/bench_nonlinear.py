@@ -19,8 +19,8 @@ end of the range), `schedule_replay` (the adaptive policy's gain table replayed 
 every breakpoint), a classical gain schedule where the run's metrics.json has one (a key or candidate whose name
 contains "classical"; "not available" otherwise), `policy` (the neural policy itself), `deployed` (the word of
 the choice); and the held-out evaluation's metrics.json (`fixed_pid`, `policy`, `deployed_schedule`, and a
-classical entry where present). A candidate the run did not produce or did not write is "not available"; the
-adaptive table is written to the run only when it is deployed, so on held-out episodes it is available only then.
+classical and adaptive tables' entries, which `evaluate` replays from classical_schedule.csv and
+adaptive_schedule.csv). A candidate the run did not produce or did not write is "not available".
 
 Columns: ISE and its ratio to the fixed PID of the same run and schedule; worst overshoot over the setpoint steps
 [%]; setpoint steps settled (SettlingTime finite) out of those in the schedule, and the longest settling time;
@@ -201,7 +201,7 @@ def heldout_candidates(h: dict | None, evaluation: dict) -> dict[str, tuple[dict
         return {k: (None, None) for k in evaluation}
     deployed = str(h.get("deployed") or "").lower()
     classical = _classical(h)
-    sched = h.get("deployed_schedule") if deployed == "gain schedule" else None
+    sched = h.get("adaptive_schedule") or (h.get("deployed_schedule") if deployed == "gain schedule" else None)
     out = {"fixed PID": (_metrics_of(h.get("fixed_pid")), evaluation["fixed PID"][1]),
            "classical schedule": (_metrics_of(classical), evaluation["classical schedule"][1]),
            "adaptive schedule": (_metrics_of(sched), evaluation["adaptive schedule"][1]),
