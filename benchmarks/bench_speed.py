@@ -3,6 +3,9 @@
 Run:  python benchmarks/bench_speed.py            (full table, a few minutes)
       python benchmarks/bench_speed.py --quick    (same table, fewer repeats and steps, under a minute)
       python benchmarks/bench_speed.py --full-run (adds the 500k-step `prlpid-fmi tune` run, minutes)
+      python benchmarks/bench_speed.py --stages [STEPS] [--stages-only]
+                                                  (stage times of `tune` on first_order, two_tank and the quadrotor,
+                                                  STEPS training steps each, default 500000; tens of minutes)
 
 Per-step rows: CPU µs per env step (process CPU time; reset included: each measurement is a seeded
 reset and E episodes of the scenario's length with uniformly random actions from a fixed seed, reset
@@ -20,6 +23,16 @@ measured once, in an order shuffled per repeat, so load on the shared machine hi
 Run rows: training steps/s of prlpid_fmi.tuning.agent.train with the AgentConfig defaults (wall time),
 the optional full run (wall time, peak RSS of the child), and the peak RSS of this process.
 Targets (issue 7) are printed beside the ratios they apply to.
+
+Stage rows (--stages, issue 24): `prlpid-fmi tune <scenario> --timesteps STEPS` in a subprocess per scenario, one
+after another; its wall time, the seconds of each stage from the run's run.json ("stage_seconds", recorded by
+prlpid_fmi.progress; from the progress lines on stderr, whole seconds, where a run.json has none), "rest" = wall
+- the stages (start-up, imports, files, plots), the ratio (wall - training) / training and the time outside
+training against the issue's target (<= 20 s on first_order, <= 60 s on two_tank and the quadrotor, at 500k steps).
+Beside the training rate (trained steps / training seconds): SB3's PPO with the scenario's agent settings
+(prlpid_fmi.tuning.agent.build_model, its n_envs in a DummyVecEnv with Monitor, VecNormalize when set) on a
+trivial numpy env with the same observation and action spaces (no FMU, no forecast: a constant observation,
+reward -|a|^2, episodes of the scenario's length), timed over the same number of steps (at least 20,000).
 """
 from __future__ import annotations
 
@@ -176,6 +189,114 @@ def full_run() -> tuple[float, float, int]:
     return wall, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024.0, code
 
 
+STAGE_TARGETS_S = {"first_order": 20.0, "two_tank": 60.0, "quadrotor": 60.0}  # time outside training at 500k
+STAGE_COLUMNS = ("fixed-PID search", "classical gain schedule", "training", "gain schedule", "evaluation",
+                 "choice of the deployed controller")
+STAGE_TITLES = ("fixed PID", "classical", "training", "schedule", "evaluation", "choice")
+
+
+def _stages_from_log(text: str) -> dict[str, float]:
+    """Stage seconds from tune's plain progress lines (whole seconds): "prlpid-fmi: <stage>: done in ..." and
+    "prlpid-fmi: training: N steps in ..."."""
+    import re
+
+    def seconds(words: str) -> float:
+        return sum(float(v) * {"h": 3600, "min": 60, "s": 1}[u] for v, u in re.findall(r"(\d+) (h|min|s)\b", words))
+    out = {}
+    for line in text.splitlines():
+        m = re.match(r"prlpid-fmi: ([^:]+): (?:done in|[\d,]+ steps in) (.*)$", line)
+        if m:
+            out[m.group(1).split(" (")[0]] = seconds(m.group(2).split(" (")[0])
+    return out
+
+
+def tune_stages(name: str, steps: int) -> dict:
+    """One `prlpid-fmi tune <name> --timesteps steps` in a subprocess: {"wall", "stages", "trained", "code"}."""
+    import json
+
+    exe = Path(sys.executable).with_name("prlpid-fmi")
+    with tempfile.TemporaryDirectory() as tmp:
+        run = Path(tmp) / "run"
+        start = time.perf_counter()
+        proc = subprocess.run([str(exe), "tune", name, "--timesteps", str(steps), "--out", str(run)],
+                              capture_output=True, text=True, cwd=REPO)
+        wall = time.perf_counter() - start
+        info = json.loads((run / "run.json").read_text()) if (run / "run.json").is_file() else {}
+    if proc.returncode:
+        print(proc.stderr[-2000:], file=sys.stderr)
+    stages = info.get("stage_seconds") or _stages_from_log(proc.stderr)
+    return {"wall": wall, "stages": stages, "trained": info.get("trained_timesteps", steps), "code": proc.returncode,
+            "source": "run.json" if info.get("stage_seconds") else "progress lines"}
+
+
+def sb3_trivial_steps_per_s(name: str, steps: int) -> float:
+    """Wall steps/s of SB3's PPO with the scenario's agent settings on a trivial env of the same spaces."""
+    import gymnasium as gym
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+
+    from prlpid_fmi.scenario.load import load_scenario
+    from prlpid_fmi.scenario.presets import scenario_path
+    from prlpid_fmi.tuning.agent import build_model
+
+    scenario = load_scenario(scenario_path(name))
+    probe = PidTuningEnv(scenario.tuning)
+    obs_space, act_space, length = probe.observation_space, probe.action_space, scenario.tuning.episode_steps
+    probe.close()
+
+    class Trivial(gym.Env):
+        observation_space, action_space = obs_space, act_space
+
+        def reset(self, seed=None, options=None):
+            super().reset(seed=seed)
+            self.k = 0
+            return np.zeros(obs_space.shape, obs_space.dtype), {}
+
+        def step(self, action):
+            self.k += 1
+            reward = -float(np.sum(np.square(action)))
+            return np.zeros(obs_space.shape, obs_space.dtype), reward, False, self.k >= length, {}
+
+    agent = scenario.agent
+    with tempfile.TemporaryDirectory() as tmp:
+        env = make_vec_env(Trivial, n_envs=agent.envs, seed=agent.seed, vec_env_cls=DummyVecEnv, monitor_dir=tmp)
+        if agent.normalize:
+            env = VecNormalize(env, gamma=agent.gamma)
+        model = build_model(agent, env)
+        start = time.perf_counter()
+        model.learn(total_timesteps=steps)
+        rate = model.num_timesteps / (time.perf_counter() - start)
+        env.close()
+    return rate
+
+
+def print_stages(steps: int, results: dict, trivial: dict) -> None:
+    cols = [("scenario", 11), ("wall", 7)] + [(t, 10) for t in STAGE_TITLES] + [
+        ("rest", 6), ("outside", 8), ("(wall-tr)/tr", 12), ("train/s", 8), ("SB3 triv/s", 10), ("ratio", 6)]
+    line = "  ".join(f"{title:>{w}}" for title, w in cols)
+    print(f"\nbench_speed --stages (issue 24): `prlpid-fmi tune <scenario> --timesteps {steps}`, seconds (wall); "
+          f"outside = wall - training; target at 500k steps: first_order <= 20 s, two_tank and quadrotor <= 60 s")
+    print(line)
+    print("-" * len(line))
+    for name, r in results.items():
+        st = r["stages"]
+        training = st.get("training", float("nan"))
+        rest = r["wall"] - sum(st.get(k, 0.0) for k in STAGE_COLUMNS)
+        outside = r["wall"] - training
+        rate = r["trained"] / training if training > 0 else float("nan")
+        target = STAGE_TARGETS_S[name]
+        cells = [name, f"{r['wall']:.1f}"] + [f"{st[k]:.1f}" if k in st else "-" for k in STAGE_COLUMNS] + [
+            f"{rest:.1f}", f"{outside:.1f}", f"{outside / training:.2f}" if training > 0 else "n/a",
+            f"{rate:.0f}", f"{trivial[name]:.0f}", f"{rate / trivial[name]:.2f}"]
+        print("  ".join(f"{cell:>{w}}" for cell, (_, w) in zip(cells, cols)))
+        verdict_text = (f"outside training {outside:.1f} s, target <= {target:.0f} s at {FULL_RUN_STEPS:,} steps: "
+                        + (verdict(outside, target) if steps == FULL_RUN_STEPS else f"not judged ({steps:,} steps)"))
+        print(f"{'':>11}  {verdict_text}; stage times from {r['source']}" + (f"; exit {r['code']}" if r["code"] else ""))
+    print("-" * len(line))
+    print("ratio = training steps/s of the tune / SB3's PPO on the trivial env (target >= 0.9); '-': the stage did "
+          "not run (classical: only on a nonlinear plant)")
+
+
 # -- printing -------------------------------------------------------------------------------------------
 def verdict(value: float, target: float) -> str:
     return "met" if value <= target else "missed"
@@ -258,8 +379,26 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=None, help="episodes per measurement (default 2, quick 1)")
     parser.add_argument("--train-steps", type=int, default=None, help="training steps (default 50000, quick 4096)")
     parser.add_argument("--full-run", action="store_true", help="also time a 500k-step `prlpid-fmi tune` run")
+    parser.add_argument("--stages", type=int, nargs="?", const=FULL_RUN_STEPS, default=None, metavar="STEPS",
+                        help=f"stage times of `tune` on {', '.join(SCENARIOS)} (STEPS training steps, default "
+                             f"{FULL_RUN_STEPS})")
+    parser.add_argument("--stages-only", action="store_true", help="only the --stages table")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
+    if args.stages_only and args.stages is None:
+        args.stages = FULL_RUN_STEPS
+    if args.stages is not None:
+        if args.stages < 1:
+            parser.error("--stages must be >= 1")
+        results, trivial = {}, {}
+        for name in SCENARIOS:
+            print(f"  tune {name} ...", file=sys.stderr, flush=True)
+            results[name] = tune_stages(name, args.stages)
+            print(f"  SB3 on a trivial env like {name}'s ...", file=sys.stderr, flush=True)
+            trivial[name] = sb3_trivial_steps_per_s(name, max(args.stages, 20_000))
+        print_stages(args.stages, results, trivial)
+        if args.stages_only:
+            return
     args.repeats = args.repeats or (3 if args.quick else 7)
     args.episodes = args.episodes or (1 if args.quick else 2)
     args.train_steps = args.train_steps or (4096 if args.quick else 50_000)

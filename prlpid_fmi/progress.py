@@ -7,6 +7,9 @@ by step (`Steps`): each step with its own count and ETA where its size is known,
 where it is not. One total over all of them would lie: its units do not cost the same, and steps such as
 the Ms check have no size known in advance.
 
+Every Steps and `stage` also records its duration, shown or not (`stage_seconds`: what `tune` writes to run.json
+as "stage_seconds", and benchmarks/bench_speed.py tabulates).
+
 On a terminal: one line redrawn in place (a bar). Otherwise (`nohup ... > log`): a plain line when the
 work starts, about every 30 s, and when it ends, so a log shows where a long run is. The count never
 passes the total: PPO collects whole rollouts, so SB3's own bar ends at 51,200/50,000.
@@ -21,6 +24,23 @@ from typing import Callable, TextIO
 TTY_INTERVAL_S = 0.2
 LOG_INTERVAL_S = 30.0
 BAR_WIDTH = 24
+_STAGE_SECONDS: dict[str, float] = {}  # stage name -> seconds, since the last stage_seconds(clear=True)
+
+
+def _record(label: str, seconds: float) -> None:
+    """Add a stage's duration under its name: the label up to its first " (" (the explanation); "" records nothing."""
+    name = label.split(" (")[0].strip()
+    if name:
+        _STAGE_SECONDS[name] = _STAGE_SECONDS.get(name, 0.0) + max(float(seconds), 0.0)
+
+
+def stage_seconds(clear: bool = False) -> dict[str, float]:
+    """{stage name: seconds} of the Steps and `stage`s that ended in this process (since the last clear), in the
+    order they first ended; clear: start afresh after reading (a new run)."""
+    out = dict(_STAGE_SECONDS)
+    if clear:
+        _STAGE_SECONDS.clear()
+    return out
 
 
 def format_duration(seconds: float) -> str:
@@ -129,6 +149,7 @@ class Steps:
         self.t0 = clock()
         self._counted: Progress | None = None
         self._plain: tuple[str, float] | None = None
+        self._closed = False
 
     def step(self, name: str, total: int | None = None, unit: str = "evaluations") -> "Steps":
         self._end_step()
@@ -149,6 +170,9 @@ class Steps:
 
     def close(self) -> None:
         self._end_step()
+        if not self._closed:
+            _record(self.label, self.clock() - self.t0)
+        self._closed = True
         if self.enabled:
             self.stream.write(f"prlpid-fmi: {self.label}: done in {format_duration(self.clock() - self.t0)}\n")
             self.stream.flush()
@@ -189,6 +213,7 @@ def stage(label: str, enabled: bool = True, stream: TextIO | None = None,
         out.write(f"prlpid-fmi: {label} ...\n")
         out.flush()
     yield
+    _record(label, clock() - t0)
     if enabled:
         out.write(f"prlpid-fmi: {label}: done in {format_duration(clock() - t0)}\n")
         out.flush()

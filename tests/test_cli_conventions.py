@@ -567,6 +567,28 @@ def test_a_stage_says_when_it_starts_and_how_long_it_took():
                                               "prlpid-fmi: evaluation: done in 1 min 15 s"]
 
 
+def test_stages_record_their_durations_shown_or_not():
+    """progress.stage_seconds: every stage and Steps adds its duration under its name (the label before " ("), shown
+    or not; clear=True starts afresh (what tune writes to run.json as stage_seconds)."""
+    from prlpid_fmi.progress import Steps, stage_seconds
+
+    stage_seconds(clear=True)
+    clock, stream = FakeClock(), io.StringIO()
+    with stage("evaluation (replays)", stream=stream, clock=clock):
+        clock.t += 2.5
+    with stage("training", enabled=False, clock=clock):
+        clock.t += 40.0
+    steps = Steps("fixed-PID search", enabled=False, clock=clock)
+    steps.step("load design", 10)
+    clock.t += 7.25
+    steps.close()
+    steps.close()  # once only
+    with stage("evaluation", enabled=False, clock=clock):
+        clock.t += 0.5
+    assert stage_seconds(clear=True) == {"evaluation": 3.0, "training": 40.0, "fixed-PID search": 7.25}
+    assert stage_seconds() == {}
+
+
 def test_format_duration():
     assert [format_duration(s) for s in (0.4, 59.4, 61, 3599, 3600, 7325)] == [
         "0 s", "59 s", "1 min 01 s", "59 min 59 s", "1 h 00 min", "2 h 02 min"]

@@ -83,13 +83,16 @@ def test_a_fixed_pid_is_detuned_until_it_meets_the_limit_at_every_operating_poin
     assert fixed_pid.detune_over(CONFIG, start, [[0.0]], 2.0) == start  # already meets a mid-range-only limit
 
 
-def test_the_ms_of_other_gains_is_predicted_from_the_plant_response_measured_once():
+def test_the_ms_of_other_gains_is_predicted_from_the_plant_response_measured_once(monkeypatch):
     """robustness.margins.predicted_ms: after one measurement at a point, the Ms of other PIDs there follows from the
     measured plant response alone; checked against python-control's exact loop on 1/(s - 1), and a PID too weak to
     hold the unstable plant (Kp < 1) is predicted unstable (Nyquist), not given the small |S| it has on the circle."""
+    import prlpid_fmi.robustness.margins as margins
     from prlpid_fmi.robustness.margins import margins_of, predicted_ms
 
-    point = [0.5]  # a point no other test of this file measures first
+    monkeypatch.setattr(margins, "_MEASURED", {})
+    monkeypatch.setattr(margins, "_REFERENCES", {})
+    point = [0.5]
     assert predicted_ms(CONFIG, TOGETHER, point) is None  # nothing measured there yet
     margins_of(CONFIG, ([4.0], [1.0], [0.1], None), point)
     for gains in (TOGETHER, ([6.0], [0.5], [0.0], None), ([3.0], [2.0], [0.05], None)):
