@@ -60,11 +60,19 @@ DIVERGED_COST = 1e6
 B_GRID = tuple(i / 20 for i in range(21))  # setpoint weights tried
 TF_RANGE = (0.1, 100.0)  # measurement filter search range [sample times], log
 INIT_SPREAD = 0.15  # std of SetpointDesign's initial population around its start [search coordinates]
-POLISH_EVALUATIONS = 60
+POLISH_EVALUATIONS = 60  # Nelder-Mead evaluations per searched parameter after differential evolution, at most ...
+POLISH_PER_GENERATION = 3  # ... and at most this many per parameter and DE generation (a token search, a token polish)
 MAX_CHATTER = 0.05  # fraction of samples where u may reverse in the load experiment (metrics.chatter_fraction)
 CHATTER_PENALTY = 10.0  # the load cost grows by this x the chatter above MAX_CHATTER (relative to it)
 KP_SCAN = 48  # |Kp| values scanned for the interval that meets the limits
-KP_REFINE = 24  # |Kp| values on the finer grid at each end of that interval  # Nelder-Mead evaluations per searched parameter after differential evolution
+KP_REFINE = 24  # |Kp| values on the finer grid at each end of that interval
+
+
+def polish_evaluations(maxiter: int) -> int:
+    """Nelder-Mead evaluations per searched parameter after a DE of maxiter generations: POLISH_PER_GENERATION x
+    (maxiter + 1), at most POLISH_EVALUATIONS (reached at the default 20 generations, so the polish costs at most 3 /
+    popsize of the DE's evaluations; a one-generation search once spent 900 polish evaluations on the quadrotor)."""
+    return min(POLISH_EVALUATIONS, POLISH_PER_GENERATION * (int(maxiter) + 1))
 
 
 def widened(config: TuningConfig, factor: float) -> TuningConfig:
@@ -385,17 +393,18 @@ class LoadDesign:
 
     def budget(self, maxiter: int, popsize: int) -> int:
         """The most cost evaluations `search` makes: DE's (maxiter + 1) * popsize * n, then the polish's."""
-        return (maxiter + 1) * popsize * self.n + POLISH_EVALUATIONS * self.n
+        return (maxiter + 1) * popsize * self.n + polish_evaluations(maxiter) * self.n
 
     def search(self, seed: int, maxiter: int, popsize: int, progress: Steps = QUIET):
-        """Differential evolution of `cost`, then a Nelder-Mead polish from its result (POLISH_EVALUATIONS per
-        parameter at most); scipy's OptimizeResult of the better. progress: counts every cost evaluation."""
+        """Differential evolution of `cost`, then a Nelder-Mead polish from its result (polish_evaluations(maxiter)
+        per parameter at most); scipy's OptimizeResult of the better. progress: counts every cost evaluation."""
         cost = counted(self.cost, progress)
         result = differential_evolution(cost, [(-1.0, 1.0)] * self.n, maxiter=maxiter, popsize=popsize,
                                         seed=seed, polish=False, tol=1e-6)
         if result.fun < DIVERGED_COST:
             polished = minimize(cost, result.x, method="Nelder-Mead", bounds=[(-1.0, 1.0)] * self.n,
-                                options={"maxfev": POLISH_EVALUATIONS * self.n, "xatol": 1e-4, "fatol": 1e-7})
+                                options={"maxfev": polish_evaluations(maxiter) * self.n, "xatol": 1e-4,
+                                         "fatol": 1e-7})
             if polished.fun < result.fun:
                 result.x, result.fun = polished.x, float(polished.fun)
             result.nfev += int(polished.nfev)
@@ -491,14 +500,14 @@ class SetpointDesign:
 
     def budget(self, maxiter: int, popsize: int) -> int:
         """The most cost evaluations `search` makes (DE with maxiter halved, as there)."""
-        return (max(5, maxiter // 2) + 1) * popsize * self.n
+        return (max(1, maxiter // 2) + 1) * popsize * self.n
 
     def search(self, start, seed: int, maxiter: int, popsize: int, progress: Steps = QUIET):
         """DE from a population around `start` (the load optimum with its best b: the feasible set lies near it, within
-        load_tolerance of its load cost), spread INIT_SPREAD in the [-1, 1] coordinates; maxiter halved.
+        load_tolerance of its load cost), spread INIT_SPREAD in the [-1, 1] coordinates; maxiter halved (at least one generation).
         progress: counts every constraint evaluation (the simulations: DE computes the constraints of every trial and
         the cost of the feasible ones only, so counting the cost would stop far short of the total)."""
-        maxiter = max(5, maxiter // 2)
+        maxiter = max(1, maxiter // 2)
         rng = np.random.default_rng(seed)
         start = np.clip(np.asarray(start, float), -1.0, 1.0)
         init = np.clip(start + rng.normal(0.0, INIT_SPREAD, (popsize * self.n, self.n)), -1.0, 1.0)
