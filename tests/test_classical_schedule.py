@@ -132,3 +132,5 @@ def test_a_local_design_is_within_5_percent_of_an_independent_optimum_on_the_loc
     l = widened(tuning, baseline.widen_ranges).loops[0]
     best = independent_optimum(h2, ((l.Kp.low, l.Kp.high), (l.Ti.low, l.Ti.high), (l.Td.low, l.Td.high)))
     assert load_iae(h2, Kp, Ti, Td) <= 1.05 * best, (gains, load_iae(h2, Kp, Ti, Td), best)
+    # never worse than the PID it started from, at its own point (there: far better)
+    assert load_iae(h2, Kp, Ti, Td) < load_iae(h2, 5.0, 14.14, 0.0)

@@ -8,7 +8,8 @@ What a control engineer does by hand on a nonlinear plant, from the FMU alone (n
    around the trim the loop itself holds, so an open-loop unstable branch needs no open-loop trim), and the
    fixed PID's load design (tuning.load_design, the same objective, limits and budget) is made for that point
    alone: Kp, Ti, Td minimise the IAE of a load step at the plant input there, under Ms <= deploy.max_sensitivity
-   and the noise bound of the local plant. The structure (b, c, Tf) is the fixed PID's for every row: Tf is a
+   and the noise bounds of the local plant; a row whose check on the FMU detuned it below the fixed PID's load
+   rejection at that point is the fixed PID there. The structure (b, c, Tf) is the fixed PID's for every row: Tf is a
    noise choice, and b acts on setpoint steps, which cross operating points.
 3. The table is interpolated linearly over the setpoint (GainSchedule: held outside the breakpoints) and its Ms
    is checked on the FMU at every breakpoint and halfway between neighbours, with the interpolated gains (what
@@ -107,6 +108,11 @@ def local_design(config: TuningConfig, setpoint: float, start: tuple, baseline, 
         kept = repaired is None
         final = start if kept else repaired
         cost = design.load_cost(final, list(design.tf))
+        if not kept:  # never worse than the PID it started from at its own point (a detuned row can be)
+            start_cost = design.load_cost(start, list(design.tf))
+            if start_cost < cost and detune_over(dataclasses.replace(
+                    design.search_config, tuned_structure=config.tuned_structure), start, [point], limit) == start:
+                final, cost, kept = start, start_cost, True
     finally:
         design.close()
     return final, {"setpoint": float(setpoint), "load_cost": float(cost), "Ms_estimate": estimate,
