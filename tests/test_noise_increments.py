@@ -48,3 +48,4 @@ def test_noise_and_increment_noise_gains_equal_the_impulse_response_norms(Kp, Ti
     assert increments[0] == pytest.approx(plant.noise_gain(controller, increments=True), rel=1e-9)
     if Td > 0 and Tf < 0.1:  # a derivative on barely filtered noise: the increments dominate
         assert std_du > std_u
+

@@ -194,7 +194,8 @@ def _robust(config: TuningConfig, gain_map: ActionMap, population, energies, lim
     """(vector, gains tuple) of the cheapest of the ROBUST_CANDIDATES cheapest population members with
     Ms <= limit at every operating point of the setpoint range (setpoint_range_points), on the nominal plant and
     the Monte-Carlo draws (parameter_samples, with training.randomize); else the best member detuned both ways (`detune_over`, with and without keep_ti; a loop in a limit cycle has Ms inf and a slower loop
-    cures it), the one with the lower J on `seeds`; else the best member as it is (the deliverable then
+    cures it), the one with the lower J on `seeds`; else the same PI (Td at its low end, detuned if need be); else
+    the best member as it is (the deliverable then
     reports its Ms)."""
     points, draws = setpoint_range_points(config), parameter_samples(config)
     order = np.argsort(energies)
@@ -209,6 +210,12 @@ def _robust(config: TuningConfig, gain_map: ActionMap, population, energies, lim
     g = gain_map.values(best.tolist())
     repairs = [r for r in (detune_over(config, g, points, limit, keep_ti=False, draws=draws),
                            detune_over(config, g, points, limit, keep_ti=True, draws=draws)) if r]
+    if not repairs and any(td > l.Td.low for td, l in zip(g[2], config.loops)):
+        # the derivative is the usual culprit of a loop that limit-cycles at Nyquist against a limit (the
+        # exothermic reactor: Kp 6.6, Ti 123 s, Td 17 s never settles; the same PI has Ms 1.13-1.15): the same PI
+        pi = (g[0], g[1], [l.Td.low for l in config.loops], g[3])
+        repairs = [pi] if all(_meets(plant, pi, p, limit) for plant, p in checks) else \
+            [r for r in (detune_over(config, pi, points, limit, keep_ti=False, draws=draws),) if r]
     return best, min(repairs, key=lambda r: _cost_of(r, core, seeds)) if repairs else g
 
 

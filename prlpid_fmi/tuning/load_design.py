@@ -9,7 +9,9 @@ Astrom & Hagglund's design, on the FMU (baseline.objective "load"):
        J_load = mean over operating points p and loops i of  sum_k Ts |y0_k - y_k| / |d_i|   [output units * s / input unit]
 
    the IAE per unit load of a step d_i at loop i's plant input (baseline.load_step x the loop's control span,
-   signed away from the nearer actuator limit), after the loop held setpoint p for setpoint_hold_steps samples;
+   signed away from the nearer actuator limit), after the loop held setpoint p for setpoint_hold_steps samples (the
+   setpoint ramped to p from the FMU's start state over the first half of them, `approach`: a step from 350 to
+   370 K sends the exothermic reactor to 443 K with a PI that holds it at 370 K);
    loops are loaded one after another, setpoint_hold_steps apart. y0 is the same controller's run without the
    load (the load response by superposition): the FMU starts where its start values put it, not at p, and a
    loop still settling onto p when the load comes would otherwise have the tail of that transient counted as
@@ -121,13 +123,42 @@ def parameter_samples(config: TuningConfig) -> list[TuningConfig]:
         for _ in range(MC_SAMPLES)]
 
 
-def _load_config(config: TuningConfig, point: list[float], loads: list[float]) -> TuningConfig:
-    """The load experiment at `point`: setpoint held, loop i loaded with loads[i] [input units] from
-    setpoint_hold_steps * (i + 1) samples on; no noise, no randomisation."""
+APPROACH_STEPS = 25  # setpoint values of the ramp from the FMU's start state to the operating point
+
+
+def start_measurement(config: TuningConfig) -> list[float]:
+    """The measurement per loop of the FMU's start state (a reset loop core, no noise, nothing stepped)."""
+    core = _open_core(dataclasses.replace(config, forecast_horizon=0, measurement_noise_std=0.0,
+                                          actuator_noise_std=0.0, randomize={}))
+    try:
+        core.reset(np.random.default_rng(0))
+        return [float(y) for y in core.measurement]
+    finally:
+        core.close()
+
+
+def approach(start: list[float] | None, point: list[float], hold: int) -> tuple:
+    """The setpoint schedule ((step, setpoints), ...) that ramps from `start` to `point` over the first half of the
+    hold in APPROACH_STEPS steps, as the margin experiment approaches its operating point (a step through an
+    unstable region can run a reactor away that the PID holds at the point); ((0, point),) from no start."""
+    if start is None or hold < 2 * APPROACH_STEPS:
+        return ((0, tuple(point)),)
+    length = hold // 2
+    schedule = []
+    for j in range(APPROACH_STEPS):
+        f = (j + 1) / APPROACH_STEPS
+        schedule.append((j * length // APPROACH_STEPS, tuple(float(a + f * (b - a)) for a, b in zip(start, point))))
+    return tuple(schedule)
+
+
+def _load_config(config: TuningConfig, point: list[float], loads: list[float],
+                 start: list[float] | None = None) -> TuningConfig:
+    """The load experiment at `point`: the setpoint ramped there from `start` (approach) and held, loop i loaded with
+    loads[i] [input units] from setpoint_hold_steps * (i + 1) samples on; no noise, no randomisation."""
     hold = config.setpoint_hold_steps
     disturbances = tuple(Disturbance("actuator", l.output, hold * (i + 1), float(loads[i]))
                          for i, l in enumerate(config.loops))
-    return dataclasses.replace(config, setpoint_schedule=((0, tuple(point)),), disturbances=disturbances,
+    return dataclasses.replace(config, setpoint_schedule=approach(start, point, hold), disturbances=disturbances,
                                episode_steps=hold * (config.n_loops + 1), measurement_noise_std=0.0,
                                actuator_noise_std=0.0, randomize={}, forecast_horizon=0, load_disturbance=0.0)
 
@@ -174,10 +205,10 @@ def load_experiment(config: TuningConfig, load_step: float, run) -> float:
     """J_load of any controller: run(config) -> Trajectory runs it on a config (a fixed PID, a schedule replay).
     Each point: an unloaded probe (for the load's sign), then the loaded experiment."""
     config = dataclasses.replace(config, forecast_horizon=0)
-    total, points = 0.0, setpoint_range_points(config)
+    total, points, start = 0.0, setpoint_range_points(config), start_measurement(config)
     for p in points:
-        probe = run(_load_config(config, p, [0.0] * config.n_loops))
-        loaded = _load_config(config, p, signed_loads(config, probe, load_step))
+        probe = run(_load_config(config, p, [0.0] * config.n_loops, start))
+        loaded = _load_config(config, p, signed_loads(config, probe, load_step), start)
         total += load_iae(run(loaded), loaded, probe)
     return total / len(points)
 
@@ -346,16 +377,19 @@ class LoadDesign:
         self.reference = [None if plants is None else
                           [pl.winding(self.controller(gains, list(self.tf), i)) for i, pl in enumerate(plants)]
                           for plants in self.plants]
+        start = start_measurement(self.config)
         for p in self.points:  # per point: the unloaded run (kept open: every candidate's reference) and the loaded
-            quiet = _load_config(self.config, p, [0.0] * self.config.n_loops)
+            quiet = _load_config(self.config, p, [0.0] * self.config.n_loops, start)
             core = _open_core(quiet)
             self.quiet_cores.append(core)
             probe = gains_rollout(lambda c: gains, quiet, seed=0, core=core)
-            self.cores.append(_open_core(_load_config(self.config, p, signed_loads(self.config, probe, self.load_step))))
+            self.cores.append(_open_core(_load_config(self.config, p, signed_loads(self.config, probe, self.load_step),
+                                                      start)))
 
     def load_response(self, gains: tuple, tf: list[float]) -> tuple[float, float]:
         """(J_load, worst chatter) of constant gains with measurement filter tf: the load cost of the module
-        docstring and the largest fraction of samples where a loop's u reverses (metrics.chatter_fraction)."""
+        docstring and the largest fraction of samples from the first load on where a loop's u reverses
+        (metrics.chatter_fraction)."""
         total, chatter = 0.0, 0.0
         for core, quiet in zip(self.cores, self.quiet_cores):
             core.set_structure(self.b, self.c, tf)
@@ -363,8 +397,9 @@ class LoadDesign:
             traj = gains_rollout(lambda c: gains, core.config, seed=0, core=core)
             unloaded = gains_rollout(lambda c: gains, quiet.config, seed=0, core=quiet)
             total += load_iae(traj, core.config, unloaded)
-            if not traj.terminated:
-                chatter = max(chatter, max(chatter_fraction(traj.pid_output[:, i], self.spans[i])
+            if not traj.terminated:  # from the first load on: the approach's setpoint ramp is not the loop's doing
+                first = self.config.setpoint_hold_steps
+                chatter = max(chatter, max(chatter_fraction(traj.pid_output[first:, i], self.spans[i])
                                            for i in range(self.config.n_loops)))
         return total / max(len(self.cores), 1), chatter
 
