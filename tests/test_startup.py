@@ -52,15 +52,17 @@ def _commands(run, out):
 @pytest.mark.parametrize("name", ["validate", "schema", "inspect", "probe", "export st", "export plcopen",
                                   "export c"])
 def test_commands_that_do_not_train_import_no_torch(name, deployed_run, tmp_path):
-    argv = _commands(deployed_run, tmp_path)[name]
+    out = tmp_path / "out"
+    out.mkdir()
+    argv = _commands(deployed_run, out)[name]
     proc = subprocess.run([sys.executable, "-c", PROGRAM, json.dumps(argv)], capture_output=True, text=True,
-                          timeout=120)
+                          timeout=120, cwd=tmp_path)  # probe writes its plot into the working directory
     assert proc.returncode == 0, proc.stderr
     result = json.loads(proc.stdout.strip().splitlines()[-1])
     assert result["code"] == 0, proc.stderr
     assert result["heavy"] == [], f"{name} imported {result['heavy']}"
     if name.startswith("export"):  # the command did its job: the code carries the deployed Kp
-        written = {p.name: p.read_text() for p in tmp_path.iterdir()}
+        written = {p.name: p.read_text() for p in out.iterdir()}
         assert set(written) == {"export st": {"pid.st"}, "export plcopen": {"pid.xml"},
                                 "export c": {"pid.c", "pid.h"}}[name]
         assert any(KP_TEXT in text for text in written.values())
