@@ -114,6 +114,9 @@ class ScheduleResult:
 
 def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None, seed: int | None, resume: bool,
           progress_bar: bool, baseline: bool, crashed: bool = False) -> Path:
+    from prlpid_fmi.progress import stage, stage_seconds
+
+    stage_seconds(clear=True)  # this run's stage times from here (run.json's stage_seconds)
     started = start_stage(scenario, source, run_dir, timesteps, seed, resume, crashed)
     if started is None:
         return run_dir
@@ -125,7 +128,8 @@ def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None
     anchor = training_anchor(scenario, fixed, classical)
     info["anchor"] = anchor_name(anchor)
     write_json(run_dir / rd.RUN_INFO, info)
-    training_stage(scenario, run_dir, info, resume, anchor, progress_bar)
+    with stage("training", False):
+        training_stage(scenario, run_dir, info, resume, anchor, progress_bar)
     policy = load_policy(run_dir, scenario.agent.algorithm)
     table = schedule_stage(policy, scenario, anchor, progress_bar)
     info.update(table.info)
@@ -331,5 +335,8 @@ def files_stage(run_dir: Path, started: Started, ev: Evaluation, fixed: dict | N
     report += "\n" + deployable_files(run_dir)
     write_atomic(run_dir / rd.REPORT, report)
     plots.plot_learning_curve(run_dir / rd.MONITOR, run_dir / rd.LEARNING_CURVE_PLOT)
+    from prlpid_fmi.progress import stage_seconds
+
+    info["stage_seconds"] = stage_seconds()  # seconds per stage this process ran (progress.stage_seconds)
     info["finished"] = rd.now()
     write_json(run_dir / rd.RUN_INFO, info)
