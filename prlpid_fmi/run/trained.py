@@ -62,9 +62,11 @@ def training_anchor(scenario: Scenario, fixed: dict | None, classical=None):
 
 def anchor_name(anchor) -> str | None:
     """run.json's "anchor": "classical gain schedule", "fixed PID", or None (absolute map)."""
+    from prlpid_fmi.loop.env import is_table
+
     if anchor is None:
         return None
-    return str(Deployed.CLASSICAL if hasattr(anchor, "gains_at") else Deployed.FIXED_PID)
+    return str(Deployed.CLASSICAL if is_table(anchor) else Deployed.FIXED_PID)
 
 
 def run_anchor(run_dir: Path, scenario: Scenario, fixed: dict | None):
