@@ -160,18 +160,19 @@ def _run_one(conn, fn, args, extracted: dict, options: dict) -> None:
     become_worker(conn, **options)
     reuse_extracted(extracted)
     try:
-        try:
-            result = fn(*args)
-            if plant_module.FmuPlant.check_outputs and plant_module.garbage_seen:
-                raise PlantError(plant_module.garbage_seen[0])  # fn may have stopped quietly at the garbage
-            conn.send(("ok", result))
-        except (BrokenPipeError, ConnectionResetError, EOFError):
-            raise
-        except Exception as exc:  # noqa: BLE001 - raised in the parent
-            garbage = plant_module.FmuPlant.check_outputs and plant_module.garbage_seen
-            conn.send(("error", PlantError(garbage[0]) if garbage else exc))  # the garbage, not what fn made of it
+        result = fn(*args)
+        if plant_module.FmuPlant.check_outputs and plant_module.garbage_seen:
+            raise PlantError(plant_module.garbage_seen[0])  # fn may have stopped quietly at the garbage
+        message = ("ok", result)
+    except Exception as exc:  # noqa: BLE001 - raised in the parent
+        garbage = plant_module.FmuPlant.check_outputs and plant_module.garbage_seen
+        message = ("error", PlantError(garbage[0]) if garbage else exc)  # the garbage, not what fn made of it
+    try:
+        conn.send(message)
     except (BrokenPipeError, ConnectionResetError, EOFError):
         return  # the parent is gone (a SIGTERM or Ctrl-C stopped it while this call finished): nobody to tell
+    except Exception as exc:  # noqa: BLE001 - the result would not pickle: say so to the parent
+        conn.send(("error", exc))
     conn.close()
 
 

@@ -349,8 +349,9 @@ class LoadDesign:
                 C = self.controller(gains, tf, i)
                 ms = max(ms, plant.sensitivity_peak(C))
                 if sigma > 0:
-                    noise = max(noise, sigma * plant.noise_gain(C) / self.spans[i])
-                    increment = max(increment, sigma * plant.noise_gain(C, increments=True) / self.spans[i])
+                    std_u, std_du = plant.noise_gains(C)
+                    noise = max(noise, sigma * std_u / self.spans[i])
+                    increment = max(increment, sigma * std_du / self.spans[i])
         limit = self.limit if self.limit is not None else math.inf
         extra = increment - self.max_increment if math.isfinite(self.max_increment) else -1.0
         return np.array([ms - limit, noise - self.max_noise, extra])
