@@ -114,21 +114,22 @@ class ScheduledActionMap(AnchoredActionMap):
     `values(action)` looks the table up at its first breakpoint.
     """
 
-    scheduled = True
-
     def __init__(self, loops: tuple[LoopConfig, ...], schedule, bands, coupled: bool = False,
                  coupling_range: float = 0.5):
         self.schedule = schedule
         super().__init__(loops, schedule.gains_object(float(schedule.breakpoints[0])), bands, coupled, coupling_range)
+        self._z, self._anchor = None, None  # the last lookup: a setpoint changes at its steps only
 
     def values(self, action: list) -> tuple[list, list, list, list | None]:
         return self.values_at(action, float(self.schedule.breakpoints[0]))
 
     def values_at(self, action: list, z: float) -> tuple[list, list, list, list | None]:
         """Action (size floats) at scheduling value z -> Kp, Ti, Td lists (n_loops,), coupling (6,) or None."""
-        g = self.schedule.gains_at(z)
-        anchor = [float(x) for i in range(len(self.loops)) for x in (g[0][i], g[1][i], g[2][i])]
-        anchor += [float(x) for x in g[3]] if self.coupled else []
+        if z != self._z:
+            g = self.schedule.gains_at(z)
+            anchor = [float(x) for i in range(len(self.loops)) for x in (g[0][i], g[1][i], g[2][i])]
+            self._z, self._anchor = z, anchor + ([float(x) for x in g[3]] if self.coupled else [])
+        anchor = self._anchor
         out = []
         for a, value, (multiplicative, _, band, low, high) in zip(action, anchor, self._anchored):
             a = -1.0 if a < -1.0 else 1.0 if a > 1.0 else a
