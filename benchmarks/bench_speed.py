@@ -3,6 +3,9 @@
 Run:  python benchmarks/bench_speed.py            (full table, a few minutes)
       python benchmarks/bench_speed.py --quick    (same table, fewer repeats and steps, under a minute)
       python benchmarks/bench_speed.py --full-run (adds the 500k-step `prlpid-fmi tune` run, minutes)
+      python benchmarks/bench_speed.py --search [NAME ...]
+                                                  (the fixed-PID search on one process and on all cores, default
+                                                  first_order and two_tank; minutes)
       python benchmarks/bench_speed.py --stages [STEPS] [--stages-only]
                                                   (stage times of `tune` on first_order, two_tank and the quadrotor,
                                                   STEPS training steps each, default 500000; tens of minutes)
@@ -23,6 +26,10 @@ measured once, in an order shuffled per repeat, so load on the shared machine hi
 Run rows: training steps/s of prlpid_fmi.tuning.agent.train with the AgentConfig defaults (wall time),
 the optional full run (wall time, peak RSS of the child), and the peak RSS of this process.
 Targets (issue 7) are printed beside the ratios they apply to.
+
+Search rows (--search, issue 24): tuning.fixed_pid.tune_fixed_pid of the scenario's file with its own budget and
+limits, baseline.workers 1 and then one per core, each in a fresh subprocess, one after another: wall seconds,
+the ratio, and whether the two controllers (Kp, Ti, Td, b, c, Tf, cost, evaluations) are the same bit for bit.
 
 Stage rows (--stages, issue 24): `prlpid-fmi tune <scenario> --timesteps STEPS` in a subprocess per scenario, one
 after another; its wall time, the seconds of each stage from the run's run.json ("stage_seconds", recorded by
@@ -229,6 +236,56 @@ def tune_stages(name: str, steps: int) -> dict:
             "source": "run.json" if info.get("stage_seconds") else "progress lines"}
 
 
+SEARCH_SCENARIOS = ("first_order", "two_tank")
+_SEARCH_CHILD = """
+import json, sys, time, dataclasses
+from prlpid_fmi.deliver.evidence import max_sensitivity
+from prlpid_fmi.scenario.load import load_scenario
+from prlpid_fmi.scenario.presets import scenario_path
+from prlpid_fmi.tuning.fixed_pid import tune_fixed_pid
+
+def main():
+    scenario = load_scenario(scenario_path(sys.argv[1]))
+    baseline = dataclasses.replace(scenario.baseline, workers=int(sys.argv[2]))
+    start = time.perf_counter()
+    fixed = tune_fixed_pid(scenario.tuning, seed=scenario.agent.seed, max_sensitivity=max_sensitivity(scenario),
+                           baseline=baseline, deploy=scenario.deploy)
+    wall = time.perf_counter() - start
+    print(json.dumps({"wall": wall, "result": repr((fixed.gains.values(), fixed.structure, fixed.cost,
+                                                    fixed.evaluations))}))
+
+if __name__ == "__main__":
+    main()
+"""
+
+
+def search_times(name: str, workers: int) -> dict:
+    """The fixed-PID search of scenario `name` with baseline.workers = workers in a fresh subprocess:
+    {"wall", "result"} (result: repr of gains, structure, cost, evaluations), or {"error"}."""
+    import json
+
+    with tempfile.TemporaryDirectory() as tmp:
+        script = Path(tmp) / "search_child.py"
+        script.write_text(_SEARCH_CHILD)
+        proc = subprocess.run([sys.executable, str(script), name, str(workers)], capture_output=True, text=True,
+                              cwd=REPO)
+    if proc.returncode:
+        return {"error": proc.stderr.strip().splitlines()[-1] if proc.stderr.strip() else f"exit {proc.returncode}"}
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def print_search(rows: dict, cores: int) -> None:
+    print(f"\nFixed-PID search on 1 process and on {cores} (baseline.workers; issue 24)\n")
+    print(f"| scenario | 1 process s | {cores} processes s | speed-up | same controller |")
+    print("|---|---|---|---|---|")
+    for name, (one, many) in rows.items():
+        if "error" in one or "error" in many:
+            print(f"| {name} | {one.get('error', '')} | {many.get('error', '')} | – | – |")
+            continue
+        print(f"| {name} | {one['wall']:.1f} | {many['wall']:.1f} | {one['wall'] / many['wall']:.2f}x | "
+              f"{'yes' if one['result'] == many['result'] else 'NO'} |")
+
+
 def sb3_trivial_steps_per_s(name: str, steps: int) -> float:
     """Wall steps/s of SB3's PPO with the scenario's agent settings on a trivial env of the same spaces."""
     import gymnasium as gym
@@ -383,8 +440,21 @@ def main() -> None:
                         help=f"stage times of `tune` on {', '.join(SCENARIOS)} (STEPS training steps, default "
                              f"{FULL_RUN_STEPS})")
     parser.add_argument("--stages-only", action="store_true", help="only the --stages table")
+    parser.add_argument("--search", nargs="*", default=None, metavar="NAME",
+                        help=f"only the fixed-PID search on one process and on all cores (default "
+                             f"{' '.join(SEARCH_SCENARIOS)})")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
+    if args.search is not None:
+        from prlpid_fmi.tuning.search_pool import search_workers
+
+        cores = max(2, search_workers(None))
+        rows = {}
+        for name in args.search or SEARCH_SCENARIOS:
+            print(f"  fixed-PID search of {name} on 1 and {cores} processes ...", file=sys.stderr, flush=True)
+            rows[name] = (search_times(name, 1), search_times(name, cores))
+        print_search(rows, cores)
+        return
     if args.stages_only and args.stages is None:
         args.stages = FULL_RUN_STEPS
     if args.stages is not None:

@@ -189,14 +189,27 @@ class Steps:
             self._plain = None
 
 
-def counted(fn, steps: Steps):
-    """`fn` reporting its number of calls so far to `steps` (the count of the current step) on every call."""
-    calls = [0]
+def counted(fn, steps: Steps, start: int = 0):
+    """`fn` reporting its number of calls so far (after `start` counted before) to `steps` (the count of the
+    current step) on every call."""
+    calls = [start]
 
     def wrapped(*args):
         calls[0] += 1
         steps.update(calls[0])
         return fn(*args)
+    return wrapped
+
+
+def batch_counted(fn, steps: Steps):
+    """`fn(x)` of a whole population x (n, S) (scipy's vectorized form) reporting the number of vectors evaluated so
+    far to `steps` after every call."""
+    def wrapped(x, *args):
+        out = fn(x, *args)
+        wrapped.calls += int(x.shape[1]) if getattr(x, "ndim", 1) == 2 else 1
+        steps.update(wrapped.calls)
+        return out
+    wrapped.calls = 0  # vectors evaluated so far (scipy's nfev counts one per vectorized call)
     return wrapped
 
 

@@ -1,6 +1,13 @@
+import os
+
 import pytest
 
 from prlpid_fmi.fmu import bundled_fmu, bundled_plant_names
+from prlpid_fmi.tuning.search_pool import WORKERS_ENV
+
+# the fixed-PID search in the test's own process: pytest-xdist runs one test file per core already (a search's result
+# does not depend on its number of processes: tests/test_search_pool.py checks that, and the pool itself)
+os.environ.setdefault(WORKERS_ENV, "1")
 
 PLANTS = bundled_plant_names()
 

@@ -754,6 +754,10 @@ class BaselineModel(Section):
     episodes: Count = Field(3, description="seeded training episodes per cost evaluation")
     maxiter: Count = Field(20, description="generations of differential evolution")
     popsize: Count = Field(10, description="population = popsize x number of gains searched")
+    workers: Optional[Count] = Field(
+        None, description="processes that evaluate the search's candidates side by side, each with its own FMU "
+                          "instances; null: one per CPU core this process may use (1 in a sweep's trial). The result "
+                          "does not depend on it")
 
 
 ClassicalSchedule = AutoOrFlag  # deploy.classical_schedule (prlpid_fmi.tuning.schedule.classical)

@@ -137,8 +137,11 @@ def check_existing(sweep: Sweep, trials: list[Trial]) -> list[str]:
 
 # -- one trial, in a worker ------------------------------------------------------------------------
 def _one_thread() -> None:
-    """A worker's math libraries on one thread (set before torch or numpy start their pools)."""
-    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+    """A worker's math libraries on one thread (set before torch or numpy start their pools), and its fixed-PID
+    search in its own process (tuning.search_pool): the sweep runs one trial per core already."""
+    from prlpid_fmi.tuning.search_pool import WORKERS_ENV
+
+    for var in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", WORKERS_ENV):
         os.environ[var] = "1"
 
 

@@ -39,11 +39,12 @@ from prlpid_fmi.loop.actions import ActionMap
 from prlpid_fmi.loop.core import LoopCore, pid_structure
 from prlpid_fmi.loop.evaluation import Trajectory, gains_rollout
 from prlpid_fmi.loop.gains import Gains, gains_from_values
-from prlpid_fmi.loop.isolated import make_core
-from prlpid_fmi.progress import QUIET, Steps, counted
+from prlpid_fmi.loop.isolated import IsolatedCore, make_core
+from prlpid_fmi.progress import QUIET, Steps, batch_counted
 from prlpid_fmi.robustness.margins import margins_of, predicted_ms, setpoint_range_points
 from prlpid_fmi.robustness.status import meets_limit
-from prlpid_fmi.tuning.load_design import LoadDesign, SetpointDesign, parameter_samples, setpoint_weight
+from prlpid_fmi.tuning.load_design import LoadDesign, SetpointDesign, columns, parameter_samples, setpoint_weight
+from prlpid_fmi.tuning.search_pool import SearchPool, search_fmus, search_workers
 
 DIVERGED_COST = 1e6
 
@@ -86,8 +87,20 @@ def episode_cost(traj: Trajectory, core: LoopCore) -> float:
     return cost
 
 
-def _cost(vector: np.ndarray, core: LoopCore, gain_map: ActionMap, seeds: list[int]) -> float:
-    return _cost_of(gain_map.values(vector.tolist()), core, seeds)
+class SetpointSearch:
+    """J (module docstring) of search vectors in [-1, 1]^n, on one loop core of `config` (forecast off) over the
+    seeded episodes `seeds`; a search worker builds its own (tuning.search_pool)."""
+
+    def __init__(self, config: TuningConfig, seeds: list[int]):
+        self.gain_map = ActionMap(config.loops, config.coupled, config.coupling_range)
+        self.seeds = seeds
+        self.core = make_core(config)
+
+    def cost(self, vector) -> float:
+        return _cost_of(self.gain_map.values(np.asarray(vector, float).tolist()), self.core, self.seeds)
+
+    def close(self) -> None:
+        self.core.close()
 
 
 ROBUST_CANDIDATES = 4  # cheapest DE population members whose Ms is measured before detuning
@@ -236,20 +249,28 @@ def tune_fixed_pid(config: TuningConfig, seed: int = 0, episodes: int | None = N
     popsize = baseline.popsize if popsize is None else popsize
     if baseline.objective == "load":
         return _load_pid(config, seed, episodes, maxiter, popsize, progress, max_sensitivity, baseline, deploy)
-    return _setpoint_pid(config, seed, episodes, maxiter, popsize, progress, max_sensitivity)
+    return _setpoint_pid(config, seed, episodes, maxiter, popsize, progress, max_sensitivity,
+                         workers=baseline.workers)
 
 
 def _setpoint_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, popsize: int, progress: Steps,
-                  max_sensitivity: float | None, name: str = "setpoint search") -> FixedPid:
+                  max_sensitivity: float | None, name: str = "setpoint search", workers: int | None = None) -> FixedPid:
+    """The setpoint objective's search (module docstring); each generation evaluated as a whole (deferred updating)
+    on search_workers(workers) processes (tuning.search_pool): the same result for any number."""
     search = dataclasses.replace(config, forecast_horizon=0)
-    gain_map = ActionMap(config.loops, config.coupled, config.coupling_range)
     seeds = [seed + i for i in range(episodes)]
-    core = make_core(search)
+    evaluator = SetpointSearch(search, seeds)
+    core, gain_map = evaluator.core, evaluator.gain_map
     n = gain_map.size
     progress.step(name, (maxiter + 1) * popsize * n)
     try:
-        result = differential_evolution(counted(_cost, progress), [(-1.0, 1.0)] * n, args=(core, gain_map, seeds),
-                                        maxiter=maxiter, popsize=popsize, seed=seed, polish=False, tol=1e-6)
+        with SearchPool(evaluator, SetpointSearch, (search, seeds),
+                        1 if isinstance(core, IsolatedCore) else search_workers(workers),
+                        fmus=search_fmus(search)) as pool:
+            cost = batch_counted(lambda x: np.array(pool.map("cost", list(columns(x)))), progress)
+            result = differential_evolution(cost, [(-1.0, 1.0)] * n, maxiter=maxiter, popsize=popsize, seed=seed,
+                                            polish=False, tol=1e-6, vectorized=True, updating="deferred")
+            result.nfev = cost.calls  # scipy counts a vectorized call as one
         vector, gains = result.x, gain_map.values(result.x.tolist())
         cost = float(result.fun)
         if max_sensitivity is not None:
@@ -271,11 +292,11 @@ def _load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, pops
     """tuning.load_design's three steps, then the Ms check on the FMU with the final controller (detuned by
     `detune_over` where a point fails: the plant-response estimate is an estimate)."""
     design = LoadDesign(config, baseline.load_step, max_sensitivity, deploy.max_noise_gain, baseline.widen_ranges,
-                        deploy.max_noise_increment)
+                        deploy.max_noise_increment, search_workers(baseline.workers))
     # robust too (its Ms checked and detuned as the setpoint search does): a lightly damped loop does not settle in
     # the frequency-response experiment, and an unverified response gives the design no constraint
     first = _setpoint_pid(config, seed, episodes, STABILISING_GENERATIONS, popsize, progress, max_sensitivity,
-                          name="stabilising PID (setpoint search)")
+                          name="stabilising PID (setpoint search)", workers=baseline.workers)
     try:
         progress.step(f"frequency response of the plant at {len(design.points)} operating points"
                       + (f" and {len(parameter_samples(config))} parameter draws" if parameter_samples(config) else ""))
@@ -319,7 +340,8 @@ def _load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, pops
             if repaired is None:  # the design's estimate misled it (several coupled loops, a nonlinear plant):
                 # the setpoint search's robust PID, as before the load design, rather than an undeployable one
                 fallback = _setpoint_pid(config, seed, episodes, maxiter, popsize, progress, max_sensitivity,
-                                         name="setpoint search (the load design could not meet the Ms limit)")
+                                         name="setpoint search (the load design could not meet the Ms limit)",
+                                         workers=baseline.workers)
                 gains, structure = fallback.gains.values(), fallback.structure
                 tf = list(structure[2])
             else:
@@ -330,7 +352,8 @@ def _load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, pops
                     # misled it: interacting loops, measured loop at a time): the setpoint search's robust PID
                     # when it rejects loads better
                     alternative = _setpoint_pid(config, seed, episodes, maxiter, popsize, progress, max_sensitivity,
-                                                name="setpoint search (the Ms check detuned the load design)")
+                                                name="setpoint search (the Ms check detuned the load design)",
+                                                workers=baseline.workers)
                     if design.load_cost(alternative.gains.values(), list(alternative.structure[2])) < cost:
                         fallback = alternative
                         gains, structure = fallback.gains.values(), fallback.structure

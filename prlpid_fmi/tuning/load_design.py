@@ -51,12 +51,13 @@ from prlpid_fmi.config import Disturbance, GainRange, TuningConfig
 from prlpid_fmi.loop.actions import ActionMap
 from prlpid_fmi.loop.core import LoopCore, control_scales, pid_structure, randomized_parameters
 from prlpid_fmi.loop.evaluation import gains_rollout
-from prlpid_fmi.loop.isolated import make_core
+from prlpid_fmi.loop.isolated import IsolatedCore, make_core
 from prlpid_fmi.metrics import chatter_fraction
-from prlpid_fmi.progress import QUIET, Steps, counted
+from prlpid_fmi.progress import QUIET, Steps, batch_counted, counted
 from prlpid_fmi.robustness.margins import margins_of, pid_frequency_response, setpoint_range_points
 from prlpid_fmi.robustness.plant_response import MeasuredPlant
 from prlpid_fmi.robustness.status import Robustness, status
+from prlpid_fmi.tuning.search_pool import SearchPool, search_fmus
 
 DIVERGED_COST = 1e6
 B_GRID = tuple(i / 20 for i in range(21))  # setpoint weights tried
@@ -68,6 +69,12 @@ MAX_CHATTER = 0.05  # fraction of samples where u may reverse in the load experi
 CHATTER_PENALTY = 10.0  # the load cost grows by this x the chatter above MAX_CHATTER (relative to it)
 KP_SCAN = 48  # |Kp| values scanned for the interval that meets the limits
 KP_REFINE = 24  # |Kp| values on the finer grid at each end of that interval
+
+
+def columns(population) -> np.ndarray:
+    """The vectors of a population in scipy's vectorized form, (n, S) or one vector (n,): an (S, n) array."""
+    population = np.asarray(population, float)
+    return population[None, :] if population.ndim == 1 else population.T
 
 
 def polish_evaluations(maxiter: int) -> int:
@@ -224,8 +231,10 @@ class LoadDesign:
     """
 
     def __init__(self, config: TuningConfig, load_step: float, max_sensitivity: float | None, max_noise_gain: float,
-                 widen: float, max_noise_increment: float = math.inf):
+                 widen: float, max_noise_increment: float = math.inf, workers: int = 1):
         self.config = dataclasses.replace(config, forecast_horizon=0)
+        self.workers = int(workers)  # processes `search` evaluates on (tuning.search_pool)
+        self.args = (config, load_step, max_sensitivity, max_noise_gain, widen, max_noise_increment)
         self.load_step = float(load_step)
         self.limit = max_sensitivity
         self.max_noise = float(max_noise_gain)
@@ -244,6 +253,8 @@ class LoadDesign:
         self._seen: dict = {}
         self._intervals: dict = {}
         self.reference: list = []
+        self.loads: list = []  # per point: the load per loop [input units]
+        self.start: list | None = None  # the FMU start state's measurement per loop
 
     # -- the structure a vector stands for -------------------------------------------------------------------
     def gains(self, vector) -> tuple:
@@ -380,14 +391,37 @@ class LoadDesign:
                           [pl.winding(self.controller(gains, list(self.tf), i)) for i, pl in enumerate(plants)]
                           for plants in self.plants]
         self._relax_increment_limit(gains)
-        start = start_measurement(self.config)
+        self.start = start = start_measurement(self.config)
         for p in self.points:  # per point: the unloaded run (kept open: every candidate's reference) and the loaded
             quiet = _load_config(self.config, p, [0.0] * self.config.n_loops, start)
             core = _open_core(quiet)
             self.quiet_cores.append(core)
             probe = gains_rollout(lambda c: gains, quiet, seed=0, core=core)
-            self.cores.append(_open_core(_load_config(self.config, p, signed_loads(self.config, probe, self.load_step),
-                                                      start)))
+            self.loads.append(signed_loads(self.config, probe, self.load_step))
+            self.cores.append(_open_core(_load_config(self.config, p, self.loads[-1], start)))
+
+    def prepared(self) -> dict:
+        """What `prepare` measured and decided (picklable): a replica (`replica`) evaluates exactly as this design."""
+        return {"plants": self.plants, "reference": self.reference, "max_increment": self.max_increment,
+                "increment_relaxed": self.increment_relaxed, "loads": self.loads, "start": self.start}
+
+    @classmethod
+    def replica(cls, args: tuple, prepared: dict) -> "LoadDesign":
+        """A design built with the constructor's `args` and a prepared design's `prepared()`, its cores open (a search
+        worker's copy: tuning.search_pool)."""
+        design = cls(*args)
+        for name, value in prepared.items():
+            setattr(design, name, value)
+        for p, loads in zip(design.points, design.loads):
+            design.quiet_cores.append(_open_core(_load_config(design.config, p, [0.0] * design.config.n_loops,
+                                                              design.start)))
+            design.cores.append(_open_core(_load_config(design.config, p, loads, design.start)))
+        return design
+
+    def pool_workers(self) -> int:
+        """Processes a search on this design may use: self.workers, 1 where the cores run in worker processes
+        already (plant.isolation "process", or an FMU that may be instantiated once per process)."""
+        return 1 if any(isinstance(c, IsolatedCore) for c in self.cores) else self.workers
 
     def _relax_increment_limit(self, gains: tuple) -> None:
         """The noise-increment limit is a preference, Ms the requirement: where no Kp meets both for the stabilising
@@ -430,24 +464,43 @@ class LoadDesign:
         """J_load (module docstring) of constant gains with measurement filter tf."""
         return self.load_response(gains, tf)[0]
 
-    def evaluate(self, vector) -> tuple[float, float]:
-        """load_response of a vector, simulated once per vector (the objective and the chatter constraint ask)."""
+    def outcome(self, vector) -> tuple[float, float] | None:
+        """load_response of a vector, None when a loop has no Kp interval for it (not simulated); computed once per
+        vector (the objective, the chatter constraint and the polish ask again)."""
         key = tuple(float(v) for v in vector)
-        found = self._seen.get(key)
-        if found is None:
-            found = self._seen[key] = self.load_response(self.gains(vector), self.filters(vector))
-            if len(self._seen) > 4096:
-                self._seen.pop(next(iter(self._seen)))
-        return found
+        if key not in self._seen:
+            self._remember(key, self.new_outcome(vector))
+        return self._seen[key]
+
+    def new_outcome(self, vector) -> tuple[float, float] | None:
+        """`outcome` computed (what a search worker runs)."""
+        if not self.feasible(vector):
+            return None
+        return self.load_response(self.gains(vector), self.filters(vector))
+
+    def _remember(self, key: tuple, value) -> None:
+        self._seen[key] = value
+        if len(self._seen) > 4096:
+            self._seen.pop(next(iter(self._seen)))
 
     def cost(self, vector) -> float:
         """The load cost of a vector: DIVERGED_COST when a loop has no Kp interval (not simulated); J_load x
         (1 + CHATTER_PENALTY x the chatter above MAX_CHATTER, relative) otherwise: a saturating limit cycle,
         which the linear Ms cannot see, chatters."""
-        if not self.feasible(vector):
+        found = self.outcome(vector)
+        if found is None:
             return DIVERGED_COST
-        load, chatter = self.evaluate(vector)
+        load, chatter = found
         return load * (1.0 + CHATTER_PENALTY * max(0.0, chatter - MAX_CHATTER) / MAX_CHATTER)
+
+    def costs(self, population: np.ndarray, pool: "SearchPool") -> np.ndarray:
+        """`cost` of every column of population (n, S) (scipy's vectorized form), the new ones evaluated on `pool`."""
+        vectors = list(columns(population))
+        keys = [tuple(float(x) for x in v) for v in vectors]
+        new = list({k: v for k, v in zip(keys, vectors) if k not in self._seen}.items())
+        for (key, _), value in zip(new, pool.map("new_outcome", [v for _, v in new])):
+            self._remember(key, value)
+        return np.array([self.cost(v) for v in vectors])
 
     def budget(self, maxiter: int, popsize: int) -> int:
         """The most cost evaluations `search` makes: DE's (maxiter + 1) * popsize * n, then the polish's."""
@@ -455,11 +508,17 @@ class LoadDesign:
 
     def search(self, seed: int, maxiter: int, popsize: int, progress: Steps = QUIET):
         """Differential evolution of `cost`, then a Nelder-Mead polish from its result (polish_evaluations(maxiter)
-        per parameter at most); scipy's OptimizeResult of the better. progress: counts every cost evaluation."""
-        cost = counted(self.cost, progress)
-        result = differential_evolution(cost, [(-1.0, 1.0)] * self.n, maxiter=maxiter, popsize=popsize,
-                                        seed=seed, polish=False, tol=1e-6)
+        per parameter at most); scipy's OptimizeResult of the better. Each generation is evaluated as a whole
+        (deferred updating) on `pool_workers()` processes (tuning.search_pool): the same result for any number.
+        progress: counts every cost evaluation."""
+        with SearchPool(self, LoadDesign.replica, (self.args, self.prepared()), self.pool_workers(),
+                        fmus=search_fmus(self.config)) as pool:
+            costs = batch_counted(lambda x: self.costs(x, pool), progress)
+            result = differential_evolution(costs, [(-1.0, 1.0)] * self.n, maxiter=maxiter, popsize=popsize,
+                                            seed=seed, polish=False, tol=1e-6, vectorized=True, updating="deferred")
+        result.nfev = costs.calls  # scipy counts a vectorized call as one
         if result.fun < DIVERGED_COST:
+            cost = counted(self.cost, progress, start=costs.calls)
             polished = minimize(cost, result.x, method="Nelder-Mead", bounds=[(-1.0, 1.0)] * self.n,
                                 options={"maxfev": polish_evaluations(maxiter) * self.n, "xatol": 1e-4,
                                          "fatol": 1e-7})
@@ -516,6 +575,7 @@ class SetpointDesign:
     def __init__(self, design: LoadDesign, best_load: float, load_tolerance: float, max_overshoot: float,
                  seeds: list[int]):
         self.design = design
+        self.best_load, self.load_tolerance, self.max_overshoot_fraction = best_load, load_tolerance, max_overshoot
         self.load_limit = load_tolerance * best_load
         self.max_overshoot = 100.0 * max_overshoot
         self.seeds = seeds
@@ -524,37 +584,75 @@ class SetpointDesign:
         self.core = _open_core(quiet)
         self.n = design.n + 1
         self._seen: dict = {}
+        self._owns_design = False  # a replica's design is its own (closed with it)
 
     def weight(self, vector) -> float:
         return (min(max(float(vector[-1]), -1.0), 1.0) + 1.0) / 2.0
 
-    def evaluate(self, vector) -> tuple[float, float, float]:
-        """(load cost, ISE, overshoot) of a vector, simulated once per vector."""
+    @classmethod
+    def replica(cls, design_args: tuple, prepared: dict, best_load: float, load_tolerance: float,
+                max_overshoot: float, seeds: list[int]) -> "SetpointDesign":
+        """A search worker's copy (tuning.search_pool) on a replica of the load design (LoadDesign.replica)."""
+        trade = cls(LoadDesign.replica(design_args, prepared), best_load, load_tolerance, max_overshoot, seeds)
+        trade._owns_design = True
+        return trade
+
+    def new_outcome(self, vector) -> tuple:
+        """(step 2's constraint values, (load cost, ISE, overshoot)) of a vector; the second None where the first
+        fail already (not simulated). What a search worker runs."""
+        cheap = self.design.constraint_values(vector[:-1])
+        if np.any(cheap > 0):
+            return cheap, None
+        d = self.design
+        gains, tf = d.gains(vector[:-1]), d.filters(vector[:-1])
+        load = d.load_cost(gains, tf)
+        self.core.set_structure([self.weight(vector)] * d.config.n_loops, d.c, tf)
+        ise, overshoot = setpoint_response(self.core, gains, self.seeds)
+        return cheap, (load, ise, overshoot)
+
+    def outcome(self, vector) -> tuple:
+        """`new_outcome`, computed once per vector."""
         key = tuple(float(v) for v in vector)
-        found = self._seen.get(key)
+        if key not in self._seen:
+            self._remember(key, self.new_outcome(vector))
+        return self._seen[key]
+
+    def _remember(self, key: tuple, value) -> None:
+        self._seen[key] = value
+        if len(self._seen) > 4096:
+            self._seen.pop(next(iter(self._seen)))
+
+    def evaluate(self, vector) -> tuple[float, float, float]:
+        """(load cost, ISE, overshoot) of a vector (simulated even where step 2's limits fail)."""
+        found = self.outcome(vector)[1]
         if found is None:
             d = self.design
             gains, tf = d.gains(vector[:-1]), d.filters(vector[:-1])
-            load = d.load_cost(gains, tf)
-            b = [self.weight(vector)] * d.config.n_loops
-            self.core.set_structure(b, d.c, tf)
-            ise, overshoot = setpoint_response(self.core, gains, self.seeds)
-            found = self._seen[key] = (load, ise, overshoot)
-            if len(self._seen) > 4096:
-                self._seen.pop(next(iter(self._seen)))
+            self.core.set_structure([self.weight(vector)] * d.config.n_loops, d.c, tf)
+            found = (d.load_cost(gains, tf), *setpoint_response(self.core, gains, self.seeds))
         return found
 
     def constraint_values(self, vector) -> np.ndarray:
-        cheap = self.design.constraint_values(vector[:-1])
-        if np.any(cheap > 0):  # not simulated: the robustness limits fail already
+        """[step 2's, load cost / its limit - 1, overshoot / its limit - 1] (<= 0: feasible); where step 2's fail the
+        last two are not simulated: 1 + their worst, and 1."""
+        cheap, simulated = self.outcome(vector)
+        if simulated is None:
             return np.concatenate([cheap, [1.0 + float(np.max(cheap)), 1.0]])
-        load, _, overshoot = self.evaluate(vector)
+        load, _, overshoot = simulated
         return np.concatenate([cheap, [load / self.load_limit - 1.0, overshoot / max(self.max_overshoot, 1e-9) - 1.0
                                        if math.isfinite(overshoot) else DIVERGED_COST]])
 
     def cost(self, vector) -> float:
         _, ise, _ = self.evaluate(vector)
         return ise if math.isfinite(ise) else DIVERGED_COST
+
+    def _batch(self, population: np.ndarray, pool: SearchPool, fn) -> list:
+        vectors = list(columns(population))
+        keys = [tuple(float(x) for x in v) for v in vectors]
+        new = list({k: v for k, v in zip(keys, vectors) if k not in self._seen}.items())
+        for (key, _), value in zip(new, pool.map("new_outcome", [v for _, v in new])):
+            self._remember(key, value)
+        return [fn(v) for v in vectors]
 
     def budget(self, maxiter: int, popsize: int) -> int:
         """The most cost evaluations `search` makes (DE with maxiter halved, as there)."""
@@ -570,13 +668,22 @@ class SetpointDesign:
         start = np.clip(np.asarray(start, float), -1.0, 1.0)
         init = np.clip(start + rng.normal(0.0, INIT_SPREAD, (popsize * self.n, self.n)), -1.0, 1.0)
         init[0] = start
-        return differential_evolution(self.cost, [(-1.0, 1.0)] * self.n, maxiter=maxiter,
-                                      seed=seed, polish=False, tol=1e-6, init=init,
-                                      constraints=NonlinearConstraint(counted(self.constraint_values, progress),
-                                                                      -np.inf, 0.0))
+        d = self.design
+        with SearchPool(self, SetpointDesign.replica, (d.args, d.prepared(), self.best_load, self.load_tolerance,
+                                                        self.max_overshoot_fraction, self.seeds),
+                        d.pool_workers(), fmus=search_fmus(d.config)) as pool:
+            constraints = batch_counted(lambda x: np.array(self._batch(x, pool, self.constraint_values)).T, progress)
+            result = differential_evolution(lambda x: np.array(self._batch(x, pool, self.cost)),
+                                            [(-1.0, 1.0)] * self.n, maxiter=maxiter, seed=seed, polish=False,
+                                            tol=1e-6, init=init, vectorized=True, updating="deferred",
+                                            constraints=NonlinearConstraint(constraints, -np.inf, 0.0))
+        result.nfev = constraints.calls  # the vectors simulated (scipy counts a vectorized call as one)
+        return result
 
     def close(self) -> None:
         self.core.close()
+        if self._owns_design:
+            self.design.close()
 
 
 def setpoint_weight(config: TuningConfig, gains: tuple, structure: tuple[list, list, list], seeds: list[int],

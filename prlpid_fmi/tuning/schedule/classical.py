@@ -35,6 +35,7 @@ from prlpid_fmi.progress import QUIET, Steps
 from prlpid_fmi.robustness.margins import margins_of, operating_point, setpoint_range_points
 from prlpid_fmi.robustness.status import Robustness, meets_limit, status
 from prlpid_fmi.tuning.load_design import LoadDesign
+from prlpid_fmi.tuning.search_pool import search_workers
 from prlpid_fmi.tuning.schedule.extraction import operating_setpoints
 from prlpid_fmi.tuning.schedule.table import GainSchedule, schedule_from_rows
 
@@ -96,7 +97,7 @@ def local_design(config: TuningConfig, setpoint: float, start: tuple, baseline, 
     point = operating_point(config, setpoint)
     local = _at(config, point)
     design = LoadDesign(local, baseline.load_step, limit, deploy.max_noise_gain, baseline.widen_ranges,
-                        deploy.max_noise_increment)
+                        deploy.max_noise_increment, search_workers(baseline.workers))
     try:
         design.prepare(start)
         progress.step(f"local load design at {setpoint:.4g}", design.budget(baseline.maxiter, baseline.popsize))
