@@ -49,3 +49,56 @@ def test_noise_and_increment_noise_gains_equal_the_impulse_response_norms(Kp, Ti
     if Td > 0 and Tf < 0.1:  # a derivative on barely filtered noise: the increments dominate
         assert std_du > std_u
 
+
+
+# -- the design drops the increment limit only where no Kp can meet it (tuning.load_design) ----------------------
+def _independent_feasibility(sigma: float, kps: np.ndarray, Ti: float, span: float, max_ms: float,
+                             max_noise: float, max_increment: float) -> tuple[bool, bool]:
+    """(some Kp meets Ms, std(u) and std(du) limits, some Kp meets Ms and std(u)) for the PI (Kp, Ti) on the ZOH
+    of 1 / (s + 1): Ms from python-control's frequency response on a dense unit-circle grid, the noise gains from
+    its impulse response."""
+    with_increment = without = False
+    theta = np.linspace(1e-4, math.pi, 4000)
+    for Kp in kps:
+        P, C = _plant_and_pid(Kp, Ti, 0.0, 0.0)
+        L = C * P
+        ms = float(np.max(np.abs(1.0 / (1.0 + np.asarray(L(np.exp(1j * theta))).ravel()))))
+        CS = ct.minreal(C / (1 + C * P), verbose=False)
+        h = ct.impulse_response(CS, T=np.arange(3000) * TS).outputs.ravel() * TS
+        std_u = math.sqrt(np.sum(h ** 2))
+        std_du = math.sqrt(np.sum(np.diff(np.concatenate([[0.0], h])) ** 2))
+        ok = ms <= max_ms and sigma * std_u / span <= max_noise
+        without |= ok
+        with_increment |= ok and sigma * std_du / span <= max_increment
+    return with_increment, without
+
+
+@pytest.mark.parametrize("sigma", [0.1, 1.0])
+def test_the_increment_limit_is_dropped_exactly_where_no_kp_meets_it(sigma):
+    import dataclasses
+
+    from prlpid_fmi.scenario.presets import preset
+    from prlpid_fmi.tuning.load_design import LoadDesign
+
+    config = dataclasses.replace(preset("first_order"), measurement_noise_std=sigma)
+    design = LoadDesign(config, 0.1, 2.0, 0.02, 4.0, 0.005)
+    w = np.geomspace(1e-3, math.pi / TS, 400)
+    P, _ = _plant_and_pid(1.0, 1.0, 0.0, 0.0)
+    plant = MeasuredPlant(w, np.asarray(P(np.exp(1j * w * TS))).ravel(), TS, (0.0,), (0.0,))
+    design.plants = [[plant]]  # the stable 1/(s + 1) measured at one point, instead of the FMU's experiment
+    gains = ([0.5], [1.0], [0.0], None)
+    design.reference = [[plant.winding(design.controller(gains, [0.0], 0))]]
+    design.relax_increment_limit(gains)
+    r = design.search_config.loops[0].Kp
+    span = 20.0  # first_order: u_limits [-10, 10]
+    with_increment, without = _independent_feasibility(sigma, np.geomspace(r.low, r.high, 60), 1.0, span, 2.0,
+                                                       0.02, 0.005)
+    assert design.increment_relaxed == (not with_increment and without)
+    assert design.increment_relaxed == (sigma == 1.0)  # the premise: one case on each side
+    interval = design.kp_interval(0, 1.0, 0.0, 0.0)
+    assert interval is not None  # with the limit dropped (sigma 1) or met (sigma 0.1) a Kp range remains
+    if not design.increment_relaxed:
+        _, _, kp_high = interval  # the increment limit still bounds Kp: the top of the range meets it
+        P, C = _plant_and_pid(kp_high, 1.0, 0.0, 0.0)
+        h = ct.impulse_response(ct.minreal(C / (1 + C * P), verbose=False), T=np.arange(3000) * TS).outputs.ravel() * TS
+        assert sigma * math.sqrt(np.sum(np.diff(np.concatenate([[0.0], h])) ** 2)) / span <= 0.005 * 1.02

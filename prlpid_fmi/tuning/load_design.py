@@ -239,7 +239,7 @@ class LoadDesign:
         self.limit = max_sensitivity
         self.max_noise = float(max_noise_gain)
         self.max_increment = float(max_noise_increment)
-        self.increment_relaxed = False  # set by prepare: the increment limit dropped (_relax_increment_limit)
+        self.increment_relaxed = False  # set by prepare: the increment limit dropped (relax_increment_limit)
         self.points = setpoint_range_points(self.config)
         self.search_config = widened(self.config, widen)
         self.gain_map = ActionMap(self.search_config.loops, config.coupled, config.coupling_range)
@@ -390,7 +390,7 @@ class LoadDesign:
         self.reference = [None if plants is None else
                           [pl.winding(self.controller(gains, list(self.tf), i)) for i, pl in enumerate(plants)]
                           for plants in self.plants]
-        self._relax_increment_limit(gains)
+        self.relax_increment_limit(gains)
         self.start = start = start_measurement(self.config)
         for p in self.points:  # per point: the unloaded run (kept open: every candidate's reference) and the loaded
             quiet = _load_config(self.config, p, [0.0] * self.config.n_loops, start)
@@ -423,7 +423,7 @@ class LoadDesign:
         already (plant.isolation "process", or an FMU that may be instantiated once per process)."""
         return 1 if any(isinstance(c, IsolatedCore) for c in self.cores) else self.workers
 
-    def _relax_increment_limit(self, gains: tuple) -> None:
+    def relax_increment_limit(self, gains: tuple) -> None:
         """The noise-increment limit is a preference, Ms the requirement: where no Kp meets both for the stabilising
         PID's Ti, Td, Tf on some loop but one meets Ms and std(u) alone (the exothermic reactor: stabilising it takes
         Kp >= 3 K/K, whose 0.1 K noise moves the jacket by 0.85 % of its span per sample), the limit is dropped for
