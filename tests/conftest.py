@@ -29,7 +29,7 @@ def fmu(name: str, version: int = 2):
 # free, so the tail is made of short files. (Grouping only the files with module fixtures and scheduling every
 # other test alone, --dist loadgroup with xdist_group marks added here, split the marked files too under
 # pytest-xdist 3.8: their fixtures were built twice; not pursued.)
-FIRST = ("test_cli.py", "test_sweep.py", "test_faults.py", "test_third_party_fmus.py", "test_packaging.py",
+FIRST = ("test_end_to_end.py", "test_cli.py", "test_sweep.py", "test_faults.py", "test_third_party_fmus.py", "test_packaging.py",
          "test_anchored.py", "test_pid_law_spec.py", "test_classical_schedule.py", "test_nonlinear_plants.py",
          "test_fmu_faults_exporters.py")
 
