@@ -98,7 +98,7 @@ def test_bundled_scenarios_are_named_from_any_folder(tmp_path, monkeypatch, caps
     assert "first_order" in BUNDLED and "two_tank" in BUNDLED
     for name in BUNDLED:
         assert main(["validate", name]) == 0
-        assert f": ok: " in capsys.readouterr().out
+        assert ": ok: " in capsys.readouterr().out
 
 
 def test_an_existing_path_wins_over_a_bundled_name(tmp_path, monkeypatch, capsys):

@@ -13,7 +13,6 @@ import pytest
 import yaml
 
 from prlpid_fmi.cli import main
-from prlpid_fmi.config import AgentConfig
 from prlpid_fmi.loop.evaluation import evaluate, model_policy
 from prlpid_fmi.fmu import FmuPlant, describe_fmu
 from prlpid_fmi.fmu.build import bundled_fmu
