@@ -220,7 +220,35 @@ def load_experiment(config: TuningConfig, load_step: float, run) -> float:
     return total / len(points)
 
 
-class LoadDesign:
+class OutcomeCache:
+    """What a search evaluates, once per vector: `outcome(vector)` is `new_outcome(vector)` (the subclass's), kept for
+    the objective, the constraints and the polish, which ask again; `evaluate_new(population, pool)` computes the
+    population's new vectors on a tuning.search_pool.SearchPool (their workers run `new_outcome`)."""
+
+    _seen: dict
+
+    def outcome(self, vector):
+        key = tuple(float(v) for v in vector)
+        if key not in self._seen:
+            self._remember(key, self.new_outcome(vector))
+        return self._seen[key]
+
+    def _remember(self, key: tuple, value) -> None:
+        self._seen[key] = value
+        if len(self._seen) > 4096:
+            self._seen.pop(next(iter(self._seen)))
+
+    def evaluate_new(self, population, pool: SearchPool) -> list[np.ndarray]:
+        """The vectors of population (scipy's vectorized form, `columns`), those not seen before evaluated on `pool`."""
+        vectors = list(columns(population))
+        keys = [tuple(float(x) for x in v) for v in vectors]
+        new = list({k: v for k, v in zip(keys, vectors) if k not in self._seen}.items())
+        for (key, _), value in zip(new, pool.map("new_outcome", [v for _, v in new])):
+            self._remember(key, value)
+        return vectors
+
+
+class LoadDesign(OutcomeCache):
     """The load cost, its constraints and the setpoint-weight choice for one tuning problem (module docstring).
 
     Args: config (the scenario's tuning problem, forecast off), load_step (fraction of the control span),
@@ -464,24 +492,11 @@ class LoadDesign:
         """J_load (module docstring) of constant gains with measurement filter tf."""
         return self.load_response(gains, tf)[0]
 
-    def outcome(self, vector) -> tuple[float, float] | None:
-        """load_response of a vector, None when a loop has no Kp interval for it (not simulated); computed once per
-        vector (the objective, the chatter constraint and the polish ask again)."""
-        key = tuple(float(v) for v in vector)
-        if key not in self._seen:
-            self._remember(key, self.new_outcome(vector))
-        return self._seen[key]
-
     def new_outcome(self, vector) -> tuple[float, float] | None:
-        """`outcome` computed (what a search worker runs)."""
+        """load_response of a vector, None when a loop has no Kp interval for it (not simulated); `outcome` keeps it."""
         if not self.feasible(vector):
             return None
         return self.load_response(self.gains(vector), self.filters(vector))
-
-    def _remember(self, key: tuple, value) -> None:
-        self._seen[key] = value
-        if len(self._seen) > 4096:
-            self._seen.pop(next(iter(self._seen)))
 
     def cost(self, vector) -> float:
         """The load cost of a vector: DIVERGED_COST when a loop has no Kp interval (not simulated); J_load x
@@ -493,14 +508,9 @@ class LoadDesign:
         load, chatter = found
         return load * (1.0 + CHATTER_PENALTY * max(0.0, chatter - MAX_CHATTER) / MAX_CHATTER)
 
-    def costs(self, population: np.ndarray, pool: "SearchPool") -> np.ndarray:
+    def costs(self, population: np.ndarray, pool: SearchPool) -> np.ndarray:
         """`cost` of every column of population (n, S) (scipy's vectorized form), the new ones evaluated on `pool`."""
-        vectors = list(columns(population))
-        keys = [tuple(float(x) for x in v) for v in vectors]
-        new = list({k: v for k, v in zip(keys, vectors) if k not in self._seen}.items())
-        for (key, _), value in zip(new, pool.map("new_outcome", [v for _, v in new])):
-            self._remember(key, value)
-        return np.array([self.cost(v) for v in vectors])
+        return np.array([self.cost(v) for v in self.evaluate_new(population, pool)])
 
     def budget(self, maxiter: int, popsize: int) -> int:
         """The most cost evaluations `search` makes: DE's (maxiter + 1) * popsize * n, then the polish's."""
@@ -567,7 +577,7 @@ def _worst_overshoot(r: np.ndarray, y: np.ndarray) -> float:
     return worst
 
 
-class SetpointDesign:
+class SetpointDesign(OutcomeCache):
     """Step 4 (module docstring): (Kp, Ti, Td[, Tf], b) minimising the setpoint ISE subject to Ms and noise as in
     step 2, J_load <= load_tolerance x the step-2 optimum and overshoot <= max_overshoot. Used when no b in B_GRID
     meets the overshoot limit with the step-2 gains. The vector is the load design's plus one entry for b."""
@@ -599,7 +609,7 @@ class SetpointDesign:
 
     def new_outcome(self, vector) -> tuple:
         """(step 2's constraint values, (load cost, ISE, overshoot)) of a vector; the second None where the first
-        fail already (not simulated). What a search worker runs."""
+        fail already (not simulated); `outcome` keeps it."""
         cheap = self.design.constraint_values(vector[:-1])
         if np.any(cheap > 0):
             return cheap, None
@@ -609,18 +619,6 @@ class SetpointDesign:
         self.core.set_structure([self.weight(vector)] * d.config.n_loops, d.c, tf)
         ise, overshoot = setpoint_response(self.core, gains, self.seeds)
         return cheap, (load, ise, overshoot)
-
-    def outcome(self, vector) -> tuple:
-        """`new_outcome`, computed once per vector."""
-        key = tuple(float(v) for v in vector)
-        if key not in self._seen:
-            self._remember(key, self.new_outcome(vector))
-        return self._seen[key]
-
-    def _remember(self, key: tuple, value) -> None:
-        self._seen[key] = value
-        if len(self._seen) > 4096:
-            self._seen.pop(next(iter(self._seen)))
 
     def evaluate(self, vector) -> tuple[float, float, float]:
         """(load cost, ISE, overshoot) of a vector (simulated even where step 2's limits fail)."""
@@ -647,12 +645,7 @@ class SetpointDesign:
         return ise if math.isfinite(ise) else DIVERGED_COST
 
     def _batch(self, population: np.ndarray, pool: SearchPool, fn) -> list:
-        vectors = list(columns(population))
-        keys = [tuple(float(x) for x in v) for v in vectors]
-        new = list({k: v for k, v in zip(keys, vectors) if k not in self._seen}.items())
-        for (key, _), value in zip(new, pool.map("new_outcome", [v for _, v in new])):
-            self._remember(key, value)
-        return [fn(v) for v in vectors]
+        return [fn(v) for v in self.evaluate_new(population, pool)]
 
     def budget(self, maxiter: int, popsize: int) -> int:
         """The most cost evaluations `search` makes (DE with maxiter halved, as there)."""
