@@ -112,6 +112,11 @@ def test_a_win_on_the_evaluation_that_does_not_carry_over_to_held_out_episodes_i
     diverged = choose(held_out(cand("gain schedule", 0.9), math.inf), fixed, 2.0)
     assert diverged.deploy == "fixed PID" and diverged.reasons[0].endswith("training distribution it diverged.")
     assert choose(held_out(cand("gain schedule", 0.9), 99.0), cand("fixed PID", 1.0), 2.0).deploy == "gain schedule"
+    both = choose(held_out(cand("gain schedule", 0.9), math.inf), held_out(cand("fixed PID", 1.0), math.inf), 2.0)
+    assert both.deploy == "gain schedule"  # no worse than the incumbent there; the verdict says that both diverged
+    assert both.reasons[1] == ("On held-out episodes of the training distribution both it and the fixed PID diverged: "
+                               "that check could not tell them apart, and neither holds every setpoint step of the "
+                               "training distribution.")
 
 
 def test_an_infinite_ms_is_said_in_words():

@@ -198,9 +198,13 @@ def choose(schedule: Candidate | None, fixed: Candidate, max_sensitivity: float,
                                 + ("it diverged" if math.isinf(h_s) else
                                    f"its ISE is {h_s:.4g} against the {against}'s {h_f:.4g}"))
         if not problems:
-            return Decision(Deployed(schedule.name), (f"The {schedule.name} beats the {against} on ISE "
-                                                    f"({schedule.score:.4g} vs {fixed.score:.4g}) within the "
-                                                    "robustness and effort limits.",))
+            said = (f"The {schedule.name} beats the {against} on ISE ({schedule.score:.4g} vs {fixed.score:.4g}) "
+                    "within the robustness and effort limits.",)
+            if math.isinf(schedule.holdout_ise) and math.isinf(fixed.holdout_ise):
+                said += (f"On held-out episodes of the training distribution both it and the {against} diverged: "
+                         "that check could not tell them apart, and neither holds every setpoint step of the "
+                         "training distribution.",)
+            return Decision(Deployed(schedule.name), said)
         reasons += [f"The {schedule.name} is not deployed: {p}." for p in problems]
     problems = fixed.problems(max_sensitivity)
     if not problems:
