@@ -18,7 +18,8 @@ import os
 from collections import deque
 from multiprocessing.connection import wait
 
-from prlpid_fmi.fmu.plant import extracted_folders, reuse_extracted
+from prlpid_fmi.fmu import watchdog
+from prlpid_fmi.fmu.plant import FmuPlant, extracted_folders, reuse_extracted
 from prlpid_fmi.fmu.watchdog import in_worker
 from prlpid_fmi.fmu.worker import JOIN_TIMEOUT_S, become_worker, mp_context
 
@@ -49,10 +50,11 @@ def search_fmus(config) -> list:
     return [resolve_fmu(config.fmu, config.fmi_version)]
 
 
-def _serve(conn, factory, args, extracted: dict, environ: dict) -> None:
-    """Worker main: evaluator = factory(*args), then answer (method, vector) with method(vector) until EOF. No crumb
-    file: a worker that dies hands its vectors back, so nothing reports its crash."""
-    become_worker(conn, environ=environ)
+def _serve(conn, factory, args, extracted: dict, options: dict) -> None:
+    """Worker main: evaluator = factory(*args), then answer (method, vector) with method(vector) until EOF. options:
+    become_worker's (the parent's environment, step timeout and output check). No crumb file: a worker that dies
+    hands its vectors back, so nothing reports its crash."""
+    become_worker(conn, **options)
     reuse_extracted(extracted)
     try:
         evaluator = factory(*args)
@@ -94,10 +96,11 @@ class SearchPool:
             return
         ctx = mp_context()
         extracted = extracted_folders(fmus)
-        environ = dict(os.environ)
+        options = {"environ": dict(os.environ), "step_timeout_s": watchdog.default_timeout_s,
+                   "check_outputs": FmuPlant.check_outputs}  # what this process's FMU calls run under
         for _ in range(workers - 1):
             parent, child = ctx.Pipe()
-            proc = ctx.Process(target=_serve, args=(child, factory, args, extracted, environ), daemon=True)
+            proc = ctx.Process(target=_serve, args=(child, factory, args, extracted, options), daemon=True)
             try:
                 proc.start()
             except (OSError, RuntimeError):  # no process to be had (a main module without its __main__ guard)
