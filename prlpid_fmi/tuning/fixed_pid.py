@@ -39,7 +39,7 @@ from prlpid_fmi.loop.actions import ActionMap
 from prlpid_fmi.loop.core import LoopCore, pid_structure
 from prlpid_fmi.loop.evaluation import Trajectory, gains_rollout
 from prlpid_fmi.loop.gains import Gains, gains_from_values
-from prlpid_fmi.loop.isolated import IsolatedCore, make_core
+from prlpid_fmi.loop.isolated import make_core
 from prlpid_fmi.progress import QUIET, Steps, batch_counted
 from prlpid_fmi.robustness.margins import margins_of, predicted_ms, setpoint_range_points
 from prlpid_fmi.robustness.status import meets_limit
@@ -264,8 +264,7 @@ def _setpoint_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, 
     n = gain_map.size
     progress.step(name, (maxiter + 1) * popsize * n)
     try:
-        with SearchPool(evaluator, SetpointSearch, (search, seeds),
-                        1 if isinstance(core, IsolatedCore) else search_workers(workers),
+        with SearchPool(evaluator, SetpointSearch, (search, seeds), search_workers(workers, [core]),
                         fmus=search_fmus(search)) as pool:
             cost = batch_counted(lambda x: np.array(pool.map("cost", list(columns(x)))), progress)
             result = differential_evolution(cost, [(-1.0, 1.0)] * n, maxiter=maxiter, popsize=popsize, seed=seed,

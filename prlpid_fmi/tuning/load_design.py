@@ -51,13 +51,13 @@ from prlpid_fmi.config import Disturbance, GainRange, TuningConfig
 from prlpid_fmi.loop.actions import ActionMap
 from prlpid_fmi.loop.core import LoopCore, control_scales, pid_structure, randomized_parameters
 from prlpid_fmi.loop.evaluation import gains_rollout
-from prlpid_fmi.loop.isolated import IsolatedCore, make_core
+from prlpid_fmi.loop.isolated import make_core
 from prlpid_fmi.metrics import chatter_fraction
 from prlpid_fmi.progress import QUIET, Steps, batch_counted, counted
 from prlpid_fmi.robustness.margins import margins_of, pid_frequency_response, setpoint_range_points
 from prlpid_fmi.robustness.plant_response import MeasuredPlant
 from prlpid_fmi.robustness.status import Robustness, status
-from prlpid_fmi.tuning.search_pool import SearchPool, search_fmus
+from prlpid_fmi.tuning.search_pool import SearchPool, search_fmus, search_workers
 
 DIVERGED_COST = 1e6
 B_GRID = tuple(i / 20 for i in range(21))  # setpoint weights tried
@@ -447,9 +447,8 @@ class LoadDesign(OutcomeCache):
         return design
 
     def pool_workers(self) -> int:
-        """Processes a search on this design may use: self.workers, 1 where the cores run in worker processes
-        already (plant.isolation "process", or an FMU that may be instantiated once per process)."""
-        return 1 if any(isinstance(c, IsolatedCore) for c in self.cores) else self.workers
+        """Processes a search on this design may use (tuning.search_pool.search_workers of self.workers and its cores)."""
+        return search_workers(self.workers, self.cores)
 
     def relax_increment_limit(self, gains: tuple) -> None:
         """The noise-increment limit is a preference, Ms the requirement: where no Kp meets both for the stabilising
@@ -611,24 +610,20 @@ class SetpointDesign(OutcomeCache):
         """(step 2's constraint values, (load cost, ISE, overshoot)) of a vector; the second None where the first
         fail already (not simulated); `outcome` keeps it."""
         cheap = self.design.constraint_values(vector[:-1])
-        if np.any(cheap > 0):
-            return cheap, None
+        return cheap, (None if np.any(cheap > 0) else self._simulate(vector))
+
+    def _simulate(self, vector) -> tuple[float, float, float]:
+        """(load cost, ISE, overshoot) of a vector, simulated."""
         d = self.design
         gains, tf = d.gains(vector[:-1]), d.filters(vector[:-1])
         load = d.load_cost(gains, tf)
         self.core.set_structure([self.weight(vector)] * d.config.n_loops, d.c, tf)
-        ise, overshoot = setpoint_response(self.core, gains, self.seeds)
-        return cheap, (load, ise, overshoot)
+        return (load, *setpoint_response(self.core, gains, self.seeds))
 
     def evaluate(self, vector) -> tuple[float, float, float]:
         """(load cost, ISE, overshoot) of a vector (simulated even where step 2's limits fail)."""
         found = self.outcome(vector)[1]
-        if found is None:
-            d = self.design
-            gains, tf = d.gains(vector[:-1]), d.filters(vector[:-1])
-            self.core.set_structure([self.weight(vector)] * d.config.n_loops, d.c, tf)
-            found = (d.load_cost(gains, tf), *setpoint_response(self.core, gains, self.seeds))
-        return found
+        return found if found is not None else self._simulate(vector)
 
     def constraint_values(self, vector) -> np.ndarray:
         """[step 2's, load cost / its limit - 1, overshoot / its limit - 1] (<= 0: feasible); where step 2's fail the

@@ -22,15 +22,18 @@ from prlpid_fmi.fmu import watchdog
 from prlpid_fmi.fmu.plant import FmuPlant, extracted_folders, reuse_extracted
 from prlpid_fmi.fmu.watchdog import in_worker
 from prlpid_fmi.fmu.worker import JOIN_TIMEOUT_S, become_worker, mp_context
+from prlpid_fmi.loop.isolated import IsolatedCore
 
 QUEUED = 2  # vectors handed to a worker at a time
 WORKERS_ENV = "PRLPID_FMI_SEARCH_WORKERS"  # processes per search where set (a sweep's trial: 1), else one per core
 
 
-def search_workers(requested: int | None) -> int:
+def search_workers(requested: int | None, cores=()) -> int:
     """Processes a search evaluates on, this one included: `requested` (baseline.workers), else WORKERS_ENV, else
-    the CPU cores this process may run on; 1 inside a worker process (its parent already uses the cores)."""
-    if in_worker():
+    the CPU cores this process may run on; 1 inside a worker process (its parent already uses the cores) and where
+    one of the search's loop `cores` runs in a worker process already (plant.isolation "process", or an FMU that may
+    be instantiated once per process)."""
+    if in_worker() or any(isinstance(c, IsolatedCore) for c in cores):
         return 1
     if requested is not None:
         return max(1, int(requested))
