@@ -82,7 +82,9 @@ def test_a_hang_in_process_ends_tune_with_one_line_and_keeps_the_run(fault_fmus,
     line = one_line_exit_2(done, "FirstOrderUnstable.fmu", "fmi2DoStep", f"did not return within {TIMEOUT_S:g} s",
                            str(run), "--resume")
     assert float(line.split("from t = ")[1].split(" s")[0]) >= HANG_S - 1e-9  # where the stage under way met it
-    assert ended <= 2 * TIMEOUT_S + 1.0  # within twice the timeout of the hang (+ the time to reach t = 3 s)
+    # Within twice the timeout of the hang, plus the time the run takes from the gate to t = 3 s of the next stage
+    # (a second on an idle machine, more on a loaded CI runner); without the watchdog communicate() times out.
+    assert ended <= 2 * TIMEOUT_S + 10.0
     assert (run / "scenario.yaml").is_file() and (run / "run.json").is_file() and (run / ".active").is_file()
     assert (run / "fixed_pid.json").is_file() and (run / "fixed_pid.csv").is_file()
 
