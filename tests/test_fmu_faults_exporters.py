@@ -113,7 +113,7 @@ def test_a_hang_in_a_worker_ends_the_episode_like_a_crash(fault_fmus, tmp_path, 
             _, terminated = core.step([3.0], [1.0], [0.0])
             if terminated:
                 break
-        assert time.monotonic() - started <= 2 * TIMEOUT_S + 0.5
+        assert time.monotonic() - started <= 2 * TIMEOUT_S + 3.0  # + the steps before t = 3 s on a loaded runner
         term = core.termination
         assert term.kind == "crash" and abs(term.time_s - HANG_S) <= TS / 2
         assert "fmi2DoStep from t = 3 s did not return within 0.5 s" in term.message
@@ -274,6 +274,6 @@ def test_sigterm_during_a_call_that_never_returns_ends_the_process_with_one_line
     sent = time.monotonic()
     proc.terminate()
     _, err = proc.communicate(timeout=30)
-    assert proc.returncode == 128 + 15 and time.monotonic() - sent <= SIGNAL_GRACE_S + 1.5
+    assert proc.returncode == 128 + 15 and time.monotonic() - sent <= SIGNAL_GRACE_S + 5.0  # a loaded runner's exit
     lines = error_lines(err)
     assert len(lines) == 1 and "interrupted by SIGTERM while FirstOrderUnstable.fmu: fmi2DoStep from t = 3 s" in lines[0]
