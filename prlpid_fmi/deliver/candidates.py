@@ -19,6 +19,7 @@ from prlpid_fmi.errors import PrlPidError
 from prlpid_fmi.loop.evaluation import Policy
 from prlpid_fmi.loop.gains import Gains
 from prlpid_fmi.robustness.margins import margins_of, operating_point
+from prlpid_fmi.tuning.margin_experiments import measure_ahead
 from prlpid_fmi.tuning.schedule.classical import robust_between
 from prlpid_fmi.tuning.schedule.extraction import extract
 from prlpid_fmi.tuning.schedule.replay import SELECTION_EPISODES, training_ise
@@ -27,7 +28,8 @@ from prlpid_fmi.tuning.schedule.table import GainSchedule
 AUTO_CANDIDATES = ("setpoint", "error")  # what auto compares
 
 
-def robust_schedule(schedule: GainSchedule, config, limit: float) -> tuple[GainSchedule, list[str]]:
+def robust_schedule(schedule: GainSchedule, config, limit: float, workers: int | None = None
+                    ) -> tuple[GainSchedule, list[str]]:
     """The schedule with every row whose Ms exceeds `limit` detuned (tuning.fixed_pid.detune) until it meets it.
 
     The agent's reward does not see robustness, so the gains it settles on can leave the Ms limit that
@@ -38,7 +40,8 @@ def robust_schedule(schedule: GainSchedule, config, limit: float) -> tuple[GainS
     then refuses the schedule). Returns (schedule, one note per detuned row). Setpoint tables: each row
     at its own setpoint, then halfway between neighbours with the interpolated gains (tuning.schedule.classical.robust_between), where
     the deliverable checks them too. Error tables: each row at every point of range_points, detuned at its worst
-    failing point until it meets the limit at all of them. Other variables: unchanged.
+    failing point until it meets the limit at all of them. Other variables: unchanged. The rows' first checks are
+    measured ahead on `workers` processes (baseline.workers: tuning.margin_experiments).
     """
     from prlpid_fmi.tuning.fixed_pid import detune
 
@@ -46,8 +49,13 @@ def robust_schedule(schedule: GainSchedule, config, limit: float) -> tuple[GainS
     if not schedule.variable.startswith("setpoint") and loop is None:
         return schedule, []
     Kp, Ti, notes = schedule.Kp.copy(), schedule.Ti.copy(), []
+
+    def points_of(b):
+        return [operating_point(config, b)] if loop is None else range_points(config, loop)
+    measure_ahead(config, [(schedule.row(j), p) for j, b in enumerate(schedule.breakpoints) for p in points_of(b)],
+                  workers)
     for j, b in enumerate(schedule.breakpoints):
-        points = [operating_point(config, b)] if loop is None else range_points(config, loop)
+        points = points_of(b)
         row, first = schedule.row(j), None
         for _ in points:  # each pass detunes at the worst failing point; that usually settles the others too
             failing = [(m.Ms, p) for m, p in ((margins_of(config, row, p), p) for p in points) if not meets(m, limit)]
@@ -65,7 +73,7 @@ def robust_schedule(schedule: GainSchedule, config, limit: float) -> tuple[GainS
                          f"Ti {np.round(Ti[j], 4).tolist()}")
     schedule = dataclasses.replace(schedule, Kp=Kp, Ti=Ti)
     if loop is None:  # a setpoint table is also run between its breakpoints, with interpolated gains
-        schedule, between = robust_between(schedule, config, limit)
+        schedule, between = robust_between(schedule, config, limit, workers)
         notes += between
     return schedule, notes
 
@@ -95,7 +103,7 @@ def deliverable_schedule(policy: Policy, scenario, seed: int, anchor: Gains | No
         if schedule.excluded:
             note = ("The closed loop diverged at setpoint(s) " + ", ".join(f"{v:g}" for v in schedule.excluded)
                     + ": left out of the schedule.\n")
-        schedule, detuned = robust_schedule(schedule, config, limit)
+        schedule, detuned = robust_schedule(schedule, config, limit, scenario.baseline.workers)
         if detuned:
             note += (f"Rows of the gain schedule ({schedule.variable}) detuned (Kp / lambda, Ti and Td * lambda) to meet "
                      f"Ms <= {limit:g}: " + "; ".join(detuned) + ".\n")

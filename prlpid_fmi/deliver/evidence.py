@@ -25,6 +25,7 @@ from prlpid_fmi.loop.gains import Gains
 from prlpid_fmi.robustness.margins import margins_of, operating_point, setpoint_range_points
 from prlpid_fmi.robustness.status import status
 from prlpid_fmi.tuning.load_design import load_experiment, parameter_samples
+from prlpid_fmi.tuning.margin_experiments import measure_ahead
 from prlpid_fmi.tuning.schedule.replay import replay_schedule, training_metrics
 from prlpid_fmi.tuning.schedule.table import LOOP_VARIABLE, GainSchedule, fixed_schedule
 
@@ -32,8 +33,10 @@ HOLDOUT_EPISODES = 8  # further episodes the deliverable rule compares the sched
 HOLDOUT_SEED_OFFSET = 30_000
 
 
-def _margins_at(config, gains, points: list[list[float]]) -> list:
-    """Margins of gains(point) -> (Kp, Ti, Td, coupling) at each operating point."""
+def _margins_at(config, gains, points: list[list[float]], workers: int | None) -> list:
+    """Margins of gains(point) -> (Kp, Ti, Td, coupling) at each operating point (measured ahead on `workers`
+    processes, baseline.workers: tuning.margin_experiments)."""
+    measure_ahead(config, [(gains(point), point) for point in points], workers)
     out = []
     for point in points:
         with warnings.catch_warnings():
@@ -47,7 +50,7 @@ def _on_draws(scenario, gains, points: list[list[float]], label) -> tuple[list, 
     (parameter_samples of scenario.tuning; none without training.randomize). label(point) -> the point's label."""
     margins, labels = [], []
     for n, draw in enumerate(parameter_samples(scenario.tuning), start=1):
-        margins += _margins_at(draw, gains, points)
+        margins += _margins_at(draw, gains, points, scenario.baseline.workers)
         labels += [f"{_label(label(p))}, draw {n}" for p in points]
     return margins, labels
 
@@ -75,7 +78,7 @@ def assess_fixed(scenario, gains: Gains) -> Candidate:
     metrics, _ = evaluate_gains(fn, plain, seed=scenario.evaluation.seed, intervals=intervals)
     mc = [evaluate_gains(fn, c, seed=s)[0] for c, s in _monte_carlo(scenario)]
     points = setpoint_range_points(scenario.tuning)
-    margins = _margins_at(scenario.tuning, lambda p: fn(None), points)
+    margins = _margins_at(scenario.tuning, lambda p: fn(None), points, scenario.baseline.workers)
     drawn, labels = _on_draws(scenario, lambda p: fn(None), points, lambda p: p[0])
     load = load_experiment(scenario.tuning, scenario.baseline.load_step,
                            lambda cfg: gains_rollout(fn, cfg, seed=0))
@@ -102,6 +105,7 @@ def assess_schedule(scenario, schedule: GainSchedule, name: str = Deployed.SCHED
     if loop is not None:  # every row, and the steady-state gains (error 0), at every operating point
         rows = [schedule.row(j) for j in range(len(schedule.breakpoints))] + [gains([0.0])]
         pairs = [(row, point) for row in rows for point in range_points(scenario.tuning, loop)]
+        measure_ahead(scenario.tuning, pairs, scenario.baseline.workers)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             margins = [margins_of(scenario.tuning, row, point) for row, point in pairs]
@@ -123,7 +127,8 @@ def assess_schedule(scenario, schedule: GainSchedule, name: str = Deployed.SCHED
         points += [operating_point(config, h) for h in halves]
         labels += [f"{_label(h)} (between breakpoints)" for h in halves]
     drawn, names = _on_draws(scenario, gains, points[:len(schedule.breakpoints) if setpoints else 1], lambda p: p[0])
-    return Candidate(name, metrics, mc, _margins_at(scenario.tuning, gains, points) + drawn, labels + names,
+    return Candidate(name, metrics, mc, _margins_at(scenario.tuning, gains, points, scenario.baseline.workers) + drawn,
+                     labels + names,
                      load_iae=load, draws=len(parameter_samples(scenario.tuning)))
 
 

@@ -471,23 +471,42 @@ def margins_of(config: TuningConfig, gains: tuple, point: list[float]) -> Margin
     The experiment is deterministic (identification: no noise, no disturbances), so each measurement is kept
     for the life of the process, keyed by the config, the FMU file's size and time, the gains and the point:
     a table row measured while it is projected onto the Ms limit and again as evidence is measured once. The
-    first measurement at a config, FMU and point that predicts others (`_predicts`) is also kept as that point's
-    plant response, for `predicted_ms`.
+    first measurement returned at a config, FMU and point that predicts others (`_predicts`) is also kept as that
+    point's plant response, for `predicted_ms` (first returned, not first measured: measurements made ahead on other
+    cores, `keep_margins`, then give the same references as measuring them one by one).
     """
     place = _place(config, point)
-    key = place + (tuple(None if g is None else tuple(float(v) for v in g) for g in gains),)
-    found = _MEASURED.get(key)
+    found = measured_margins(config, gains, point)
     if found is None:
-        found = loop_margins(config, gains[0], gains[1], gains[2], point, coupling=gains[3])
-        if len(_MEASURED) >= MEASURED_LIMIT:
-            _MEASURED.pop(next(iter(_MEASURED)))  # the oldest
-        _MEASURED[key] = found
-        if place not in _REFERENCES and _predicts(config, found):
-            if len(_REFERENCES) >= MEASURED_LIMIT:
-                _REFERENCES.pop(next(iter(_REFERENCES)))
-            _REFERENCES[place] = (gains, MeasuredPlant(found.frequencies_rad_s, found.plant_response,
-                                                       config.sample_time_s, tuple(point), ()))
+        found = measure_margins(config, gains, point)
+        keep_margins(config, gains, point, found)
+    if place not in _REFERENCES and _predicts(config, found):
+        if len(_REFERENCES) >= MEASURED_LIMIT:
+            _REFERENCES.pop(next(iter(_REFERENCES)))
+        _REFERENCES[place] = (gains, MeasuredPlant(found.frequencies_rad_s, found.plant_response,
+                                                   config.sample_time_s, tuple(point), ()))
     return found
+
+
+def measure_margins(config: TuningConfig, gains: tuple, point: list[float]) -> Margins:
+    """margins_of's experiment itself, not kept (a worker process measuring ahead: tuning.margin_experiments)."""
+    return loop_margins(config, gains[0], gains[1], gains[2], point, coupling=gains[3])
+
+
+def _key(config: TuningConfig, gains: tuple, point) -> tuple:
+    return _place(config, point) + (tuple(None if g is None else tuple(float(v) for v in g) for g in gains),)
+
+
+def measured_margins(config: TuningConfig, gains: tuple, point: list[float]) -> Margins | None:
+    """What margins_of keeps for these gains and point, None when they were not measured (or no longer kept)."""
+    return _MEASURED.get(_key(config, gains, point))
+
+
+def keep_margins(config: TuningConfig, gains: tuple, point: list[float], margins: Margins) -> None:
+    """Keep a measurement of these gains and point (measure_margins, here or in another process) for margins_of."""
+    if len(_MEASURED) >= MEASURED_LIMIT:
+        _MEASURED.pop(next(iter(_MEASURED)))  # the oldest
+    _MEASURED[_key(config, gains, point)] = margins
 
 
 def _place(config: TuningConfig, point) -> tuple:

@@ -755,9 +755,9 @@ class BaselineModel(Section):
     maxiter: Count = Field(20, description="generations of differential evolution")
     popsize: Count = Field(10, description="population = popsize x number of gains searched")
     workers: Optional[Count] = Field(
-        None, description="processes that evaluate the search's candidates side by side, each with its own FMU "
-                          "instances; null: one per CPU core this process may use (1 in a sweep's trial). The result "
-                          "does not depend on it")
+        None, description="processes that evaluate the search's candidates (and the margin experiments of the "
+                          "stages after training) side by side, each with its own FMU instances; null: one per CPU "
+                          "core this process may use (1 in a sweep's trial). The result does not depend on it")
 
 
 ClassicalSchedule = AutoOrFlag  # deploy.classical_schedule (prlpid_fmi.tuning.schedule.classical)

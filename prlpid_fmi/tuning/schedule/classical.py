@@ -35,6 +35,7 @@ from prlpid_fmi.progress import QUIET, Steps
 from prlpid_fmi.robustness.margins import margins_of, operating_point, setpoint_range_points
 from prlpid_fmi.robustness.status import Robustness, meets_limit, status
 from prlpid_fmi.tuning.load_design import LoadDesign
+from prlpid_fmi.tuning.margin_experiments import measure_ahead
 from prlpid_fmi.tuning.search_pool import search_workers
 from prlpid_fmi.tuning.schedule.extraction import operating_setpoints
 from prlpid_fmi.tuning.schedule.table import GainSchedule, schedule_from_rows
@@ -124,29 +125,43 @@ def _row(gains: tuple) -> dict:
     return {"Kp": np.asarray(gains[0], float), "Ti": np.asarray(gains[1], float), "Td": np.asarray(gains[2], float)}
 
 
+def _halfway(schedule: GainSchedule, config: TuningConfig, j: int) -> tuple:
+    """(mid, gains, point) halfway between breakpoints j and j + 1: the interpolated gains there."""
+    mid = 0.5 * (float(schedule.breakpoints[j]) + float(schedule.breakpoints[j + 1]))
+    return mid, tuple(list(a) for a in schedule.gains_at(mid)) + (None,), operating_point(config, mid)
+
+
+def _measure_halfway(schedule: GainSchedule, config: TuningConfig, workers: int | None) -> None:
+    """The Ms checks halfway between every two neighbouring breakpoints, measured ahead on `workers` processes."""
+    checks = [_halfway(schedule, config, j) for j in range(len(schedule.breakpoints) - 1)]
+    measure_ahead(config, [(gains, point) for _, gains, point in checks], workers)
+
+
 def _failing_halfway(schedule: GainSchedule, config: TuningConfig, limit: float, j: int):
     """(mid, gains, point) halfway between breakpoints j and j + 1 when the interpolated gains there fail the Ms limit
     on the FMU; None when they meet it."""
-    mid = 0.5 * (float(schedule.breakpoints[j]) + float(schedule.breakpoints[j + 1]))
-    gains = tuple(list(a) for a in schedule.gains_at(mid)) + (None,)
-    point = operating_point(config, mid)
+    mid, gains, point = _halfway(schedule, config, j)
     return None if meets_limit(margins_of(config, gains, point), limit) else (mid, gains, point)
 
 
-def _between(schedule: GainSchedule, config: TuningConfig, limit: float) -> list[float]:
+def _between(schedule: GainSchedule, config: TuningConfig, limit: float, workers: int | None = None) -> list[float]:
     """Halfway points between neighbouring breakpoints where the interpolated gains fail the Ms limit."""
+    _measure_halfway(schedule, config, workers)
     failing = (_failing_halfway(schedule, config, limit, j) for j in range(len(schedule.breakpoints) - 1))
     return [f[0] for f in failing if f is not None]
 
 
-def robust_between(schedule: GainSchedule, config, limit: float) -> tuple[GainSchedule, list[str]]:
+def robust_between(schedule: GainSchedule, config, limit: float, workers: int | None = None
+                   ) -> tuple[GainSchedule, list[str]]:
     """Where the interpolated gains halfway between two breakpoints fail the Ms limit, both neighbours detuned by the
     factor lambda that `detune` (Kp / lambda, Ti and Td * lambda) finds for the gains there: linear interpolation
-    commutes with that scaling, so the halfway gains become exactly the detuned ones."""
+    commutes with that scaling, so the halfway gains become exactly the detuned ones. The checks of the table as given
+    are measured ahead on `workers` processes (a detuned pair's next check is measured when it is asked for)."""
     from prlpid_fmi.tuning.fixed_pid import detune
 
     Kp, Ti, Td, notes = schedule.Kp.copy(), schedule.Ti.copy(), schedule.Td.copy(), []
     bp = schedule.breakpoints
+    _measure_halfway(schedule, config, workers)
     for j in range(len(bp) - 1):
         failing = _failing_halfway(dataclasses.replace(schedule, Kp=Kp, Ti=Ti, Td=Td), config, limit, j)
         if failing is None:
@@ -187,7 +202,8 @@ def classical_schedule(scenario, fixed: dict, progress: Steps = QUIET,
     variable = f"setpoint[{config.loops[0].output}]"
     schedule = schedule_from_rows(config, variable, output_units[0], rows, meta)
     progress.step(f"Ms check between the {len(rows)} breakpoints")
-    refined = _between(schedule, config, limit)
+    workers = scenario.baseline.workers
+    refined = _between(schedule, config, limit, workers)
     for s in refined:  # a local design where the interpolation fails, from the table's own gains there
         here = tuple(list(a) for a in schedule.gains_at(s)) + (None,)
         gains, info = local_design(config, s, here, scenario.baseline, scenario.deploy, limit, seed, progress)
@@ -196,7 +212,7 @@ def classical_schedule(scenario, fixed: dict, progress: Steps = QUIET,
     if refined:
         schedule = schedule_from_rows(config, variable, output_units[0], rows, meta)
         progress.step(f"Ms check between the {len(rows)} breakpoints")
-    schedule, detuned = robust_between(schedule, config, limit)  # what refinement left: both neighbours detuned
-    failing = _between(schedule, config, limit)
+    schedule, detuned = robust_between(schedule, config, limit, workers)  # what refinement left: both neighbours detuned
+    failing = _between(schedule, config, limit, workers)
     return schedule, {"rows": sorted(infos, key=lambda i: i["setpoint"]), "refined": refined,
                       "detuned_between": detuned, "failing_between": failing}
