@@ -36,11 +36,11 @@ HOLDOUT_SEED_OFFSET = 30_000
 def _margins_at(config, gains, points: list[list[float]], workers: int | None) -> list:
     """Margins of gains(point) -> (Kp, Ti, Td, coupling) at each operating point (measured ahead on `workers`
     processes, baseline.workers: tuning.margin_experiments)."""
-    measure_ahead(config, [(gains(point), point) for point in points], workers)
     out = []
-    for point in points:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        measure_ahead(config, [(gains(point), point) for point in points], workers)
+        for point in points:
             out.append(margins_of(config, gains(point), point))
     return out
 
@@ -105,9 +105,9 @@ def assess_schedule(scenario, schedule: GainSchedule, name: str = Deployed.SCHED
     if loop is not None:  # every row, and the steady-state gains (error 0), at every operating point
         rows = [schedule.row(j) for j in range(len(schedule.breakpoints))] + [gains([0.0])]
         pairs = [(row, point) for row in rows for point in range_points(scenario.tuning, loop)]
-        measure_ahead(scenario.tuning, pairs, scenario.baseline.workers)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
+            measure_ahead(scenario.tuning, pairs, scenario.baseline.workers)
             margins = [margins_of(scenario.tuning, row, point) for row, point in pairs]
         def row_label(j: int, point) -> str:
             return (f"row {j + 1}" if j < len(rows) - 1 else "error 0") + f" at {_label(point[loop])}"
