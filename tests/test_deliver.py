@@ -192,3 +192,40 @@ def test_classical_schedule_setting_is_auto_or_a_boolean_with_one_message(tmp_pa
         load_scenario(path)
     assert str(err.value) == (f"{path}: deploy.classical_schedule: neither 'auto' nor true/false (got 'maybe'; "
                               "expected auto, true or false)")
+
+
+def _design(**extra) -> dict:
+    return {"gains": {"Kp": [8.3], "Ti": [5.8], "Td": [62.0]},
+            "structure": {"setpoint_weight": [0.0], "derivative_weight": [0.0], "measurement_filter_s": [72.3]},
+            "design": {"objective": "load", "load_step": 0.02, "load_cost": 1.02, "load_optimum": 1.02, **extra}}
+
+
+def test_the_design_section_names_the_limits_that_hold_the_design_and_what_was_kept():
+    """The report's "How the fixed PID was designed": the active limits (fixed_pid.json design.active_limits) with
+    their worst estimate and points; an infeasible overshoot trade says the load-optimal gains are kept (as
+    tuning.fixed_pid does) and never claims a trade; setpoint weights that all diverged are said to be so."""
+    from prlpid_fmi.report.markdown import design_section
+
+    active = [{"limit": "max_sensitivity", "point": [370.0], "loop": 0, "value": 1.9999995, "bound": 2.0},
+              {"limit": "max_noise_gain", "point": [345.0], "loop": 0, "value": 0.0199, "bound": 0.02},
+              {"limit": "max_noise_gain", "point": [370.0], "loop": 0, "value": 0.019999, "bound": 0.02}]
+    inf = float("inf")
+    text = design_section(_design(active_limits=active,
+                                  traded_for_overshoot={"load_cost": 0.94, "ISE": inf, "Overshoot": inf,
+                                                        "feasible": False},
+                                  setpoint_weights=[{"b": 0.0, "ISE": inf, "Overshoot": inf},
+                                                    {"b": 0.5, "ISE": inf, "Overshoot": inf}]), ["T"])
+    assert ("Limits that hold this design (its estimates within 1 % of them): Ms 2.00 against deploy.max_sensitivity 2 "
+            "(at T = 370); std(u) from the measurement noise 2.0% of the control span against deploy.max_noise_gain "
+            "2.0% (at T = 345, T = 370).") in text
+    assert "a larger limit gives a faster loop" in text and "none for excursions past it" in text
+    assert "gave up load rejection" not in text
+    assert ("found none (the setpoint episodes of its best candidate diverged): the load-optimal gains are kept, with "
+            "the setpoint weight of least overshoot (b = 0).") in text
+    assert "diverged on every setpoint episode of the training distribution" in text
+    # a feasible trade, no active limit, finite setpoint responses: the trade's sentence alone
+    text = design_section(_design(traded_for_overshoot={"load_cost": 1.3 * 1.02, "ISE": 4.0, "Overshoot": 3.47,
+                                                        "feasible": True},
+                                  setpoint_weights=[{"b": 0.0, "ISE": 5.0, "Overshoot": 9.0}]), ["T"])
+    assert "gave up load rejection (1.3x the optimum) for an overshoot of 3.47 %." in text
+    assert "Limits that hold" not in text and "diverged" not in text

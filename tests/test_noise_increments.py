@@ -102,3 +102,31 @@ def test_the_increment_limit_is_dropped_exactly_where_no_kp_meets_it(sigma):
         P, C = _plant_and_pid(kp_high, 1.0, 0.0, 0.0)
         h = ct.impulse_response(ct.minreal(C / (1 + C * P), verbose=False), T=np.arange(3000) * TS).outputs.ravel() * TS
         assert sigma * math.sqrt(np.sum(np.diff(np.concatenate([[0.0], h])) ** 2)) / span <= 0.005 * 1.02
+
+
+@pytest.mark.parametrize("held", ["max_sensitivity", "max_noise_gain"])
+def test_the_limits_that_hold_a_design_are_those_within_1_percent(held):
+    """LoadDesign.active_limits (fixed_pid.json design.active_limits, the report's "Limits that hold this design")
+    names the limit whose estimate lies within 1 % of it: Ms and std(u) of a PI on 1/(s + 1) from python-control's
+    frequency and impulse responses, each limit set 0.5 % above its value (held) or 5 % above (free)."""
+    import dataclasses
+
+    from prlpid_fmi.scenario.presets import preset
+    from prlpid_fmi.tuning.load_design import LoadDesign
+
+    sigma, span, (Kp, Ti) = 0.1, 20.0, (4.0, 0.5)
+    P, C = _plant_and_pid(Kp, Ti, 0.0, 0.0)
+    theta = np.linspace(1e-4, math.pi, 20000)
+    ms = float(np.max(np.abs(1.0 / (1.0 + np.asarray((C * P)(np.exp(1j * theta))).ravel()))))
+    h = ct.impulse_response(ct.minreal(C / (1 + C * P), verbose=False), T=np.arange(3000) * TS).outputs.ravel() * TS
+    share = sigma * math.sqrt(np.sum(h ** 2)) / span
+    near = {name: (1.005 if name == held else 1.05) for name in ("max_sensitivity", "max_noise_gain")}
+    config = dataclasses.replace(preset("first_order"), measurement_noise_std=sigma)
+    design = LoadDesign(config, 0.1, ms * near["max_sensitivity"], share * near["max_noise_gain"], 4.0, math.inf)
+    w = np.geomspace(1e-3, math.pi / TS, 400)
+    design.plants = [[MeasuredPlant(w, np.asarray(P(np.exp(1j * w * TS))).ravel(), TS, (0.0,), (0.0,))]]
+    design.points = [[0.5]]
+    (active,) = design.active_limits(([Kp], [Ti], [0.0], None), [0.0])
+    assert active["limit"] == held and active["point"] == [0.5] and active["loop"] == 0
+    assert active["value"] == pytest.approx(ms if held == "max_sensitivity" else share, rel=0.01)
+    assert active["bound"] == pytest.approx(active["value"] * 1.005, rel=0.01)

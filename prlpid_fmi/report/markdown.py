@@ -234,13 +234,59 @@ def design_section(fixed: dict, loop_names) -> str:
     lines += ["", f"Load IAE per unit load (mean over the points) [output units·s per input unit]: "
                   f"{number(design['load_cost'], 4)}; the search's optimum without the overshoot limit: "
                   f"{number(design['load_optimum'], 4)}."]
+    held = _active_limits(design.get("active_limits") or [], loop_names)
+    if held:
+        lines += ["", held]
     traded = design.get("traded_for_overshoot")
-    if traded:
+    if traded and traded["feasible"]:
         lines.append(f"No setpoint weight kept the overshoot within the limit with the load-optimal gains, so the gains "
                      f"gave up load rejection ({number(traded['load_cost'] / design['load_optimum'], 3)}x the optimum) "
-                     f"for an overshoot of {number(traded['Overshoot'], 3)} %"
-                     + ("." if traded["feasible"] else ": no candidate met every limit; the least violation is kept."))
+                     f"for an overshoot of {number(traded['Overshoot'], 3)} %.")
+    elif traded:  # tuning.fixed_pid: the load optimum stays, with the b of least overshoot
+        best = (f"its best: load IAE {number(traded['load_cost'] / design['load_optimum'], 3)}x the optimum, overshoot "
+                f"{number(traded['Overshoot'], 3)} %" if math.isfinite(traded["Overshoot"]) else
+                "the setpoint episodes of its best candidate diverged")
+        lines.append("No setpoint weight kept the overshoot within the limit with the load-optimal gains, and the search "
+                     f"for gains that would, within the load tolerance, found none ({best}): the load-optimal gains are "
+                     f"kept, with the setpoint weight of least overshoot (b = {number(structure['setpoint_weight'][0], 3)}).")
+    weights = design.get("setpoint_weights") or []
+    if weights and not any(math.isfinite(w["ISE"]) for w in weights):
+        lines.append("With these gains the loop diverged on every setpoint episode of the training distribution the "
+                     "setpoint weight is chosen on, whatever b: those setpoint steps are larger than the loop holds, so "
+                     "b was not chosen on its setpoint response (the first b of the grid is kept).")
     return "\n".join(lines) + "\n"
+
+
+LIMIT_WORDS = {"max_sensitivity": ("Ms", "deploy.max_sensitivity", False),
+               "max_noise_gain": ("std(u) from the measurement noise", "deploy.max_noise_gain", True),
+               "max_noise_increment": ("std(u_k - u_(k-1)) from the measurement noise", "deploy.max_noise_increment",
+                                       True)}
+
+
+def _active_limits(active: list[dict], loop_names) -> str:
+    """One paragraph on the limits that hold the fixed PID's design (fixed_pid.json design.active_limits), "" if
+    none: the worst estimate of each and where, and what relaxing a noise limit would buy."""
+    parts, noise = [], False
+    for name, (what, key, is_noise) in LIMIT_WORDS.items():
+        found = [a for a in active if a["limit"] == name]
+        if not found:
+            continue
+        worst = max(found, key=lambda a: a["value"])
+        where = ", ".join(sorted({f"{loop_names[a['loop']]} = {number(a['point'][a['loop']], 4)}" for a in found}))
+        value = f"{worst['value']:.1%} of the control span" if is_noise else f"{worst['value']:.2f}"
+        bound = f"{worst['bound']:.1%}" if is_noise else f"{worst['bound']:g}"
+        parts.append(f"{what} {value} against {key} {bound} (at {where})")
+        noise |= is_noise
+    if not parts:
+        return ""
+    text = "Limits that hold this design (its estimates within 1 % of them): " + "; ".join(parts) + "."
+    if noise:
+        text += (" A design held by a noise limit filters the measurement and lowers its gains to meet it: where "
+                 "larger control moves are acceptable, a larger limit gives a faster loop.")
+    if any(a["limit"] == "max_sensitivity" for a in active):
+        text += (" Ms at its limit leaves no robustness margin at that point, and none for excursions past it "
+                 "(an overshoot beyond the setpoint range).")
+    return text
 
 
 def loop_units(config) -> tuple[str, str]:

@@ -360,7 +360,8 @@ def _load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, pops
         cost = design.load_cost(gains, tf)
         info = {"objective": "load", "load_cost": cost, "load_optimum": best_load, "load_step": baseline.load_step,
                 "traded_for_overshoot": traded,
-                "estimates": design.estimates(gains, tf), "setpoint_weights": choices,
+                "estimates": design.estimates(gains, tf), "active_limits": design.active_limits(gains, tf),
+                "setpoint_weights": choices,
                 "stabilising_gains": first.gains.as_dict(), "feasible": bool(getattr(result, "constr_violation", 0) <= 0),
                 "fell_back_to_setpoint_search": fallback is not None,
                 "noise_increment_limit_relaxed": design.increment_relaxed}

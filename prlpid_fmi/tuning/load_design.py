@@ -66,6 +66,7 @@ INIT_SPREAD = 0.15  # std of SetpointDesign's initial population around its star
 POLISH_EVALUATIONS = 60  # Nelder-Mead evaluations per searched parameter after differential evolution, at most ...
 POLISH_PER_GENERATION = 3  # ... and at most this many per parameter and DE generation (a token search, a token polish)
 MAX_CHATTER = 0.05  # fraction of samples where u may reverse in the load experiment (metrics.chatter_fraction)
+ACTIVE_TOLERANCE = 0.01  # an estimate this close (relative) to its limit holds the design (LoadDesign.active_limits)
 CHATTER_PENALTY = 10.0  # the load cost grows by this x the chatter above MAX_CHATTER (relative to it)
 KP_SCAN = 48  # |Kp| values scanned for the interval that meets the limits
 KP_REFINE = 24  # |Kp| values on the finer grid at each end of that interval
@@ -405,6 +406,25 @@ class LoadDesign(OutcomeCache):
             Cs = [self.controller(gains, tf, i) for i in range(len(plants))]
             out.append({"point": p, "Ms": max(pl.sensitivity_peak(C) for pl, C in zip(plants, Cs)),
                         "noise_gain": max(pl.noise_gain(C) for pl, C in zip(plants, Cs))})
+        return out
+
+    def active_limits(self, gains: tuple, tf: list[float]) -> list[dict]:
+        """The limits that hold the design: per nominal operating point and loop, the Ms and noise estimates (as
+        constraint_values computes them) within ACTIVE_TOLERANCE (relative) of their limits. Each {"limit":
+        "max_sensitivity" | "max_noise_gain" | "max_noise_increment", "point", "loop" (index), "value", "bound"};
+        noise values are std(u) or std(u_k - u_{k-1}) from the measurement noise as a fraction of the loop's span."""
+        out, sigma = [], self.config.measurement_noise_std
+        for p, plants in zip(self.points, self.plants):  # the nominal plant's points come first
+            for i, plant in enumerate(plants or ()):
+                C = self.controller(gains, tf, i)
+                values = [("max_sensitivity", plant.sensitivity_peak(C), self.limit)]
+                if sigma > 0:
+                    std_u, std_du = plant.noise_gains(C)
+                    values += [("max_noise_gain", sigma * std_u / self.spans[i], self.max_noise),
+                               ("max_noise_increment", sigma * std_du / self.spans[i], self.max_increment)]
+                out += [{"limit": name, "point": list(p), "loop": i, "value": float(v), "bound": float(bound)}
+                        for name, v, bound in values
+                        if bound is not None and math.isfinite(bound) and v >= (1.0 - ACTIVE_TOLERANCE) * bound]
         return out
 
     # -- the load cost -----------------------------------------------------------------------------------------
