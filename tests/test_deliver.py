@@ -210,7 +210,7 @@ def test_the_design_section_names_the_limits_that_hold_the_design_and_what_was_k
               {"limit": "max_noise_gain", "point": [345.0], "loop": 0, "value": 0.0199, "bound": 0.02},
               {"limit": "max_noise_gain", "point": [370.0], "loop": 0, "value": 0.019999, "bound": 0.02}]
     inf = float("inf")
-    text = design_section(_design(active_limits=active,
+    text = design_section(_design(active_limits=active, estimates=[{"point": [p]} for p in (320.0, 345.0, 370.0)],
                                   traded_for_overshoot={"load_cost": 0.94, "ISE": inf, "Overshoot": inf,
                                                         "feasible": False},
                                   setpoint_weights=[{"b": 0.0, "ISE": inf, "Overshoot": inf},
@@ -218,7 +218,13 @@ def test_the_design_section_names_the_limits_that_hold_the_design_and_what_was_k
     assert ("Limits that hold this design (its estimates within 1 % of them): Ms 2.00 against deploy.max_sensitivity 2 "
             "(at T = 370); std(u) from the measurement noise 2.0% of the control span against deploy.max_noise_gain "
             "2.0% (at T = 345, T = 370).") in text
-    assert "a larger limit gives a faster loop" in text and "none for excursions past it" in text
+    assert "a larger limit gives a faster loop" in text and "an excursion past it" in text
+    # Ms on its limit at every point (a linear plant): no word on the range's ends
+    every = [{"limit": "max_sensitivity", "point": [p], "loop": 0, "value": 1.997, "bound": 2.0} for p in (-1.0, 0.0, 1.0)]
+    text_linear = design_section(_design(active_limits=every, estimates=[{"point": [p]} for p in (-1.0, 0.0, 1.0)]),
+                                 ["y"])
+    assert "Ms 2.00 against deploy.max_sensitivity 2 (at y = -1, y = 0, y = 1)" in text_linear
+    assert "spends all the robustness" in text_linear and "excursion past it" not in text_linear
     assert "gave up load rejection" not in text
     assert ("found none (the setpoint episodes of its best candidate diverged): the load-optimal gains are kept, with "
             "the setpoint weight of least overshoot (b = 0).") in text

@@ -234,7 +234,8 @@ def design_section(fixed: dict, loop_names) -> str:
     lines += ["", f"Load IAE per unit load (mean over the points) [output units·s per input unit]: "
                   f"{number(design['load_cost'], 4)}; the search's optimum without the overshoot limit: "
                   f"{number(design['load_optimum'], 4)}."]
-    held = _active_limits(design.get("active_limits") or [], loop_names)
+    held = _active_limits(design.get("active_limits") or [], loop_names,
+                          [e["point"] for e in design.get("estimates") or []])
     if held:
         lines += ["", held]
     traded = design.get("traded_for_overshoot")
@@ -263,9 +264,10 @@ LIMIT_WORDS = {"max_sensitivity": ("Ms", "deploy.max_sensitivity", False),
                                        True)}
 
 
-def _active_limits(active: list[dict], loop_names) -> str:
+def _active_limits(active: list[dict], loop_names, points: list) -> str:
     """One paragraph on the limits that hold the fixed PID's design (fixed_pid.json design.active_limits), "" if
-    none: the worst estimate of each and where, and what relaxing a noise limit would buy."""
+    none: the worst estimate of each and where, what relaxing a noise limit would buy, and (Ms on its limit at an
+    end of the design's points but not at all of them: the margins shrink towards that end) what that leaves."""
     parts, noise = [], False
     for name, (what, key, is_noise) in LIMIT_WORDS.items():
         found = [a for a in active if a["limit"] == name]
@@ -283,9 +285,14 @@ def _active_limits(active: list[dict], loop_names) -> str:
     if noise:
         text += (" A design held by a noise limit filters the measurement and lowers its gains to meet it: where "
                  "larger control moves are acceptable, a larger limit gives a faster loop.")
-    if any(a["limit"] == "max_sensitivity" for a in active):
-        text += (" Ms at its limit leaves no robustness margin at that point, and none for excursions past it "
-                 "(an overshoot beyond the setpoint range).")
+    at_limit = [a["point"] for a in active if a["limit"] == "max_sensitivity"]
+    if at_limit:
+        text += (" Ms on its limit: the design spends all the robustness deploy.max_sensitivity allows there (a lower "
+                 "limit gives a more robust, slower loop).")
+        ends = [p for p in (points[:1] + points[-1:]) if p in at_limit]
+        if ends and len({tuple(p) for p in at_limit}) < len({tuple(p) for p in points}):
+            text += (" The margins shrink towards the end of the range where Ms meets its limit, so an excursion past "
+                     "it (an overshoot beyond the setpoint range) has less.")
     return text
 
 
