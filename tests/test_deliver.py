@@ -215,7 +215,7 @@ def test_the_design_section_names_the_limits_that_hold_the_design_and_what_was_k
                                                         "feasible": False},
                                   setpoint_weights=[{"b": 0.0, "ISE": inf, "Overshoot": inf},
                                                     {"b": 0.5, "ISE": inf, "Overshoot": inf}]), ["T"])
-    assert ("Limits that hold this design (its estimates within 1 % of them): Ms 2.00 against deploy.max_sensitivity 2 "
+    assert ("Limits that hold this design (its estimates within 1% of them): Ms 2.00 against deploy.max_sensitivity 2 "
             "(at T = 370); std(u) from the measurement noise 2.0% of the control span against deploy.max_noise_gain "
             "2.0% (at T = 345, T = 370).") in text
     assert "a larger limit gives a faster loop" in text and "an excursion past it" in text

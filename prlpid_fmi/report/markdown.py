@@ -19,6 +19,7 @@ from prlpid_fmi.fmu.resolve import loop_units as units_of_loops
 from prlpid_fmi.loop.core import pid_structure
 from prlpid_fmi.metrics import overall_metric
 from prlpid_fmi.robustness.status import INFINITE_MS, ms_text, why
+from prlpid_fmi.tuning.load_design import ACTIVE_TOLERANCE
 
 METRIC_COLUMNS = ("ISE", "IAE", "ITAE", "Overshoot", "SettlingTime", "RiseTime", "SteadyStateError",
                   "PeakDeviation", "RecoveryTime", "ControlEffort", "TotalVariation", "Chatter")
@@ -281,7 +282,8 @@ def _active_limits(active: list[dict], loop_names, points: list) -> str:
         noise |= is_noise
     if not parts:
         return ""
-    text = "Limits that hold this design (its estimates within 1 % of them): " + "; ".join(parts) + "."
+    text = (f"Limits that hold this design (its estimates within {ACTIVE_TOLERANCE:.0%} of them): " + "; ".join(parts)
+            + ".")
     if noise:
         text += (" A design held by a noise limit filters the measurement and lowers its gains to meet it: where "
                  "larger control moves are acceptable, a larger limit gives a faster loop.")
