@@ -27,17 +27,26 @@ def _same(a, b) -> bool:
         np.array_equal(a.plant_response, b.plant_response, equal_nan=True) and a.reliable == b.reliable
 
 
-def test_measured_ahead_on_two_processes_equals_measured_here(config):
+def test_measured_ahead_on_two_processes_equals_measured_here(config, monkeypatch):
+    from prlpid_fmi.tuning import margin_experiments
+
+    sizes = []
+
+    class Recorded(margin_experiments.SearchPool):  # the pool really has a worker process beside this one
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            sizes.append(self.size)
+    monkeypatch.setattr(margin_experiments, "SearchPool", Recorded)
     points = [[0.0], [0.5]]
     requests = [(g, p) for g in GAINS for p in points]
     here = [measure_margins(config, g, p) for g, p in requests]
     assert sorted({round(m.Ms, 1) for m in here})[0] < 2.0 and any(np.isinf(m.Ms) for m in here)
     # a duplicate is measured once; nothing is a reference before margins_of returns it
     assert measure_ahead(config, requests + requests[:2], workers=2) == len(requests)
-    assert margins._REFERENCES == {}
+    assert sizes == [2] and margins._REFERENCES == {}
     for (g, p), m in zip(requests, here):
         assert _same(measured_margins(config, g, p), m)
-    assert measure_ahead(config, requests, workers=2) == 0  # kept: nothing left to measure
+    assert measure_ahead(config, requests, workers=2) == 0 and sizes == [2]  # kept: nothing left, no pool
 
 
 def test_one_process_measures_nothing_ahead(config):
