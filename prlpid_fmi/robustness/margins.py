@@ -493,20 +493,21 @@ def measure_margins(config: TuningConfig, gains: tuple, point: list[float]) -> M
     return loop_margins(config, gains[0], gains[1], gains[2], point, coupling=gains[3])
 
 
-def _key(config: TuningConfig, gains: tuple, point) -> tuple:
+def measurement_key(config: TuningConfig, gains: tuple, point) -> tuple:
+    """What margins_of keeps a measurement under: the config, the FMU file, the point and the gains."""
     return _place(config, point) + (tuple(None if g is None else tuple(float(v) for v in g) for g in gains),)
 
 
 def measured_margins(config: TuningConfig, gains: tuple, point: list[float]) -> Margins | None:
     """What margins_of keeps for these gains and point, None when they were not measured (or no longer kept)."""
-    return _MEASURED.get(_key(config, gains, point))
+    return _MEASURED.get(measurement_key(config, gains, point))
 
 
 def keep_margins(config: TuningConfig, gains: tuple, point: list[float], margins: Margins) -> None:
     """Keep a measurement of these gains and point (measure_margins, here or in another process) for margins_of."""
     if len(_MEASURED) >= MEASURED_LIMIT:
         _MEASURED.pop(next(iter(_MEASURED)))  # the oldest
-    _MEASURED[_key(config, gains, point)] = margins
+    _MEASURED[measurement_key(config, gains, point)] = margins
 
 
 def _place(config: TuningConfig, point) -> tuple:

@@ -14,7 +14,7 @@ ahead, margins_of measures each when asked.
 from __future__ import annotations
 
 from prlpid_fmi.loop.isolated import runs_isolated
-from prlpid_fmi.robustness.margins import keep_margins, measure_margins, measured_margins
+from prlpid_fmi.robustness.margins import keep_margins, measure_margins, measured_margins, measurement_key
 from prlpid_fmi.tuning.search_pool import SearchPool, search_fmus, search_workers
 
 
@@ -35,7 +35,7 @@ def measure_ahead(config, requests, workers: int | None = None) -> int:
     Td, coupling) lists as margins_of takes them; point: setpoints per loop; workers: baseline.workers."""
     todo, seen = [], set()
     for gains, point in requests:
-        key = (tuple(None if g is None else tuple(float(v) for v in g) for g in gains), tuple(float(v) for v in point))
+        key = measurement_key(config, gains, point)
         if key in seen or measured_margins(config, gains, point) is not None:
             continue
         seen.add(key)
