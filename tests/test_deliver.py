@@ -235,3 +235,24 @@ def test_the_design_section_names_the_limits_that_hold_the_design_and_what_was_k
                                   setpoint_weights=[{"b": 0.0, "ISE": 5.0, "Overshoot": 9.0}]), ["T"])
     assert "gave up load rejection (1.3x the optimum) for an overshoot of 3.47 %." in text
     assert "Limits that hold" not in text and "diverged" not in text
+
+
+def test_the_design_section_says_when_the_gains_were_replaced_to_follow_the_setpoint_episodes():
+    """tuning.load_design step 5 in the report: what replaced the load-optimal gains (search or stabilising PID) with
+    its load IAE against the optimum, and no claim that the load-optimal gains were kept; nothing found: they are."""
+    from prlpid_fmi.report.markdown import design_section
+
+    inf = float("inf")
+    diverged = {"traded_for_overshoot": {"load_cost": 0.94, "ISE": inf, "Overshoot": inf, "feasible": False},
+                "setpoint_weights": [{"b": 0.0, "ISE": inf, "Overshoot": inf}]}
+    search = {"source": "search", "load_cost": 8.67, "ISE": 2.7e4, "Overshoot": 0.03, "feasible": True}
+    text = design_section(_design(**diverged, followed_setpoints=search, load_cost=8.67), ["T"])
+    assert "the load tolerance was dropped" in text and "(load IAE 8.5x the optimum, worst overshoot 0.03 %" in text
+    assert "load-optimal gains are kept" not in text and "first b of the grid is kept" not in text
+    assert "With the load-optimal gains the loop diverged on every setpoint episode" in text
+    stabilising = {**search, "source": "stabilising PID", "Overshoot": 12.0, "feasible": False}
+    text = design_section(_design(**diverged, followed_setpoints=stabilising), ["T"])
+    assert "the stabilising PID of the setpoint search is kept" in text and "worst overshoot 12 %" in text
+    text = design_section(_design(**diverged, followed_setpoints={**search, "source": None}), ["T"])
+    assert "the load-optimal gains are kept. This plant's setpoint steps" in text
+    assert "the load-optimal gains are kept, with the setpoint weight of least overshoot (b = 0)." in text

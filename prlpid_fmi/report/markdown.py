@@ -244,19 +244,44 @@ def design_section(fixed: dict, loop_names) -> str:
         lines.append(f"No setpoint weight kept the overshoot within the limit with the load-optimal gains, so the gains "
                      f"gave up load rejection ({number(traded['load_cost'] / design['load_optimum'], 3)}x the optimum) "
                      f"for an overshoot of {number(traded['Overshoot'], 3)} %.")
-    elif traded:  # tuning.fixed_pid: the load optimum stays, with the b of least overshoot
+    followed = design.get("followed_setpoints")
+    replaced = bool(followed and followed["source"])
+    if traded and not traded["feasible"]:  # tuning.fixed_pid: the load optimum stays, with the b of least overshoot
         best = (f"its best: load IAE {number(traded['load_cost'] / design['load_optimum'], 3)}x the optimum, overshoot "
                 f"{number(traded['Overshoot'], 3)} %" if math.isfinite(traded["Overshoot"]) else
                 "the setpoint episodes of its best candidate diverged")
         lines.append("No setpoint weight kept the overshoot within the limit with the load-optimal gains, and the search "
-                     f"for gains that would, within the load tolerance, found none ({best}): the load-optimal gains are "
-                     f"kept, with the setpoint weight of least overshoot (b = {number(structure['setpoint_weight'][0], 3)}).")
+                     f"for gains that would, within the load tolerance, found none ({best})"
+                     + ("." if replaced else ": the load-optimal gains are kept, with the setpoint weight of least "
+                        f"overshoot (b = {number(structure['setpoint_weight'][0], 3)})."))
     weights = design.get("setpoint_weights") or []
     if weights and not any(math.isfinite(w["ISE"]) for w in weights):
-        lines.append("With these gains the loop diverged on every setpoint episode of the training distribution the "
-                     "setpoint weight is chosen on, whatever b: those setpoint steps are larger than the loop holds, so "
-                     "b was not chosen on its setpoint response (the first b of the grid is kept).")
+        lines.append(("With the load-optimal gains" if followed else "With these gains") + " the loop diverged on every "
+                     "setpoint episode of the training distribution the setpoint weight is chosen on, whatever b"
+                     + (": those setpoint steps are larger than the loop holds, so b was not chosen on its setpoint "
+                        "response (the first b of the grid is kept)." if not followed else "."))
+    if followed:
+        lines.append(_followed_sentence(followed, design["load_optimum"]))
     return "\n".join(lines) + "\n"
+
+
+def _followed_sentence(followed: dict, load_optimum: float) -> str:
+    """fixed_pid.json design.followed_setpoints in words (tuning.load_design step 5)."""
+    result = (f"load IAE {number(followed['load_cost'] / load_optimum, 3)}x the optimum, worst overshoot "
+              f"{number(followed['Overshoot'], 3)} % on those episodes")
+    if followed["source"] == "search":
+        return ("A fixed PID must follow the setpoint steps it is chosen on, so the load tolerance was dropped: these "
+                "gains minimise the setpoint ISE of those episodes within the Ms and noise limits, with no bound on the "
+                f"load IAE ({result}"
+                + (")." if followed["feasible"] else "; the overshoot limit could not be met).")
+                + " Load rejection is what it costs.")
+    if followed["source"] == "stabilising PID":
+        return ("A fixed PID must follow the setpoint steps it is chosen on, and no gains within the Ms and noise limits "
+                "did, so the stabilising PID of the setpoint search is kept, with its best setpoint weight "
+                f"({result}).")
+    return ("A fixed PID must follow the setpoint steps it is chosen on, but neither a search without the load limit "
+            "nor the stabilising PID of the setpoint search did: the load-optimal gains are kept. This plant's setpoint "
+            "steps of the training distribution are larger than any PID found holds.")
 
 
 LIMIT_WORDS = {"max_sensitivity": ("Ms", "deploy.max_sensitivity", False),

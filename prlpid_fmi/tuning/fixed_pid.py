@@ -29,6 +29,7 @@ uses the first, and the second only where the first cannot meet the limit.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -306,7 +307,7 @@ def _load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, pops
         gains, tf = design.gains(vector), design.filters(vector)
         best_load = float(result.fun)
         b, c, _ = pid_structure(config)
-        choices, traded = [], None
+        choices, traded, followed = [], None, None
         seeds = [seed + i for i in range(episodes)]
         if config.setpoint_weight == "tuned":
             progress.step("setpoint weight b")
@@ -328,6 +329,11 @@ def _load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, pops
                         b = [trade.weight(vector)] * config.n_loops
                 finally:
                     trade.close()
+            if not follows_setpoints(choices, traded):  # step 5 (tuning.load_design)
+                followed, found = follow_setpoints(config, design, first, best_load, deploy, seeds, seed, maxiter,
+                                                    popsize, progress)
+                if found is not None:
+                    vector, gains, (b, c, tf) = found
         structure = (b, c, tf)
         tuned = dataclasses.replace(design.search_config, tuned_structure=tuple(zip(b, c, tf)))
         fallback = None
@@ -359,7 +365,7 @@ def _load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, pops
                         tf = list(structure[2])
         cost = design.load_cost(gains, tf)
         info = {"objective": "load", "load_cost": cost, "load_optimum": best_load, "load_step": baseline.load_step,
-                "traded_for_overshoot": traded,
+                "traded_for_overshoot": traded, "followed_setpoints": followed,
                 "estimates": design.estimates(gains, tf), "active_limits": design.active_limits(gains, tf),
                 "setpoint_weights": choices,
                 "stabilising_gains": first.gains.as_dict(), "feasible": bool(getattr(result, "constr_violation", 0) <= 0),
@@ -368,6 +374,46 @@ def _load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, pops
     finally:
         design.close()
     return FixedPid(vector, gains_from_values(*gains), cost, first.evaluations + int(result.nfev), structure, info)
+
+
+def follows_setpoints(choices: list[dict], traded: dict | None) -> bool:
+    """Whether the gains steps 2-4 of the load design keep follow the setpoint episodes they were chosen on: some b of
+    setpoint_weight's table (those gains) did not diverge, or the trade found gains within every limit."""
+    return any(math.isfinite(r["ISE"]) for r in choices) or bool(traded and traded["feasible"])
+
+
+def follow_setpoints(config: TuningConfig, design: LoadDesign, first: FixedPid, best_load: float, deploy: DeployConfig,
+                      seeds: list[int], seed: int, maxiter: int, popsize: int, progress: Steps) -> tuple[dict, tuple | None]:
+    """Step 5 of tuning.load_design: gains that follow the setpoint episodes where the load-optimal ones diverge on all
+    of them. The setpoint ISE within step 2's limits and the overshoot limit, without a load limit, searched over the
+    whole box; where its best diverges too, the stabilising PID `first` with its best setpoint weight. Returns
+    (what was found, for fixed_pid.json: {"source": "search" | "stabilising PID" | None, "load_cost", "ISE",
+    "Overshoot", "feasible", "evaluations"}, (vector, gains, (b, c, Tf)) to keep or None: nothing follows them)."""
+    follow = SetpointDesign(design, best_load, math.inf, deploy.max_overshoot, seeds)
+    progress.step("setpoint ISE of gains that follow the setpoint episodes (the load-optimal gains diverge on them)",
+                  follow.budget(maxiter, popsize))
+    try:
+        result = follow.search(None, seed, maxiter, popsize, progress=progress)
+        load, ise, overshoot = follow.evaluate(result.x)
+        found = {"source": "search", "load_cost": load, "ISE": ise, "Overshoot": overshoot,
+                 "feasible": bool(np.max(follow.constraint_values(result.x)) <= 0), "evaluations": int(result.nfev)}
+    finally:
+        follow.close()
+    if math.isfinite(ise):
+        vector = np.asarray(result.x)
+        b = [follow.weight(vector)] * config.n_loops
+        tf = design.filters(vector[:-1])
+        return found, (vector, design.gains(vector[:-1]), (b, list(design.c), tf))
+    gains = first.gains.values()
+    _, c, tf = first.structure
+    weight, rows = setpoint_weight(config, gains, first.structure, seeds, deploy.max_overshoot)
+    best = next(r for r in rows if r["b"] == weight)
+    if not math.isfinite(best["ISE"]):
+        return {**found, "source": None}, None
+    found = {"source": "stabilising PID", "load_cost": design.load_cost(gains, list(tf)), "ISE": best["ISE"],
+             "Overshoot": best["Overshoot"], "feasible": best["Overshoot"] <= 100.0 * deploy.max_overshoot,
+             "evaluations": found["evaluations"]}
+    return found, (np.asarray(first.action), gains, ([weight] * config.n_loops, list(c), list(tf)))
 
 
 def _cost_of(gains: tuple, core: LoopCore, seeds: list[int]) -> float:
