@@ -134,3 +134,53 @@ def test_a_local_design_is_within_5_percent_of_an_independent_optimum_on_the_loc
     assert load_iae(h2, Kp, Ti, Td) <= 1.05 * best, (gains, load_iae(h2, Kp, Ti, Td), best)
     # never worse than the PID it started from, at its own point (there: far better)
     assert load_iae(h2, Kp, Ti, Td) < load_iae(h2, 5.0, 14.14, 0.0)
+
+
+def _table(Kp, Ti, Td):
+    from prlpid_fmi.tuning.schedule.table import GainSchedule
+
+    col = lambda v: np.asarray(v, float).reshape(-1, 1)  # noqa: E731
+    return GainSchedule(variable="setpoint[y]", unit="", breakpoints=np.arange(len(Kp), dtype=float), Kp=col(Kp),
+                        Ti=col(Ti), Td=col(Td), coupling=None, sample_time_s=1.0, loop_names=("y",), loop_inputs=("u",),
+                        output_units=("",), input_units=("",), anti_windup="clamping", u_min=np.array([0.0]),
+                        u_max=np.array([1.0]))
+
+
+def test_rows_blended_towards_the_fixed_pid_by_hand():
+    """Kp and Ti move geometrically, Td linearly; weight 1 is the table, 0 the fixed PID in every row."""
+    from prlpid_fmi.tuning.schedule.classical import blended
+
+    table = _table([8.0, 2.0], [100.0, 1.0], [10.0, 0.0])
+    fixed = ([2.0], [25.0], [4.0], None)
+    half = blended(table, fixed, 0.5)
+    assert half.Kp.ravel().tolist() == pytest.approx([4.0, 2.0], rel=1e-14)  # sqrt(8 * 2), sqrt(2 * 2)
+    assert half.Ti.ravel().tolist() == pytest.approx([50.0, 5.0], rel=1e-14)  # sqrt(100 * 25), sqrt(1 * 25)
+    assert half.Td.ravel().tolist() == pytest.approx([7.0, 2.0], rel=1e-14)
+    same = blended(table, fixed, 1.0)
+    assert np.allclose(same.Kp, table.Kp, rtol=1e-14) and np.allclose(same.Ti, table.Ti, rtol=1e-14)
+    flat = blended(table, fixed, 0.0)
+    assert flat.Kp.ravel().tolist() == [2.0, 2.0] and flat.Ti.ravel().tolist() == [25.0, 25.0]
+    assert flat.Td.ravel().tolist() == [4.0, 4.0]
+    reverse = blended(_table([-8.0], [100.0], [0.0]), ([-2.0], [25.0], [0.0], None), 0.5)
+    assert reverse.Kp.ravel().tolist() == pytest.approx([-4.0], rel=1e-14)  # a reverse-acting loop keeps its sign
+
+
+def test_the_first_blend_that_follows_the_setpoint_steps_is_taken(monkeypatch):
+    """following_blend: the table as designed where it follows (or where the fixed PID does not: nothing to move
+    towards), else the first of FOLLOW_BLENDS that does, else None. Here "follows" means Kp <= a bound at every row,
+    a stand-in for the replays (tuning.schedule.replay) that lets the choice be checked by hand."""
+    from prlpid_fmi.tuning.schedule import classical
+
+    table, fixed = _table([16.0, 1.0], [1.0, 1.0], [0.0, 0.0]), ([1.0], [1.0], [0.0], None)
+    bound = {"Kp": 5.0}
+    monkeypatch.setattr(classical, "follows_setpoints", lambda t, config, seed: float(np.max(t.Kp)) <= bound["Kp"])
+    assert classical.FOLLOW_BLENDS == (1.0, 0.5, 0.25, 0.125)
+    assert classical.following_blend(table, fixed, None, 0) == 0.5  # 16^0.5 = 4 <= 5
+    bound["Kp"] = 2.5
+    assert classical.following_blend(table, fixed, None, 0) == 0.25  # 16^0.25 = 2
+    bound["Kp"] = 1.2
+    assert classical.following_blend(table, fixed, None, 0) is None  # 16^0.125 = 1.41
+    bound["Kp"] = 0.5  # not even the fixed PID follows
+    assert classical.following_blend(table, fixed, None, 0) == 1.0
+    bound["Kp"] = 16.0
+    assert classical.following_blend(table, fixed, None, 0) == 1.0
