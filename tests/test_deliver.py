@@ -256,3 +256,19 @@ def test_the_design_section_says_when_the_gains_were_replaced_to_follow_the_setp
     text = design_section(_design(**diverged, followed_setpoints={**search, "source": None}), ["T"])
     assert "the load-optimal gains are kept. This plant's setpoint steps" in text
     assert "the load-optimal gains are kept, with the setpoint weight of least overshoot (b = 0)." in text
+    # the overshoot limit met without the load tolerance, the load-optimal gains following the episodes
+    text = design_section(_design(traded_for_overshoot={"load_cost": 1.3, "ISE": 5.0, "Overshoot": 12.0,
+                                                        "feasible": False},
+                                  setpoint_weights=[{"b": 0.0, "ISE": 5.0, "Overshoot": 11.0}],
+                                  followed_setpoints={**search, "load_optimal_diverged": False, "load_cost": 2.04,
+                                                      "Overshoot": 4.5}), ["T"])
+    assert ("deploy.max_overshoot is a limit of the deployed controller and baseline.load_tolerance a preference, so the "
+            "load tolerance was dropped") in text and "(load IAE 2x the optimum, worst overshoot 4.5 %" in text
+    assert "gains are kept" not in text and "diverged" not in text
+    text = design_section(_design(traded_for_overshoot={"load_cost": 1.3, "ISE": 5.0, "Overshoot": 12.0,
+                                                        "feasible": False},
+                                  setpoint_weights=[{"b": 0.0, "ISE": 5.0, "Overshoot": 11.0}],
+                                  followed_setpoints={**search, "source": None, "load_optimal_diverged": False,
+                                                      "feasible": False, "Overshoot": 9.0}), ["T"])
+    assert "the load-optimal gains are kept, with the setpoint weight of least overshoot (b = 0)." in text
+    assert "Without the load tolerance no gains met the overshoot limit either (its best: load IAE" in text

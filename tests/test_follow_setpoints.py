@@ -1,7 +1,8 @@
-"""Step 5 of the fixed PID's load design (tuning.load_design): a fixed PID must follow the setpoint episodes it is
-chosen on. Where the load-optimal gains diverge on all of them whatever b, the setpoint ISE is minimised within the
-Ms, noise and overshoot limits without a load limit; where that finds nothing that follows them, the stabilising PID
-with its best b; where that diverges too, nothing is replaced.
+"""Step 5 of the fixed PID's load design (tuning.load_design): where nothing within the load tolerance meets the
+overshoot limit, the setpoint ISE is minimised within the Ms, noise and overshoot limits without a load limit, and
+kept where it meets them all. A fixed PID must follow the setpoint episodes it is chosen on: where the load-optimal
+gains diverge on all of them whatever b, the search's best is kept where it follows them; where it does not, the
+stabilising PID with its best b; where that diverges too, nothing is replaced.
 
 Ms is checked against python-control's frequency response of the exactly sampled plant 1/(s - 1) (the bundled
 first_order), not the tool's estimate; the search's reported setpoint response against a fresh simulation of the
@@ -91,6 +92,10 @@ def test_where_the_search_diverges_the_stabilising_pid_is_kept_and_where_it_dive
     _, gains, (b, c, tf) = keep
     assert gains == STABILISING and b == [weight] and c == [0.0] and tf == [0.0]
     assert found["ISE"] == next(r["ISE"] for r in rows if r["b"] == weight) and math.isfinite(found["ISE"])
+    # where the gains of steps 2-4 follow the episodes (only the overshoot limit unmet), nothing replaces them
+    found, keep = follow_setpoints(config, load_design, _first(), 0.0252, DeployConfig(), SEEDS, 0, 1, 3, QUIET,
+                                   diverged=False)
+    assert found["source"] is None and keep is None and not found["load_optimal_diverged"]
 
     inf = math.inf
     monkeypatch.setattr(fixed_pid, "setpoint_weight", lambda *a: (0.0, [{"b": 0.0, "ISE": inf, "Overshoot": inf}]))

@@ -269,16 +269,21 @@ def _followed_sentence(followed: dict, load_optimum: float) -> str:
     """fixed_pid.json design.followed_setpoints in words (tuning.load_design step 5)."""
     result = (f"load IAE {number(followed['load_cost'] / load_optimum, 3)}x the optimum, worst overshoot "
               f"{number(followed['Overshoot'], 3)} % on those episodes")
+    diverged = followed.get("load_optimal_diverged", True)
+    why = ("A fixed PID must follow the setpoint steps it is chosen on" if diverged else
+           "deploy.max_overshoot is a limit of the deployed controller and baseline.load_tolerance a preference")
     if followed["source"] == "search":
-        return ("A fixed PID must follow the setpoint steps it is chosen on, so the load tolerance was dropped: these "
-                "gains minimise the setpoint ISE of those episodes within the Ms and noise limits, with no bound on the "
-                f"load IAE ({result}"
+        return (f"{why}, so the load tolerance was dropped: these gains minimise the setpoint ISE of those episodes "
+                f"within the Ms and noise limits, with no bound on the load IAE ({result}"
                 + (")." if followed["feasible"] else "; the overshoot limit could not be met).")
                 + " Load rejection is what it costs.")
     if followed["source"] == "stabilising PID":
-        return ("A fixed PID must follow the setpoint steps it is chosen on, and no gains within the Ms and noise limits "
-                "did, so the stabilising PID of the setpoint search is kept, with its best setpoint weight "
-                f"({result}).")
+        return (f"{why}, and no gains within the Ms and noise limits did, so the stabilising PID of the setpoint search "
+                f"is kept, with its best setpoint weight ({result}).")
+    if not diverged:
+        best = (f"its best: {result}" if math.isfinite(followed["Overshoot"]) else
+                "the setpoint episodes of its best candidate diverged")
+        return f"Without the load tolerance no gains met the overshoot limit either ({best})."
     return ("A fixed PID must follow the setpoint steps it is chosen on, but neither a search without the load limit "
             "nor the stabilising PID of the setpoint search did: the load-optimal gains are kept. This plant's setpoint "
             "steps of the training distribution are larger than any PID found holds.")

@@ -329,9 +329,9 @@ def _load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, pops
                         b = [trade.weight(vector)] * config.n_loops
                 finally:
                     trade.close()
-            if not follows_setpoints(choices, traded):  # step 5 (tuning.load_design)
+            if traded is not None and not traded["feasible"]:  # step 5 (tuning.load_design)
                 followed, found = follow_setpoints(config, design, first, best_load, deploy, seeds, seed, maxiter,
-                                                    popsize, progress)
+                                                    popsize, progress, diverged=not follows_setpoints(choices, traded))
                 if found is not None:
                     vector, gains, (b, c, tf) = found
         structure = (b, c, tf)
@@ -383,36 +383,42 @@ def follows_setpoints(choices: list[dict], traded: dict | None) -> bool:
 
 
 def follow_setpoints(config: TuningConfig, design: LoadDesign, first: FixedPid, best_load: float, deploy: DeployConfig,
-                      seeds: list[int], seed: int, maxiter: int, popsize: int, progress: Steps) -> tuple[dict, tuple | None]:
-    """Step 5 of tuning.load_design: gains that follow the setpoint episodes where the load-optimal ones diverge on all
-    of them. The setpoint ISE within step 2's limits and the overshoot limit, without a load limit, searched over the
-    whole box; where its best diverges too, the stabilising PID `first` with its best setpoint weight. Returns
-    (what was found, for fixed_pid.json: {"source": "search" | "stabilising PID" | None, "load_cost", "ISE",
-    "Overshoot", "feasible", "evaluations"}, (vector, gains, (b, c, Tf)) to keep or None: nothing follows them)."""
+                     seeds: list[int], seed: int, maxiter: int, popsize: int, progress: Steps,
+                     diverged: bool = True) -> tuple[dict, tuple | None]:
+    """Step 5 of tuning.load_design, where no gains within the load tolerance met the overshoot limit: the setpoint ISE
+    within step 2's limits and the overshoot limit, without a load limit, searched over the whole box. Its best is
+    kept where it meets every limit, or where the gains of steps 2-4 diverged on the episodes (`diverged`) and it
+    follows them; where they diverged and it does not follow them either, the stabilising PID `first` with its best
+    setpoint weight. Returns (what was found, for fixed_pid.json: {"source": "search" | "stabilising PID" | None,
+    "load_optimal_diverged", "load_cost", "ISE", "Overshoot", "feasible", "evaluations"}, (vector, gains, (b, c, Tf))
+    to keep, or None: the gains of steps 2-4 stay)."""
     follow = SetpointDesign(design, best_load, math.inf, deploy.max_overshoot, seeds)
-    progress.step("setpoint ISE of gains that follow the setpoint episodes (the load-optimal gains diverge on them)",
+    progress.step("setpoint ISE within the overshoot limit without the load tolerance"
+                  + (" (the load-optimal gains diverge on the setpoint episodes)" if diverged else ""),
                   follow.budget(maxiter, popsize))
     try:
         result = follow.search(None, seed, maxiter, popsize, progress=progress)
         load, ise, overshoot = follow.evaluate(result.x)
-        found = {"source": "search", "load_cost": load, "ISE": ise, "Overshoot": overshoot,
-                 "feasible": bool(np.max(follow.constraint_values(result.x)) <= 0), "evaluations": int(result.nfev)}
+        feasible = bool(np.max(follow.constraint_values(result.x)) <= 0)
+        found = {"source": "search", "load_optimal_diverged": diverged, "load_cost": load, "ISE": ise,
+                 "Overshoot": overshoot, "feasible": feasible, "evaluations": int(result.nfev)}
     finally:
         follow.close()
-    if math.isfinite(ise):
+    if feasible or (diverged and math.isfinite(ise)):
         vector = np.asarray(result.x)
         b = [follow.weight(vector)] * config.n_loops
         tf = design.filters(vector[:-1])
         return found, (vector, design.gains(vector[:-1]), (b, list(design.c), tf))
+    if not diverged:
+        return {**found, "source": None}, None
     gains = first.gains.values()
     _, c, tf = first.structure
     weight, rows = setpoint_weight(config, gains, first.structure, seeds, deploy.max_overshoot)
     best = next(r for r in rows if r["b"] == weight)
     if not math.isfinite(best["ISE"]):
         return {**found, "source": None}, None
-    found = {"source": "stabilising PID", "load_cost": design.load_cost(gains, list(tf)), "ISE": best["ISE"],
-             "Overshoot": best["Overshoot"], "feasible": best["Overshoot"] <= 100.0 * deploy.max_overshoot,
-             "evaluations": found["evaluations"]}
+    found = {**found, "source": "stabilising PID", "load_cost": design.load_cost(gains, list(tf)), "ISE": best["ISE"],
+             "Overshoot": best["Overshoot"], "feasible": best["Overshoot"] <= 100.0 * deploy.max_overshoot}
     return found, (np.asarray(first.action), gains, ([weight] * config.n_loops, list(c), list(tf)))
 
 

@@ -38,12 +38,14 @@ Astrom & Hagglund's design, on the FMU (baseline.objective "load"):
    (Kp, Ti, Td[, Tf], b) minimise the setpoint ISE of those episodes subject to step 2's limits,
    J_load <= baseline.load_tolerance x step 2's optimum, and overshoot <= deploy.max_overshoot (SetpointDesign).
    If nothing meets them all, the least violation is kept and the report says so.
-5. A fixed PID must follow the setpoint steps it is chosen on. Where the gains steps 2-4 keep diverge on every one
-   of those episodes whatever b (the exothermic reactor: the load optimum, Ti 5 s with a 72 s measurement filter,
-   runs away on the setpoint steps across its unstable branch, while its small-signal Ms is 2 at worst), the
-   load tolerance goes: the same search as step 4 without the load limit, its population spread over the whole
-   box (`SetpointDesign.search` with start None). Where that too finds nothing that follows them, the stabilising
-   PID of the setpoint search (which has followed them) is kept (tuning.fixed_pid).
+5. deploy.max_overshoot is a limit of the deployed controller, baseline.load_tolerance a preference: where step 4
+   finds nothing within every limit, the same search without the load limit, its population spread over the whole
+   box (`SetpointDesign.search` with start None), is kept where it meets every limit. A fixed PID must above all
+   follow the setpoint steps it is chosen on: where the gains of steps 2-4 diverge on every one of those episodes
+   whatever b (the exothermic reactor: the load optimum, Ti 5 s with a 72 s measurement filter, runs away on the
+   setpoint steps across its unstable branch, while its small-signal Ms is 2 at worst), that search's best is kept
+   wherever it follows them, and where it does not either, the stabilising PID of the setpoint search with its best
+   b (tuning.fixed_pid.follow_setpoints).
 """
 from __future__ import annotations
 
