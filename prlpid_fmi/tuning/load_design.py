@@ -613,7 +613,7 @@ class SetpointDesign(OutcomeCache):
                  seeds: list[int]):
         self.design = design
         self.best_load, self.load_tolerance, self.max_overshoot_fraction = best_load, load_tolerance, max_overshoot
-        self.load_limit = load_tolerance * best_load
+        self.load_limit = load_tolerance * best_load if math.isfinite(load_tolerance) else math.inf  # inf: no limit
         self.max_overshoot = 100.0 * max_overshoot
         self.seeds = seeds
         quiet = dataclasses.replace(design.config, measurement_noise_std=0.0, actuator_noise_std=0.0,
