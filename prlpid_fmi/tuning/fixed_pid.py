@@ -395,7 +395,7 @@ def follow_setpoints(config: TuningConfig, design: LoadDesign, first: FixedPid, 
     follow = SetpointDesign(design, best_load, math.inf, deploy.max_overshoot, seeds)
     progress.step("setpoint ISE within the overshoot limit without the load tolerance"
                   + (" (the load-optimal gains diverge on the setpoint episodes)" if diverged else ""),
-                  follow.budget(maxiter, popsize))
+                  follow.budget(maxiter, popsize, whole_box=True))
     try:
         result = follow.search(None, seed, maxiter, popsize, progress=progress)
         load, ise, overshoot = follow.evaluate(result.x)
