@@ -165,22 +165,25 @@ def test_rows_blended_towards_the_fixed_pid_by_hand():
     assert reverse.Kp.ravel().tolist() == pytest.approx([-4.0], rel=1e-14)  # a reverse-acting loop keeps its sign
 
 
-def test_the_first_blend_that_follows_the_setpoint_steps_is_taken(monkeypatch):
-    """following_blend: the table as designed where it follows (or where the fixed PID does not: nothing to move
-    towards), else the first of FOLLOW_BLENDS that does, else None. Here "follows" means Kp <= a bound at every row,
-    a stand-in for the replays (tuning.schedule.replay) that lets the choice be checked by hand."""
+def test_the_blend_with_the_least_training_ise_is_taken(monkeypatch):
+    """best_blend: of the tables between the local designs (1) and the fixed PID (0), the one with the least ISE on
+    the training distribution (`training_setpoint_ise`; inf: it diverged), the first of equals; 0 says the fixed PID
+    beats them all; where every one diverges, the table as designed. Here the ISE is a function of the largest Kp
+    (a stand-in for the replays of tuning.schedule.replay) so that the choice can be checked by hand."""
     from prlpid_fmi.tuning.schedule import classical
 
     table, fixed = _table([16.0, 1.0], [1.0, 1.0], [0.0, 0.0]), ([1.0], [1.0], [0.0], None)
-    bound = {"Kp": 5.0}
-    monkeypatch.setattr(classical, "follows_setpoints", lambda t, config, seed: float(np.max(t.Kp)) <= bound["Kp"])
-    assert classical.FOLLOW_BLENDS == (1.0, 0.5, 0.25, 0.125)
-    assert classical.following_blend(table, fixed, None, 0) == 0.5  # 16^0.5 = 4 <= 5
-    bound["Kp"] = 2.5
-    assert classical.following_blend(table, fixed, None, 0) == 0.25  # 16^0.25 = 2
-    bound["Kp"] = 1.2
-    assert classical.following_blend(table, fixed, None, 0) is None  # 16^0.125 = 1.41
-    bound["Kp"] = 0.5  # not even the fixed PID follows
-    assert classical.following_blend(table, fixed, None, 0) == 1.0
-    bound["Kp"] = 16.0
-    assert classical.following_blend(table, fixed, None, 0) == 1.0
+    assert classical.FOLLOW_BLENDS == (1.0, 0.5, 0.25, 0.125, 0.0)
+    cost = {}
+    monkeypatch.setattr(classical, "training_setpoint_ise", lambda t, config, seed: cost["f"](float(np.max(t.Kp))))
+    cost["f"] = lambda kp: abs(kp - 4.0)  # max Kp 16, 4, 2, 1.41, 1 -> 0.5 is exact
+    weight, ise = classical.best_blend(table, fixed, None, 0)
+    assert weight == 0.5 and ise == pytest.approx([12.0, 0.0, 2.0, 4.0 - 16.0 ** 0.125, 3.0], rel=1e-12)
+    cost["f"] = lambda kp: math.inf if kp > 3.0 else 10.0 - kp  # the aggressive tables diverge; 2 beats 1.41 and 1
+    assert classical.best_blend(table, fixed, None, 0)[0] == 0.25
+    cost["f"] = lambda kp: kp  # the fixed PID's Kp 1 is best: no schedule
+    assert classical.best_blend(table, fixed, None, 0)[0] == 0.0
+    cost["f"] = lambda kp: 1.0  # all equal: the first, the table as designed
+    assert classical.best_blend(table, fixed, None, 0)[0] == 1.0
+    cost["f"] = lambda kp: math.inf  # nothing follows the episodes, not even the fixed PID
+    assert classical.best_blend(table, fixed, None, 0)[0] == 1.0
