@@ -200,25 +200,35 @@ class ClosedLoopRig:
         """From t = 0, ramp the setpoint to the operating point over SETPOINT_RAMP_STEPS samples and run
         the closed loop until it is still (or MAX_SETTLE_STEPS); remember that state."""
         y0, u = self._start()
-        y = y0
-        u_scale = np.where(np.isfinite(self.u_max - self.u_min), self.u_max - self.u_min, 1.0)
+        n = self.n_loops
+        # the arithmetic of _ramp, _control, FmuPlant.step and _outside on plain floats, element by element (this loop
+        # runs up to MAX_SETTLE_STEPS times per experiment; numpy per sample was most of a slow plant's experiments)
+        start, target = y0.tolist(), self.setpoint.tolist()
+        gains = (self.Kp, self.Ti, self.Td) if self.coupling is None else (self.Kp, self.Ti, self.Td, self.coupling)
+        pid_step, plant_step = self.pid.step_values, self.plant.step_values
+        scale, bound = self.scale.tolist(), self.bound.tolist()
+        y_tolerance = [SETTLE_TOLERANCE * s for s in scale]
+        u_scale = np.where(np.isfinite(self.u_max - self.u_min), self.u_max - self.u_min, 1.0).tolist()
+        y = start
         still, u_prev, y_prev = 0, None, y
         diverged = settled = False
         k = 0
         while k < MAX_SETTLE_STEPS:
-            r = self._ramp(y0, k)
-            u = self._control(y, r)
+            f = min(1.0, (k + 1) / SETPOINT_RAMP_STEPS)
+            r = [start[i] + (target[i] - start[i]) * f for i in range(n)]
+            u = pid_step(r, y, *gains)
             try:
-                y = self.plant.step(u)
+                y = plant_step(u)
             except StepRejected:
                 diverged = True
                 break
             k += 1
-            if self._outside(y, r):
+            if not all(math.isfinite(y[i]) and abs(y[i] - r[i]) / scale[i] <= bound[i] for i in range(n)):
                 diverged = True
                 break
-            if k > SETPOINT_RAMP_STEPS and np.all(np.abs(y - y_prev) <= SETTLE_TOLERANCE * self.scale) and \
-                    np.all(np.abs(u - u_prev) <= SETTLE_TOLERANCE * np.maximum(u_scale, np.abs(u))):
+            # max(a, |u|) is a where |u| is NaN (np.maximum: NaN), but then |u - u_prev| is NaN and the test fails alike
+            if k > SETPOINT_RAMP_STEPS and all(abs(y[i] - y_prev[i]) <= y_tolerance[i] for i in range(n)) and \
+                    all(abs(u[i] - u_prev[i]) <= SETTLE_TOLERANCE * max(u_scale[i], abs(u[i])) for i in range(n)):
                 still += 1
                 if still >= SETTLE_WINDOW:
                     settled = True
@@ -226,12 +236,13 @@ class ClosedLoopRig:
             else:
                 still = 0
             u_prev, y_prev = u, y
+        y, u = np.array(y, float), np.array(u, float)
         self._settle_steps = k
         self.y = y
         saturated = bool(np.any((u <= self.u_min) | (u >= self.u_max)))
         if not diverged and self._snapshots and self.plant.description.can_serialize_state:
             self._snapshot = (self.plant.get_state(), self.pid.get_state(), y.copy())
-        return Settling(k, settled, diverged, saturated, y.copy(), np.array(u, float))
+        return Settling(k, settled, diverged, saturated, y.copy(), u)
 
     def restore(self) -> None:
         """Back to the settled state (state snapshot, or a deterministic replay from t = 0)."""
