@@ -35,6 +35,7 @@ timesteps: 256
 set:
   baseline: {{episodes: 1, maxiter: 1, popsize: 2}}
   agent: {{n_envs: 2, n_steps: 64, batch_size: 64, n_epochs: 2, checkpoint_every: 100000}}
+  deploy: {{schedule_points: 3}}
 vary:
   strategies.forecast_horizon: [0, 3]
 """
