@@ -272,3 +272,14 @@ def test_the_design_section_says_when_the_gains_were_replaced_to_follow_the_setp
                                                       "feasible": False, "Overshoot": 9.0}), ["T"])
     assert "the load-optimal gains are kept, with the setpoint weight of least overshoot (b = 0)." in text
     assert "Without the load tolerance no gains met the overshoot limit either (its best: load IAE" in text
+
+
+def test_the_report_says_why_a_classical_schedule_was_not_built_or_was_blended():
+    from prlpid_fmi.report.verdict import classical_note
+
+    assert classical_note(None) == "" and classical_note({"built": False, "gain_variation": 1.0}) == ""
+    assert classical_note({"built": True, "follow_blend": 1.0}) == ""
+    assert classical_note({"built": False, "why": "the fixed PID does better: not built"}) == (
+        "A classical gain schedule was considered and not built: the fixed PID does better: not built.")
+    assert classical_note({"built": True, "follow_blend": 0.25}).startswith(
+        "The classical gain schedule's rows are 0.25 of the way from the fixed PID to the local load designs")

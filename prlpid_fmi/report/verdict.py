@@ -70,3 +70,19 @@ def verdict(decision: Decision, schedule: Candidate | None, fixed: Candidate, ma
                      "the choice rests on the evaluation alone.")
     lines += [""] + [f"- {r}" for r in decision.reasons]
     return "\n".join(lines) + "\n"
+
+
+def classical_note(record: dict | None) -> str:
+    """One sentence on how run.json's "classical_schedule" record shaped the classical gain schedule ("" when there is
+    nothing to say): not built and why, or its rows kept only part of the way from the fixed PID to the local designs
+    (tuning.schedule.classical.best_blend)."""
+    if not record:
+        return ""
+    if not record.get("built") and record.get("why"):
+        return f"A classical gain schedule was considered and not built: {record['why']}."
+    blend = record.get("follow_blend")
+    if record.get("built") and blend is not None and blend < 1.0:
+        return (f"The classical gain schedule's rows are {blend:g} of the way from the fixed PID to the local load "
+                "designs (gains interpolated geometrically): on the training distribution's setpoint steps that table "
+                "had the least ISE of those tried (run.json classical_schedule.training_ise_per_blend).")
+    return ""

@@ -298,7 +298,7 @@ def files_stage(run_dir: Path, started: Started, ev: Evaluation, fixed: dict | N
     the learning curve, and run.json marked finished."""
     from prlpid_fmi.deliver.evidence import candidate_summary, max_sensitivity
     from prlpid_fmi.report import plots
-    from prlpid_fmi.report.verdict import verdict
+    from prlpid_fmi.report.verdict import classical_note, verdict
     from prlpid_fmi.run.export import deployable_files
     from prlpid_fmi.tuning.schedule.csv_file import write_schedule_csv
     from prlpid_fmi.tuning.schedule.table import fixed_schedule
@@ -319,6 +319,7 @@ def files_stage(run_dir: Path, started: Started, ev: Evaluation, fixed: dict | N
         units = loop_units(scenario.tuning)
         opening = (verdict(choice.decision, choice.schedule, choice.fixed, max_sensitivity(scenario),
                            scenario.tuning.gain_mapping, choice.classical).rstrip(), "",
+                   *((note, "") if (note := classical_note(info.get("classical_schedule"))) else ()),
                    candidates_table(choice.schedule, choice.fixed, units, classical=choice.classical),
                    "### Robustness at each operating point", "",
                    margins_table((choice.fixed, choice.classical, choice.schedule), max_sensitivity(scenario),
