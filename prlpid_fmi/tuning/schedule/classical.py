@@ -219,8 +219,8 @@ def classical_schedule(scenario, fixed: dict, progress: Steps = QUIET,
         raise PrlPidError("on the training distribution's setpoint steps (ISE over "
                           f"{FOLLOW_EPISODES} episodes) the fixed PID does better than its local designs and every "
                           "table between them and it: "
-                          + "; ".join(f"rows {w:g} of the way to the local designs: {v:.4g}"
-                                      for w, v in zip(FOLLOW_BLENDS, ise)))
+                          + "; ".join((f"rows {w:g} of the way to the local designs" if w else "the fixed PID")
+                                      + f": {v:.4g}" for w, v in zip(FOLLOW_BLENDS, ise)))
     if blend < 1.0:
         schedule = blended(schedule, start, blend)
         schedule, more = robust_between(schedule, config, limit, workers)
