@@ -377,8 +377,8 @@ def _load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, pops
 
 
 def follows_setpoints(choices: list[dict], traded: dict | None) -> bool:
-    """Whether the gains steps 2-4 of the load design keep follow the setpoint episodes they were chosen on: some b of
-    setpoint_weight's table (those gains) did not diverge, or the trade found gains within every limit."""
+    """Whether the gains kept by steps 2-4 of the load design follow the setpoint episodes they were chosen on: with
+    some b of setpoint_weight's table they did not diverge, or the trade found gains within every limit."""
     return any(math.isfinite(r["ISE"]) for r in choices) or bool(traded and traded["feasible"])
 
 

@@ -16,6 +16,10 @@ What a control engineer does by hand on a nonlinear plant, from the FMU alone (n
    the PID runs there). Where a halfway point fails, a local design is made there too and becomes a breakpoint
    (once per interval); where a halfway point still fails, both neighbours are detuned by the factor its gains need
    (`robust_between`).
+4. The table is judged against the fixed PID on the training distribution (`best_blend`): it and the tables between
+   it and the fixed PID (`blended`) are replayed on FOLLOW_EPISODES training episodes, the one with the least ISE is
+   kept (its halfway checks redone), and where the fixed PID itself has the least, no schedule is built (PrlPidError,
+   which run.json and the report give as the reason).
 
 Whether to build it (`deploy.classical_schedule`): "auto" builds it where the plant is nonlinear over the
 setpoint range: the magnitude of the plant's frequency response measured with the fixed PID at the low end and
