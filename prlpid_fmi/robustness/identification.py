@@ -150,6 +150,7 @@ class ClosedLoopRig:
         self.n_loops = n
         self.Kp, self.Ti, self.Td = [float(v) for v in Kp], [float(v) for v in Ti], [float(v) for v in Td]
         self.setpoint = np.array(setpoint, float)
+        self._target = self.setpoint.tolist()
         self.u_min = np.array([l.u_min for l in c.loops], float)
         self.u_max = np.array([l.u_max for l in c.loops], float)
         self.scale = np.array([l.measurement_scale for l in c.loops], float)
@@ -174,15 +175,6 @@ class ClosedLoopRig:
     def close(self) -> None:
         self.plant.close()
 
-    def _control(self, y: np.ndarray, setpoint: np.ndarray | None = None) -> np.ndarray:
-        r = self.setpoint if setpoint is None else setpoint
-        if self.coupling is not None:
-            return self.pid.step(r, y, self.Kp, self.Ti, self.Td, self.coupling)
-        return self.pid.step(r, y, self.Kp, self.Ti, self.Td)
-
-    def _outside(self, y: np.ndarray, setpoint: np.ndarray) -> bool:
-        return not (np.all(np.isfinite(y)) and np.all(np.abs(y - setpoint) / self.scale <= self.bound))
-
     def _start(self) -> tuple[np.ndarray, np.ndarray]:
         """Plant and PID at t = 0, started bumplessly (the integral term holds the plant's input start
         values, clipped to the limits, as the env does); returns (y0, u0)."""
@@ -192,19 +184,24 @@ class ClosedLoopRig:
         self.pid.preset_output(u0.tolist(), y0.tolist(), list(self.Kp), list(self.Ti))
         return y0, u0
 
-    def _ramp(self, y0: np.ndarray, k: int) -> np.ndarray:
-        """Setpoint while settling: a ramp from the initial measurement to the operating point."""
-        return y0 + (self.setpoint - y0) * min(1.0, (k + 1) / SETPOINT_RAMP_STEPS)
+    def _ramp(self, start: list, k: int) -> list:
+        """Setpoint while settling (plain floats): a ramp from the initial measurement to the operating point."""
+        f = min(1.0, (k + 1) / SETPOINT_RAMP_STEPS)
+        target = self._target
+        return [start[i] + (target[i] - start[i]) * f for i in range(self.n_loops)]
+
+    def _gains(self) -> tuple:
+        """The PID's gain arguments after (setpoint, measurement) for step_values (the coupling too where coupled)."""
+        return (self.Kp, self.Ti, self.Td) if self.coupling is None else (self.Kp, self.Ti, self.Td, self.coupling)
 
     def settle(self) -> Settling:
         """From t = 0, ramp the setpoint to the operating point over SETPOINT_RAMP_STEPS samples and run
         the closed loop until it is still (or MAX_SETTLE_STEPS); remember that state."""
         y0, u = self._start()
         n = self.n_loops
-        # the arithmetic of _ramp, _control, FmuPlant.step and _outside on plain floats, element by element (this loop
-        # runs up to MAX_SETTLE_STEPS times per experiment; numpy per sample was most of a slow plant's experiments)
-        start, target = y0.tolist(), self.setpoint.tolist()
-        gains = (self.Kp, self.Ti, self.Td) if self.coupling is None else (self.Kp, self.Ti, self.Td, self.coupling)
+        # PID.step, FmuPlant.step and the divergence bound on plain floats, element by element (this loop runs up to
+        # MAX_SETTLE_STEPS times per experiment; numpy per sample was most of a slow plant's experiments)
+        start, gains = y0.tolist(), self._gains()
         pid_step, plant_step = self.pid.step_values, self.plant.step_values
         scale, bound = self.scale.tolist(), self.bound.tolist()
         y_tolerance = [SETTLE_TOLERANCE * s for s in scale]
@@ -214,8 +211,7 @@ class ClosedLoopRig:
         diverged = settled = False
         k = 0
         while k < MAX_SETTLE_STEPS:
-            f = min(1.0, (k + 1) / SETPOINT_RAMP_STEPS)
-            r = [start[i] + (target[i] - start[i]) * f for i in range(n)]
+            r = self._ramp(start, k)
             u = pid_step(r, y, *gains)
             try:
                 y = plant_step(u)
@@ -253,10 +249,11 @@ class ClosedLoopRig:
             self.y = y.copy()
             return
         y0, _ = self._start()
-        y = y0
-        for k in range(self._settle_steps):
-            y = self.plant.step(self._control(y, self._ramp(y0, k)))
-        self.y = y
+        start, gains = y0.tolist(), self._gains()
+        y = start
+        for k in range(self._settle_steps):  # settle's arithmetic, on plain floats
+            y = self.plant.step_values(self.pid.step_values(self._ramp(start, k), y, *gains))
+        self.y = np.array(y, float)
 
     def simulate(self, loop: int, d: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool, bool]:
         """Continue the closed loop for len(d) samples with d added to loop `loop`'s control signal.
@@ -274,7 +271,7 @@ class ClosedLoopRig:
         pid, plant = self.pid, self.plant
         y = [float(x) for x in self.y]
         saturated = diverged = False
-        # the same arithmetic as _control / FmuPlant.step, on plain floats (this loop runs ~1e5 times)
+        # the same arithmetic as PID.step / FmuPlant.step, on plain floats (this loop runs ~1e5 times)
         for dk in (d.tolist() if hasattr(d, "tolist") else list(d)):
             if coupling is not None:
                 u = pid.step_values(r, y, Kp, Ti, Td, coupling)
