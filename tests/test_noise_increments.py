@@ -53,14 +53,14 @@ def test_noise_and_increment_noise_gains_equal_the_impulse_response_norms(Kp, Ti
 
 # -- the design drops the increment limit only where no Kp can meet it (tuning.load_design) ----------------------
 def _independent_feasibility(sigma: float, kps: np.ndarray, Ti: float, span: float, max_ms: float,
-                             max_noise: float, max_increment: float) -> tuple[bool, bool]:
+                             max_noise: float, max_increment: float, tfs=(0.0,)) -> tuple[bool, bool]:
     """(some Kp meets Ms, std(u) and std(du) limits, some Kp meets Ms and std(u)) for the PI (Kp, Ti) on the ZOH
     of 1 / (s + 1): Ms from python-control's frequency response on a dense unit-circle grid, the noise gains from
     its impulse response."""
     with_increment = without = False
     theta = np.linspace(1e-4, math.pi, 4000)
-    for Kp in kps:
-        P, C = _plant_and_pid(Kp, Ti, 0.0, 0.0)
+    for Kp, Tf in ((k, f) for f in tfs for k in kps):
+        P, C = _plant_and_pid(Kp, Ti, 0.0, Tf)
         L = C * P
         ms = float(np.max(np.abs(1.0 / (1.0 + np.asarray(L(np.exp(1j * theta))).ravel()))))
         CS = ct.minreal(C / (1 + C * P), verbose=False)
@@ -80,7 +80,7 @@ def test_the_increment_limit_is_dropped_exactly_where_no_kp_meets_it(sigma):
     from prlpid_fmi.scenario.presets import preset
     from prlpid_fmi.tuning.load_design import LoadDesign
 
-    config = dataclasses.replace(preset("first_order"), measurement_noise_std=sigma)
+    config = dataclasses.replace(preset("first_order"), measurement_noise_std=sigma, measurement_filter=0.0)
     design = LoadDesign(config, 0.1, 2.0, 0.02, 4.0, 0.005)
     w = np.geomspace(1e-3, math.pi / TS, 400)
     P, _ = _plant_and_pid(1.0, 1.0, 0.0, 0.0)
@@ -102,6 +102,35 @@ def test_the_increment_limit_is_dropped_exactly_where_no_kp_meets_it(sigma):
         P, C = _plant_and_pid(kp_high, 1.0, 0.0, 0.0)
         h = ct.impulse_response(ct.minreal(C / (1 + C * P), verbose=False), T=np.arange(3000) * TS).outputs.ravel() * TS
         assert sigma * math.sqrt(np.sum(np.diff(np.concatenate([[0.0], h])) ** 2)) / span <= 0.005 * 1.02
+
+
+def test_a_searched_measurement_filter_that_meets_the_increment_limit_keeps_it():
+    """With the filter searched (controller.measurement_filter "tuned"), the limit is dropped only where no Tf the
+    search may choose admits a Kp: with sigma = 1 no unfiltered PI on 1/(s + 1) meets it (the case above), but a
+    filtered one does, by python-control's responses of the PI with a first-order filter on P, so it stays."""
+    import dataclasses
+
+    from prlpid_fmi.scenario.presets import preset
+    from prlpid_fmi.tuning.load_design import FILTER_PROBES, TF_RANGE, LoadDesign
+
+    sigma, span = 1.0, 20.0
+    config = dataclasses.replace(preset("first_order"), measurement_noise_std=sigma, measurement_filter="tuned")
+    design = LoadDesign(config, 0.1, 2.0, 0.02, 4.0, 0.005)
+    assert design.tune_filter
+    w = np.geomspace(1e-3, math.pi / TS, 400)
+    P, _ = _plant_and_pid(1.0, 1.0, 0.0, 0.0)
+    plant = MeasuredPlant(w, np.asarray(P(np.exp(1j * w * TS))).ravel(), TS, (0.0,), (0.0,))
+    design.plants = [[plant]]
+    gains = ([0.5], [1.0], [0.0], None)
+    design.reference = [[plant.winding(design.controller(gains, [0.0], 0))]]
+    design.relax_increment_limit(gains)
+    r = design.search_config.loops[0].Kp
+    tfs = [0.0] + list(np.geomspace(TF_RANGE[0] * TS, TF_RANGE[1] * TS, FILTER_PROBES))
+    unfiltered, _ = _independent_feasibility(sigma, np.geomspace(r.low, r.high, 60), 1.0, span, 2.0, 0.02, 0.005)
+    filtered, _ = _independent_feasibility(sigma, np.geomspace(r.low, r.high, 60), 1.0, span, 2.0, 0.02, 0.005,
+                                           tfs=tfs)
+    assert not unfiltered and filtered  # the premise: only a filter meets it
+    assert not design.increment_relaxed and math.isfinite(design.max_increment)
 
 
 @pytest.mark.parametrize("held", ["max_sensitivity", "max_noise_gain"])

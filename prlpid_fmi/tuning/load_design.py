@@ -70,6 +70,7 @@ from prlpid_fmi.tuning.search_pool import SearchPool, search_fmus, search_worker
 DIVERGED_COST = 1e6
 B_GRID = tuple(i / 20 for i in range(21))  # setpoint weights tried
 TF_RANGE = (0.1, 100.0)  # measurement filter search range [sample times], log
+FILTER_PROBES = 13  # Tf values over TF_RANGE the noise-increment relaxation test tries (relax_increment_limit)
 INIT_SPREAD = 0.15  # std of SetpointDesign's initial population around its start [search coordinates]
 POLISH_EVALUATIONS = 60  # Nelder-Mead evaluations per searched parameter after differential evolution, at most ...
 POLISH_PER_GENERATION = 3  # ... and at most this many per parameter and DE generation (a token search, a token polish)
@@ -478,16 +479,26 @@ class LoadDesign(OutcomeCache):
         """Processes a search on this design may use (tuning.search_pool.search_workers of self.workers and its cores)."""
         return search_workers(self.workers, self.cores)
 
+    def filter_candidates(self, loop: int) -> list[float]:
+        """Tf [s] of loop `loop` the relaxation test tries: the fixed one, or (Tf searched) the untuned one and
+        FILTER_PROBES log-spaced values over TF_RANGE."""
+        if not self.tune_filter:
+            return [self.tf[loop]]
+        ts = self.config.sample_time_s
+        return [self.tf[loop]] + [float(x) for x in np.geomspace(TF_RANGE[0] * ts, TF_RANGE[1] * ts, FILTER_PROBES)]
+
     def relax_increment_limit(self, gains: tuple) -> None:
         """The noise-increment limit is a preference, Ms the requirement: where no Kp meets both for the stabilising
-        PID's Ti, Td, Tf on some loop but one meets Ms and std(u) alone (the exothermic reactor: stabilising it takes
-        Kp >= 3 K/K, whose 0.1 K noise moves the jacket by 0.85 % of its span per sample), the limit is dropped for
-        this design and `increment_relaxed` says so."""
+        PID's Ti, Td on some loop with any measurement filter the search may choose (`filter_candidates`), but one
+        meets Ms and std(u) alone, the limit is dropped for this design and `increment_relaxed` says so. (The
+        exothermic reactor: stabilising it takes Kp >= 3 K/K, whose unfiltered 0.1 K noise moves the jacket by
+        1.7 % of its span per sample; a filter of a few seconds brings that under the limit, so it stays.)"""
         self.increment_relaxed = False
         if not (self.config.measurement_noise_std > 0 and math.isfinite(self.max_increment)):
             return
         Kp, Ti, Td, _ = gains
-        blocked = [i for i in range(self.config.n_loops) if self.kp_interval(i, Ti[i], Td[i], self.tf[i]) is None]
+        blocked = [i for i in range(self.config.n_loops)
+                   if all(self.kp_interval(i, Ti[i], Td[i], tf) is None for tf in self.filter_candidates(i))]
         if not blocked:
             return
         limit, self.max_increment = self.max_increment, math.inf
