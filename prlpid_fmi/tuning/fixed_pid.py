@@ -370,8 +370,7 @@ def _load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, pops
                 "setpoint_weights": choices,
                 "stabilising_gains": first.gains.as_dict(), "feasible": bool(getattr(result, "constr_violation", 0) <= 0),
                 "fell_back_to_setpoint_search": fallback is not None,
-                "noise_increment_limit_relaxed": design.increment_relaxed,
-                "noise_increment_limit": design.max_increment if math.isfinite(design.max_increment) else None}
+                "noise_increment_limit_relaxed": design.increment_relaxed}
     finally:
         design.close()
     return FixedPid(vector, gains_from_values(*gains), cost, first.evaluations + int(result.nfev), structure, info)
