@@ -13,6 +13,7 @@ import zipfile
 from pathlib import Path
 
 import pytest
+import yaml
 
 import prlpid_fmi
 
@@ -104,16 +105,25 @@ def test_wheel_install_works_from_any_folder(wheel, tmp_path):
     assert built == [f"built {fmu_dir / f'{name}.fmu'}" for name in plants]
     assert (fmu_dir / ".build.lock").is_file()
 
+    # the bundled scenario by name resolves to the wheel's copy
+    wheel_scenario = site / "prlpid_fmi" / "scenarios" / "first_order.yaml"
+    validated = _run([cli, "validate", "first_order"], cwd=elsewhere, env=env).stdout
+    assert validated.startswith(f"{wheel_scenario}: ok")
+    # the main job from the wheel: that scenario with its bundled plant (by name, built from the wheel's sources), a
+    # token fixed-PID search (what this checks is the install; the search has tests of its own); written outside
+    # `elsewhere`, which must stay empty
+    doc = yaml.safe_load(wheel_scenario.read_text())
+    assert doc["plant"]["fmu"] == "FirstOrderUnstable"
+    doc["baseline"] = {**doc.get("baseline", {}), "episodes": 1, "maxiter": 1, "popsize": 2}
+    scenario = tmp_path / "scenario" / "first_order.yaml"
+    scenario.parent.mkdir()
+    scenario.write_text(yaml.safe_dump(doc, sort_keys=False))
     run = tmp_path / "run"
-    # --no-baseline: what this checks is the install (bundled scenario and plants from the wheel, nothing written into
-    # site-packages), not the fixed-PID search, which has tests of its own
-    proc = _run([cli, "tune", "first_order", "--timesteps", "2048", "--no-baseline", "--out", run], cwd=elsewhere,
-                env=env)
+    proc = _run([cli, "tune", scenario, "--timesteps", "2048", "--out", run], cwd=elsewhere, env=env)
     assert f"run directory: {run}" in proc.stdout
-    for name in ("model.zip", "metrics.json", "report.md", "gains.csv", "response.png"):
+    for name in ("model.zip", "metrics.json", "report.md", "gains.csv", "response.png", "fixed_pid.json"):
         assert (run / name).is_file(), name
-    # the scenario came from the wheel, not from a checkout
-    assert f"Scenario file: `{site / 'prlpid_fmi' / 'scenarios' / 'first_order.yaml'}`" in (run / "report.md").read_text()
+    assert f"Scenario file: `{scenario}`" in (run / "report.md").read_text()
 
     assert _files(site) == site_before, "the tool wrote into the venv's site-packages"
     assert _files(Path(sysconfig.get_paths()["purelib"])) == parent_before
