@@ -440,6 +440,8 @@ def main() -> None:
                         help=f"stage times of `tune` on {', '.join(SCENARIOS)} (STEPS training steps, default "
                              f"{FULL_RUN_STEPS})")
     parser.add_argument("--stages-only", action="store_true", help="only the --stages table")
+    parser.add_argument("--stages-scenarios", nargs="+", choices=SCENARIOS, default=list(SCENARIOS), metavar="NAME",
+                        help=f"the scenarios of --stages (default: {' '.join(SCENARIOS)})")
     parser.add_argument("--search", nargs="*", default=None, metavar="NAME",
                         help=f"only the fixed-PID search on one process and on all cores (default "
                              f"{' '.join(SEARCH_SCENARIOS)})")
@@ -461,7 +463,7 @@ def main() -> None:
         if args.stages < 1:
             parser.error("--stages must be >= 1")
         results, trivial = {}, {}
-        for name in SCENARIOS:
+        for name in args.stages_scenarios:
             print(f"  tune {name} ...", file=sys.stderr, flush=True)
             results[name] = tune_stages(name, args.stages)
             print(f"  SB3 on a trivial env like {name}'s ...", file=sys.stderr, flush=True)
