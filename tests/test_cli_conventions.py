@@ -391,11 +391,17 @@ def test_tune_progress_goes_to_stderr_and_never_passes_the_target(tmp_path, caps
 
 
 def test_quiet_tune_prints_only_the_run_directory(tmp_path, capsys):
+    """-q: the run directory on stdout, no progress on stderr. --no-baseline with the anchored gain map warns that the
+    fixed PID is searched anyway (the flag was silently ignored before; pytest records the warning instead of
+    printing it, the CLI prints it as one `prlpid-fmi: warning:` line)."""
     scenario = _small_copy(scenario_path("first_order"), tmp_path / "s.yaml")
-    assert main(["tune", str(scenario), "--timesteps", "64", "--out", str(tmp_path / "run"), "-q",
-                 "--no-baseline"]) == 0
+    with pytest.warns(UserWarning, match=r"^--no-baseline: the fixed PID is searched anyway, because the anchored gain "
+                                         r"map \(controller.gain_mapping: anchored, the default\)"):
+        assert main(["tune", str(scenario), "--timesteps", "64", "--out", str(tmp_path / "run"), "-q",
+                     "--no-baseline"]) == 0
     out, err = capsys.readouterr()
     assert out == f"run directory: {tmp_path / 'run'}\n" and err == ""
+    assert (tmp_path / "run" / "fixed_pid.json").is_file()
 
 
 # -- build-fmus ------------------------------------------------------------------------------------

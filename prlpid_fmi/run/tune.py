@@ -172,10 +172,15 @@ def start_stage(scenario: Scenario, source: Path, run_dir: Path, timesteps: int 
     return Started(scenario, source, info)
 
 
+NO_BASELINE_ANCHORED = ("--no-baseline: the fixed PID is searched anyway, because the anchored gain map "
+                        "(controller.gain_mapping: anchored, the default) trains around it; set controller.gain_mapping: "
+                        "absolute to skip the search")
+
+
 def fixed_pid_stage(scenario: Scenario, run_dir: Path, progress_bar: bool, baseline: bool) -> dict | None:
     """The fixed PID first: the baseline, and the anchor the agent's gains move around. fixed_pid.json's
     content ({"action", "gains", "cost", "evaluations"}); read back when the run has one (resume); None when
-    `baseline` is off and the gain map is absolute."""
+    `baseline` is off and the gain map is absolute (with the anchored map it is searched anyway, and a warning says so)."""
     from prlpid_fmi.deliver.evidence import max_sensitivity
     from prlpid_fmi.progress import Steps
     from prlpid_fmi.tuning import fixed_pid as search_module
@@ -184,8 +189,10 @@ def fixed_pid_stage(scenario: Scenario, run_dir: Path, progress_bar: bool, basel
 
     if (run_dir / rd.FIXED_PID).is_file():
         return json.loads((run_dir / rd.FIXED_PID).read_text())
-    if not baseline and scenario.tuning.gain_mapping != "anchored":
-        return None
+    if not baseline:
+        if scenario.tuning.gain_mapping != "anchored":
+            return None
+        warnings.warn(NO_BASELINE_ANCHORED, stacklevel=2)
     b = scenario.baseline
     search = Steps("fixed-PID search", enabled=progress_bar)
     result = search_module.tune_fixed_pid(scenario.tuning, seed=scenario.agent.seed, episodes=b.episodes,
