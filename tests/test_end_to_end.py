@@ -19,7 +19,7 @@ def test_every_paper_scenario_runs_end_to_end(name, tmp_path, capsys):
     # barely trained policy diverges, so each candidate table's rows are detuned through a scan of three-loop
     # experiments (3 min for both candidates on one seed): one candidate here, the setpoint table; the choice between
     # candidates is tested in test_transients. Its training episodes are halved (holds of 7.5 s): the fixed-PID search's
-    # load and setpoint experiments, most of this run, are as long as the holds (93 -> 78 s measured alone).
+    # load and setpoint experiments, most of this run, are as long as the holds (93 -> 72 s in the suite).
     extra = {"deploy": {"schedule_points": 3, "max_sensitivity": 1e3, "schedule_by": "setpoint"},
              "training": {"episode_steps": 150, "setpoint_hold_steps": 75}} if name == "quadrotor" else None
     if name == "time_varying":
