@@ -21,7 +21,7 @@ PROG = "prlpid-fmi"
 OPTIONS = {"timesteps": "--timesteps", "seed": "--seed", "points": "--points", "schedule_by": "--schedule-by",
            "scenario_path": "--scenario", "replay": "--replay", "name": "--name", "fmt": "--format",
            "fmi_version": "--fmi-version", "ray": "--ray", "workers": "--workers", "resume": "--resume", "out": "--out",
-           "force": "--force"}
+           "force": "--force", "not_deployable": "--force-not-deployable"}
 
 
 def _say(args: argparse.Namespace, text: str) -> None:
@@ -198,7 +198,8 @@ def _evaluate(args: argparse.Namespace) -> int:
 def csv_only_options(args) -> list[str]:
     """The `export` options given that do not apply to args.format (CSV extraction vs code generation)."""
     if args.format == "csv":
-        given = (("--fixed", args.fixed), ("--name", args.name is not None))
+        given = (("--fixed", args.fixed), ("--name", args.name is not None),
+                 ("--force-not-deployable", args.force_not_deployable))
     else:
         given = (("--schedule-by", args.schedule_by is not None), ("--points", args.points is not None),
                  ("--replay", args.replay), ("--scenario", args.scenario is not None))
@@ -215,7 +216,7 @@ def _export(args: argparse.Namespace) -> int:
             f"--format {', '.join(list(CODE_FORMATS)[:-1])} or {list(CODE_FORMATS)[-1]})"))
     if args.format != "csv":
         for path in export_controller(args.run_dir, args.output, args.format, fixed=args.fixed, name=args.name,
-                                      force=args.force):
+                                      force=args.force, not_deployable=args.force_not_deployable):
             print(f"controller code written to {path}")
         return 0
     scenario = None if args.scenario is None else _scenario(args.scenario)
@@ -384,6 +385,8 @@ def make_parser() -> argparse.ArgumentParser:
     p.add_argument("--name", default=None,
                    help="st/plcopen/c: identifier in the code (default: from the output file name)")
     p.add_argument("--force", action="store_true", help="replace an existing output file (never a run's own file)")
+    p.add_argument("--force-not-deployable", action="store_true",
+                   help="st/plcopen/c: export a table marked NOT DEPLOYABLE (it failed the acceptance check) anyway")
     p.add_argument("--schedule-by", default=None,
                    help="csv: setpoint, measurement (settled holds), error (setpoint - measurement, binned from "
                         "training-distribution trajectories), or an FMU variable name (default: setpoint)")

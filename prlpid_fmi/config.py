@@ -225,6 +225,7 @@ class DeployConfig:
     max_overshoot: float = _d(_m.DeployModel, "max_overshoot")  # fraction of the setpoint step
     max_noise_gain: float = _d(_m.DeployModel, "max_noise_gain")  # std(u) from measurement noise / control span
     max_noise_increment: float = _d(_m.DeployModel, "max_noise_increment")  # std(u_k - u_k-1) from the noise / span
+    max_chatter: float = _d(_m.DeployModel, "max_chatter")  # acceptance check: Chatter metric limit, fraction
     allow_unverified: bool = _d(_m.DeployModel, "allow_unverified")  # a schedule with an impossible Ms estimate
     classical_schedule: object = _d(_m.DeployModel, "classical_schedule")  # "auto" | True | False
     schedule_points: int = _d(_m.DeployModel, "schedule_points")

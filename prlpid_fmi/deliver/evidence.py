@@ -19,6 +19,7 @@ import dataclasses
 import math
 import warnings
 
+from prlpid_fmi.deliver.acceptance import Episode, check
 from prlpid_fmi.deliver.rule import Candidate, Decision, Deployed, choose_among
 from prlpid_fmi.loop.evaluation import constant_gains, evaluate_gains, gains_rollout
 from prlpid_fmi.loop.gains import Gains
@@ -26,7 +27,8 @@ from prlpid_fmi.robustness.margins import margins_of, operating_point, setpoint_
 from prlpid_fmi.robustness.status import status
 from prlpid_fmi.tuning.load_design import load_experiment, parameter_samples
 from prlpid_fmi.tuning.margin_experiments import measure_ahead
-from prlpid_fmi.tuning.schedule.replay import replay_schedule, training_metrics
+from prlpid_fmi.metrics import overall_metric
+from prlpid_fmi.tuning.schedule.replay import replay_schedule
 from prlpid_fmi.tuning.schedule.table import LOOP_VARIABLE, GainSchedule, fixed_schedule
 
 HOLDOUT_EPISODES = 8  # further episodes the deliverable rule compares the schedule and the fixed PID on
@@ -75,7 +77,7 @@ def assess_fixed(scenario, gains: Gains) -> Candidate:
     intervals = list(scenario.evaluation.intervals) or None
     fn = constant_gains(gains.Kp, gains.Ti, gains.Td, gains.coupling)
     plain = dataclasses.replace(config, randomize={}) if config.randomize else config
-    metrics, _ = evaluate_gains(fn, plain, seed=scenario.evaluation.seed, intervals=intervals)
+    metrics, traj = evaluate_gains(fn, plain, seed=scenario.evaluation.seed, intervals=intervals)
     mc = [evaluate_gains(fn, c, seed=s)[0] for c, s in _monte_carlo(scenario)]
     points = setpoint_range_points(scenario.tuning)
     margins = _margins_at(scenario.tuning, lambda p: fn(None), points, scenario.baseline.workers)
@@ -83,7 +85,8 @@ def assess_fixed(scenario, gains: Gains) -> Candidate:
     load = load_experiment(scenario.tuning, scenario.baseline.load_step,
                            lambda cfg: gains_rollout(fn, cfg, seed=0))
     return Candidate(Deployed.FIXED_PID.value, metrics, mc, margins + drawn, [p[0] for p in points] + labels,
-                     load_iae=load, draws=len(parameter_samples(scenario.tuning)))
+                     load_iae=load, draws=len(parameter_samples(scenario.tuning)),
+                     evaluation=Episode("the evaluation", plain, scenario.evaluation.seed, metrics, traj))
 
 
 def assess_schedule(scenario, schedule: GainSchedule, name: str = Deployed.SCHEDULE.value) -> Candidate:
@@ -93,7 +96,8 @@ def assess_schedule(scenario, schedule: GainSchedule, name: str = Deployed.SCHED
     config = scenario.evaluation_config()
     intervals = list(scenario.evaluation.intervals) or None
     plain = dataclasses.replace(config, randomize={}) if config.randomize else config
-    metrics, _ = replay_schedule(schedule, plain, seed=scenario.evaluation.seed, intervals=intervals)
+    metrics, traj = replay_schedule(schedule, plain, seed=scenario.evaluation.seed, intervals=intervals)
+    evaluation = Episode("the evaluation", plain, scenario.evaluation.seed, metrics, traj)
     mc = [replay_schedule(schedule, c, seed=s)[0] for c, s in _monte_carlo(scenario)]
     load = load_experiment(scenario.tuning, scenario.baseline.load_step,
                            lambda cfg: replay_schedule(schedule, cfg, seed=0)[1])
@@ -118,7 +122,7 @@ def assess_schedule(scenario, schedule: GainSchedule, name: str = Deployed.SCHED
             drawn, names = _on_draws(scenario, lambda p, row=row: row, middle, lambda p, j=j: row_label(j, p))
             margins, labels = margins + drawn, labels + names
         return Candidate(name, metrics, mc, margins, labels, load_iae=load,
-                         draws=len(parameter_samples(scenario.tuning)))
+                         draws=len(parameter_samples(scenario.tuning)), evaluation=evaluation)
     setpoints = schedule.variable.startswith("setpoint")
     points = [operating_point(config, b) for b in schedule.breakpoints] if setpoints else [operating_point(config)]
     labels = [p[0] for p in points]
@@ -129,7 +133,7 @@ def assess_schedule(scenario, schedule: GainSchedule, name: str = Deployed.SCHED
     drawn, names = _on_draws(scenario, gains, points[:len(schedule.breakpoints) if setpoints else 1], lambda p: p[0])
     return Candidate(name, metrics, mc, _margins_at(scenario.tuning, gains, points, scenario.baseline.workers) + drawn,
                      labels + names,
-                     load_iae=load, draws=len(parameter_samples(scenario.tuning)))
+                     load_iae=load, draws=len(parameter_samples(scenario.tuning)), evaluation=evaluation)
 
 
 def error_loop(schedule: GainSchedule) -> int | None:
@@ -152,16 +156,33 @@ def range_points(config, loop: int) -> list[list[float]]:
     return points
 
 
-def holdout(scenario, schedule: GainSchedule, seed: int) -> dict:
-    """replay.training_metrics (ISE, TotalVariation, unsettled) over HOLDOUT_EPISODES seeded episodes of the training
-    distribution (scenario.tuning: its random setpoints, noise, disturbances, randomisation), replayed as a plain
-    PID. The seeds are disjoint from those the table was built and chosen on, and from the evaluation's."""
-    return training_metrics(schedule, scenario.tuning, seed, episodes=HOLDOUT_EPISODES, offset=HOLDOUT_SEED_OFFSET)
+def held_out(scenario, schedule: GainSchedule, seed: int) -> list[Episode]:
+    """HOLDOUT_EPISODES seeded episodes of the training distribution (scenario.tuning: its random setpoints, noise,
+    disturbances, randomisation) of the table replayed as a plain PID, up to the first that diverges. The seeds
+    (seed + HOLDOUT_SEED_OFFSET + i) are disjoint from those the table was built and chosen on, and from the
+    evaluation's."""
+    out = []
+    for i in range(HOLDOUT_EPISODES):
+        s = seed + HOLDOUT_SEED_OFFSET + i
+        metrics, traj = replay_schedule(schedule, scenario.tuning, seed=s)
+        out.append(Episode(f"held-out episode {i + 1}", scenario.tuning, s, metrics, traj))
+        if metrics.get("terminated"):
+            break
+    return out
 
 
-def holdout_ise(scenario, schedule: GainSchedule, seed: int) -> float:
-    """The held-out ISE (`holdout`); infinity when an episode diverges."""
-    return holdout(scenario, schedule, seed)["ISE"]
+def _held_out_totals(episodes: list[Episode]) -> tuple[float, float, int]:
+    """(ISE, total variation of u, episodes with an unsettled setpoint step) summed over the held-out episodes;
+    ISE and total variation infinity when one diverged."""
+    if any(e.metrics.get("terminated") for e in episodes):
+        return math.inf, math.inf, sum(_unsettled(e) for e in episodes if not e.metrics.get("terminated"))
+    return (sum(overall_metric(e.metrics["overall"], "ISE") for e in episodes),
+            sum(overall_metric(e.metrics["overall"], "TotalVariation") for e in episodes),
+            sum(_unsettled(e) for e in episodes))
+
+
+def _unsettled(e: Episode) -> int:
+    return int(overall_metric(e.metrics["overall"], "SettlingTime") == math.inf)
 
 
 def assess(scenario, schedule: GainSchedule | None, fixed_gains: Gains, seed: int | None = None,
@@ -175,11 +196,12 @@ def assess(scenario, schedule: GainSchedule | None, fixed_gains: Gains, seed: in
     fixed = assess_fixed(scenario, fixed_gains)
     sched = assess_schedule(scenario, schedule) if schedule is not None else None
     table = assess_schedule(scenario, classical, Deployed.CLASSICAL.value) if classical is not None else None
-    for c, s in ((fixed, fixed_schedule(fixed_gains, scenario.tuning) if sched or table else None),
-                 (sched, schedule), (table, classical)):
+    for c, s in ((fixed, fixed_schedule(fixed_gains, scenario.tuning)), (sched, schedule), (table, classical)):
         if c is not None and s is not None:
-            held = holdout(scenario, s, seed)
-            c.holdout_ise, c.holdout_tv, c.holdout_unsettled = held["ISE"], held["TotalVariation"], held["unsettled"]
+            held = held_out(scenario, s, seed)
+            c.holdout_ise, c.holdout_tv, c.holdout_unsettled = _held_out_totals(held)
+            c.acceptance = check([c.evaluation, *held], lambda cfg, sd, s=s: replay_schedule(s, cfg, seed=sd),
+                                 scenario.deploy.max_overshoot, scenario.deploy.max_chatter)
     decision = choose_among(sched, table, fixed, limit, scenario.deploy.allow_unverified)
     return decision, sched, fixed, table
 
@@ -201,4 +223,4 @@ def candidate_summary(c: Candidate) -> dict:
             "holdout_total_variation": None if math.isnan(c.holdout_tv) else c.holdout_tv
             if math.isfinite(c.holdout_tv) else "inf", "holdout_unsettled_episodes": c.holdout_unsettled,
             "holdout_ise": None if math.isnan(c.holdout_ise) else c.holdout_ise if math.isfinite(c.holdout_ise)
-            else "inf"}
+            else "inf", "acceptance": c.acceptance.as_dict() if c.acceptance is not None else None}

@@ -28,6 +28,7 @@ import enum
 import math
 from dataclasses import dataclass, field
 
+from prlpid_fmi.deliver.acceptance import Acceptance, Episode
 from prlpid_fmi.metrics import overall_metric
 from prlpid_fmi.robustness.status import Robustness, meets_limit, status, why
 
@@ -79,6 +80,8 @@ class Candidate:
     holdout_unsettled: int | None = None  # how many of them leave a setpoint step unsettled (None: not measured)
     load_iae: float = math.nan  # load IAE per unit load of tuning.load_design's experiment (NaN: not measured)
     draws: int = 0  # Monte-Carlo parameter draws the margins were also measured on (labelled in words; deliver.evidence)
+    evaluation: Episode | None = None  # the evaluation replay (metrics and trajectory) the acceptance check reads
+    acceptance: Acceptance | None = None  # deliver.acceptance.check (None: not checked)
 
     @property
     def diverged(self) -> bool:
@@ -133,7 +136,15 @@ class Candidate:
                            f"points (at {_point(b)}, {why(m, max_sensitivity)})")
             elif not self.worst_Ms <= max_sensitivity:
                 out.append(f"its peak sensitivity Ms = {self.worst_Ms:.2f} exceeds the limit {max_sensitivity:g}")
-        return out
+        return out + self.check_failures()
+
+    def check_failures(self) -> list[str]:
+        """The acceptance check's failures (deliver.acceptance), one sentence each; a divergence of the evaluation
+        that `diverged` reports already is not repeated."""
+        if self.acceptance is None:
+            return []
+        return [f"it fails the acceptance check ({f.check}): it {f.text}" for f in self.acceptance.failures
+                if not (self.diverged and f.check == "follows" and f.episode == "the evaluation")]
 
 
 def _point(b) -> str:

@@ -60,15 +60,27 @@ def verdict(decision: Decision, schedule: Candidate | None, fixed: Candidate, ma
                          f"(--timesteps), {the_map}, or training.randomize over the parameters that vary in your "
                          "plant.")
     else:
-        lines.append(f"**Nothing here is safe to deploy**: no controller meets the robustness limit Ms <= "
-                     f"{max_sensitivity:g} without diverging. Narrow the gain ranges, lower the sample time, or "
-                     "check the plant's limits and operating range.")
+        lines.append("**Nothing here is safe to deploy.** No controller passes every check (it follows and settles "
+                     f"every setpoint step, overshoots at most the limit, does not chatter, Ms <= {max_sensitivity:g}). "
+                     "fixed_pid.csv and the candidates' tables are still written, marked NOT DEPLOYABLE in their "
+                     "header. What failed, and what would change it:")
+        lines.append("")
+        for c in (fixed, classical, schedule):
+            if c is not None:
+                lines += [f"- the {c.name}: {p}." for p in c.problems(max_sensitivity)]
+                lines += [f"  To change it: {r}." for r in _remedies(c)]
+        lines.append("")
+    deployed = {Deployed.FIXED_PID: fixed, Deployed.CLASSICAL: classical, Deployed.SCHEDULE: schedule
+                }.get(decision.deploy)
+    if deployed is not None and deployed.acceptance is not None:
+        lines += _acceptance_lines(deployed.acceptance)
     unverified = [c.name for c in (schedule, classical, fixed) if c is not None and c.unverified]
     if unverified:
         lines.append(f"Robustness could not be verified for: {', '.join(unverified)} (the frequency-response "
                      "estimate on the FMU was unreliable, e.g. a time-varying or strongly nonlinear plant); "
                      "the choice rests on the evaluation alone.")
-    lines += [""] + [f"- {r}" for r in decision.reasons]
+    if decision.deploy != Deployed.NONE:  # NONE: each candidate's failures are listed above
+        lines += [""] + [f"- {r}" for r in decision.reasons]
     return "\n".join(lines) + "\n"
 
 
@@ -86,3 +98,48 @@ def classical_note(record: dict | None) -> str:
                 "designs (gains interpolated geometrically): on the training distribution's setpoint steps that table "
                 "had the least ISE of those tried (run.json classical_schedule.training_ise_per_blend).")
     return ""
+
+
+def _remedies(c: Candidate) -> list[str]:
+    """What would change each failed acceptance check of a candidate, without repeats."""
+    if c.acceptance is None:
+        return []
+    return list(dict.fromkeys(f.remedy for f in c.acceptance.failures if f.remedy))
+
+
+def _acceptance_lines(a) -> list[str]:
+    """Sentences on a deployed controller's acceptance check (deliver.acceptance.Acceptance): overshoot above the
+    user's limit, slow steps, excused setpoints."""
+    out = []
+    if a.above_user_overshoot > 0:
+        out.append(f"Its overshoot is {a.overshoot_pct:.0f} %, {a.above_user_overshoot:.0f} percentage points above "
+                   f"deploy.max_overshoot ({a.user_overshoot_pct:g} %), within the acceptance limit "
+                   f"{a.overshoot_limit_pct:g} %.")
+    if a.steps:
+        where = ("on the evaluation" if a.episodes == 1 else
+                 f"on the evaluation and {a.episodes - 1} held-out episodes of the training distribution")
+        out.append(f"It settles {a.settled} of {a.steps} setpoint steps within their holds {where}"
+                   + (f"; {len(a.excused)} excused" if a.excused else "") + ".")
+    out += [f"Slow: {s}." for s in a.slow[:5]]
+    if len(a.slow) > 5:
+        out.append(f"({len(a.slow) - 5} more slow steps in metrics.json.)")
+    out += [f"Excused: {e}." for e in a.excused[:5]]
+    return out
+
+
+def acceptance_section(deployed: Deployed, a) -> str:
+    """An evaluation report's verdict on the deployed controller by the acceptance check (deliver.acceptance,
+    the rule `tune` deploys by): whether it still passes on this evaluation, and if not which check failed."""
+    lines = ["## Acceptance check on this evaluation", ""]
+    if a.passed:
+        lines.append(f"**The deployed {deployed} passes** the acceptance check on this evaluation: it follows, settles "
+                     f"every setpoint step, overshoots at most {a.overshoot_limit_pct:g} % and does not chatter.")
+    else:
+        lines.append(f"**The deployed {deployed} fails** the acceptance check on this evaluation; do not rely on it "
+                     "for these setpoints and disturbances:")
+        lines.append("")
+        lines += [f"- {f.check}: it {f.text}." + (f" To change it: {f.remedy}." if f.remedy else "")
+                  for f in a.failures]
+        lines.append("")
+    lines += _acceptance_lines(a)
+    return "\n".join(lines) + "\n"

@@ -2,6 +2,7 @@
 plots and the evaluation part of report.md; `evaluate RUN` writes them into a new evaluations/<n>/."""
 from __future__ import annotations
 
+import dataclasses
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -10,6 +11,7 @@ from prlpid_fmi import rundir as rd
 from prlpid_fmi.config import TuningConfig
 from prlpid_fmi.deliver.rule import Deployed
 from prlpid_fmi.report.markdown import deployed_section, loop_units, render_report
+from prlpid_fmi.report.verdict import acceptance_section
 from prlpid_fmi.run.gains_csv import trajectory_csv
 from prlpid_fmi.run.trained import deployed_controller, load_policy, load_trained, on_other_evaluation, run_anchor
 from prlpid_fmi.rundir import write_atomic, write_json
@@ -103,11 +105,33 @@ def evaluate_run(run_dir: str | Path, scenario_path: str | Path | None = None) -
         metrics["deployed"] = deployed
         metrics["deployed_schedule"] = ev.schedule if deployed in (Deployed.SCHEDULE, Deployed.CLASSICAL) else None
         opening = (deployed_section(deployed, ev.schedule, ev.fixed, loop_units(ev.config)),)
+        acceptance = deployed_acceptance(run_dir, scenario)
+        if acceptance is not None:
+            metrics["deployed_acceptance"] = acceptance.as_dict()
+            opening += (acceptance_section(deployed, acceptance),)
     metrics.update(other_tables(run_dir, ev.config, scenario, deployed))
     write_json(out_dir / rd.METRICS, metrics)
     write_atomic(out_dir / rd.REPORT, evaluation_report(scenario, ev, fixed, source, learning_curve=False,
                                                         opening=opening))
     return out_dir
+
+
+def deployed_acceptance(run_dir: Path, scenario: Scenario):
+    """The acceptance check (deliver.acceptance) of the run's deployed controller (schedule.csv, replayed as a
+    plain PID) on this scenario's evaluation; None when the run deployed nothing."""
+    from prlpid_fmi.deliver.acceptance import Episode, check
+    from prlpid_fmi.tuning.schedule.csv_file import read_schedule_csv
+    from prlpid_fmi.tuning.schedule.replay import replay_schedule
+
+    if not (run_dir / rd.SCHEDULE).is_file():
+        return None
+    table = read_schedule_csv(run_dir / rd.SCHEDULE)
+    config, seed = scenario.evaluation_config(), scenario.evaluation.seed
+    plain = dataclasses.replace(config, randomize={}) if config.randomize else config
+    metrics, traj = replay_schedule(table, plain, seed=seed)
+    return check([Episode("this evaluation", plain, seed, metrics, traj)],
+                 lambda cfg, sd: replay_schedule(table, cfg, seed=sd),
+                 scenario.deploy.max_overshoot, scenario.deploy.max_chatter)
 
 
 def other_tables(run_dir: Path, config: TuningConfig, scenario: Scenario, deployed) -> dict:

@@ -93,16 +93,17 @@ def export_schedule(run_dir: str | Path, output: str | Path, schedule_by: str = 
 
 
 def export_controller(run_dir: str | Path, output: str | Path, fmt: str, fixed: bool = False,
-                      name: str | None = None, force: bool = False) -> list[Path]:
+                      name: str | None = None, force: bool = False, not_deployable: bool = False) -> list[Path]:
     """Write the run's deployed controller (schedule.csv; fixed_pid.csv with `fixed`) as code; the paths written.
 
     output: the file to write (for C: <stem>.c, with <stem>.h beside it). name: the identifier in the
     code (default: made from the output file's stem). Files the run owns are never written; existing
-    files only with `force`.
+    files only with `force`. A table marked NOT DEPLOYABLE (the deliverable rule refused it) only with
+    `not_deployable`; otherwise ArgumentError.
     """
     from prlpid_fmi import rundir as rd
     from prlpid_fmi.run.export import check_output
-    from prlpid_fmi.tuning.schedule.csv_file import read_schedule_csv
+    from prlpid_fmi.tuning.schedule.csv_file import not_deployable as refused, read_schedule_csv
 
     run_dir, output = Path(run_dir), Path(output)
     table = run_dir / (rd.FIXED_PID_CSV if fixed else rd.SCHEDULE)
@@ -110,6 +111,10 @@ def export_controller(run_dir: str | Path, output: str | Path, fmt: str, fixed: 
         what = "the tuned fixed PID (written by `tune` when it searched one)" if fixed else \
             "the deployed controller (written by `tune` when a controller is deployable)"
         raise RunError(f"{table}: missing (expected {what})")
+    why = refused(table)
+    if why and not not_deployable:
+        raise ArgumentError(f"{table}: marked NOT DEPLOYABLE ({why}); expected a deployable table, or "
+                            "{not_deployable} to export it anyway")
     paths = output_paths(output, fmt)
     for path in paths:
         check_output(run_dir, path, force)
@@ -124,15 +129,24 @@ def deployable_files(run_dir: str | Path) -> str:
     """A report paragraph naming the run's deployable files and how to turn them into PLC or C code."""
     from prlpid_fmi import rundir as rd
 
+    from prlpid_fmi.tuning.schedule.csv_file import not_deployable
+
     run_dir = Path(run_dir)
     have = [(f, what) for f, what in ((rd.SCHEDULE, "the deployed controller: a plain (gain-scheduled) PID table"),
                                       (rd.FIXED_PID_CSV, "the tuned fixed PID as a one-row table"))
-            if (run_dir / f).is_file()]
+            if (run_dir / f).is_file() and not not_deployable(run_dir / f)]
+    refused = [f for f in (rd.FIXED_PID_CSV, rd.CLASSICAL_SCHEDULE, rd.ADAPTIVE_SCHEDULE)
+               if (run_dir / f).is_file() and not_deployable(run_dir / f)]
+    if refused:
+        said = (f"Marked NOT DEPLOYABLE in their header (they failed a check; `export --force-not-deployable` "
+                f"writes code from them anyway): {', '.join(f'`{f}`' for f in refused)}.\n")
+    else:
+        said = ""
     if not have:
-        return "Deployable files: none (no controller was deployable).\n"
+        return "Deployable files: none (no controller was deployable).\n" + said
     lines = ["Deployable files:", ""] + [f"- `{f}`: {what}" for f, what in have]
     formats = CODE_FORMATS.values()
     lines += ["", f"As code for a PLC or a microcontroller ({', '.join(f.description for f in formats)}; see "
                   f"docs/deploy.md): `prlpid-fmi export RUN --format {'|'.join(f.name for f in formats)} -o FILE`"
               + (" (`--fixed` for fixed_pid.csv)." if any(f == rd.FIXED_PID_CSV for f, _ in have) else ".")]
-    return "\n".join(lines) + "\n"
+    return "\n".join(lines) + "\n" + (("\n" + said) if said else "")

@@ -299,6 +299,16 @@ def choice_stage(scenario: Scenario, table, fixed: dict, progress_bar: bool, cla
     return Choice(decision, sched_c, fixed_c, classical_c)
 
 
+def refusals(choice: Choice, limit: float) -> dict:
+    """{Deployed member: why} for each candidate the deliverable rule refuses (deliver.rule.Candidate.problems: it
+    fails the acceptance check or the Ms limit, or diverged); a candidate that only lost on ISE is not refused."""
+    out = {}
+    for c in (choice.fixed, choice.classical, choice.schedule):
+        if c is not None and (problems := c.problems(limit)):
+            out[Deployed(c.name)] = "; ".join(problems)
+    return out
+
+
 def files_stage(run_dir: Path, started: Started, ev: Evaluation, fixed: dict | None, table: ScheduleResult,
                 choice: Choice | None, classical=None) -> None:
     """schedule.csv (the deployed controller), metrics.json and report.md built once from the stages' results,
@@ -318,6 +328,12 @@ def files_stage(run_dir: Path, started: Started, ev: Evaluation, fixed: dict | N
                     }.get(choice.decision.deploy)
         if deployed is not None:
             write_schedule_csv(deployed, run_dir / rd.SCHEDULE)
+        refused = refusals(choice, max_sensitivity(scenario))
+        if Deployed.FIXED_PID in refused:  # the tables of refused candidates say so in their header
+            write_schedule_csv(fixed_schedule(gains_from_dict(fixed["gains"]), scenario.tuning),
+                               run_dir / rd.FIXED_PID_CSV, not_deployable=refused[Deployed.FIXED_PID])
+        if Deployed.CLASSICAL in refused and classical is not None:
+            write_schedule_csv(classical, run_dir / rd.CLASSICAL_SCHEDULE, not_deployable=refused[Deployed.CLASSICAL])
         metrics.update(deployed=choice.decision.deploy, decision=list(choice.decision.reasons),
                        schedule_replay=candidate_summary(choice.schedule) if choice.schedule is not None else None,
                        fixed_pid_assessment=candidate_summary(choice.fixed),
@@ -335,7 +351,8 @@ def files_stage(run_dir: Path, started: Started, ev: Evaluation, fixed: dict | N
     elif table.table is not None:
         write_schedule_csv(table.table, run_dir / rd.SCHEDULE)
     if table.table is not None:  # deployed or not: `evaluate` replays it on held-out schedules
-        write_schedule_csv(table.table, run_dir / rd.ADAPTIVE_SCHEDULE)
+        write_schedule_csv(table.table, run_dir / rd.ADAPTIVE_SCHEDULE,
+                           not_deployable=refused.get(Deployed.SCHEDULE, "") if choice is not None else "")
     write_json(run_dir / rd.METRICS, metrics)
     report = evaluation_report(scenario, ev, fixed, started.source, learning_curve=True, opening=opening)
     if table.note:

@@ -779,6 +779,10 @@ class DeployModel(Section):
                            "scenario's measurement noise, a fraction of the loop's control span (from |C S| weighted "
                            "by |1 - exp(-j w Ts)| over the Nyquist band); 0.005: twice it is the chatter metric's "
                            "1 % threshold, so noise alone reverses u by more than that on a few % of samples at most")
+    max_chatter: Fraction = Field(
+        0.05, description="acceptance check: the largest fraction of samples at which a deployed controller's command "
+                          "may reverse direction by more than 1 % of the control span (the Chatter metric), on the "
+                          "evaluation and on held-out episodes; a controller above it is never deployed")
     allow_unverified: Flag = Field(False, description="deploy a gain schedule whose robustness could not be verified "
                                                       "(an Ms estimate impossible to make: the plant varies faster "
                                                       "than the margin experiment); default false: such a schedule "

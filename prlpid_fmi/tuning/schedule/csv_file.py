@@ -87,10 +87,16 @@ def _metadata(s: GainSchedule) -> list[tuple[str, str]]:
     return meta
 
 
-def write_schedule_csv(schedule: GainSchedule, path) -> Path:
-    """Write the schedule as CSV (metadata as "# key: value" lines, then header and rows), atomically."""
+NOT_DEPLOYABLE = "NOT DEPLOYABLE"  # the metadata key of a table the deliverable rule refused (its value: why)
+
+
+def write_schedule_csv(schedule: GainSchedule, path, not_deployable: str = "") -> Path:
+    """Write the schedule as CSV (metadata as "# key: value" lines, then header and rows), atomically.
+    not_deployable: why the deliverable rule refused this table; written first as "# NOT DEPLOYABLE: why"."""
     s = schedule
     buf = io.StringIO()
+    if not_deployable:
+        buf.write(f"# {NOT_DEPLOYABLE}: {' '.join(not_deployable.split())}\n")
     for key, value in _metadata(s):
         buf.write(f"# {key}: {value}\n".replace(": \n", ":\n"))
     w = csv.writer(buf, lineterminator="\n")
@@ -117,6 +123,11 @@ def read_schedule_metadata(path) -> dict[str, str]:
             key, _, value = line[1:].strip().partition(":")
             meta[key.strip()] = value.strip()
     return meta
+
+
+def not_deployable(path) -> str:
+    """Why the table at `path` was refused ("# NOT DEPLOYABLE: ..."), "" for a deployable one."""
+    return read_schedule_metadata(path).get(NOT_DEPLOYABLE, "")
 
 
 _STRUCTURE_DEFAULTS = {"b": 1.0, "c": 1.0, "Tf": 0.0}  # the law of a file without the structure columns (eq. 2)

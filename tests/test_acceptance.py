@@ -1,0 +1,155 @@
+"""The acceptance check (prlpid_fmi.deliver.acceptance) on the bundled first-order FMU as a stable lag.
+
+The plant dx/dt = a x + b u, y = x with a = -1, b = 1 is 1/(s + 1). A PI with Ti = 1 s cancels its pole, so the
+closed loop is exactly first order, y(t) = r (1 - exp(-Kp t)) after a setpoint step from rest: the 2 % settling
+time is ln(50) / Kp. With u limited to [-1, 1], no input holds |y| > 1 at steady state (y_ss = u). Those analytic
+facts are the truth the check is held to.
+"""
+import math
+
+import numpy as np
+import pytest
+
+from prlpid_fmi.deliver.acceptance import LONG_HOLD, Episode, check, stretched
+from prlpid_fmi.deliver.rule import Candidate, Deployed, choose
+from prlpid_fmi.loop.gains import Gains
+from prlpid_fmi.report.verdict import verdict
+from prlpid_fmi.scenario.load import load_scenario
+from prlpid_fmi.tuning.schedule.replay import replay_schedule
+from prlpid_fmi.tuning.schedule.table import fixed_schedule
+
+TS, HOLD = 0.1, 100  # s, samples: holds of 10 s
+
+
+def scenario(tmp_path, setpoints, u_limits=(-10, 10), noise=0.0):
+    text = f"""
+name: lag
+plant:
+  fmu: FirstOrderUnstable
+  sample_time: {TS}
+  parameters: {{a: -1.0, b: 1.0}}
+  loops:
+    - input: u
+      output: y
+      u_limits: [{u_limits[0]}, {u_limits[1]}]
+      setpoint_range: [-1, 2]
+      measurement_scale: 1.0
+      divergence_bound: 50.0
+      gains: {{Kp: [0.005, 30, log], Ti: [0.2, 20, log], Td: [0.0, 0.2, linear]}}
+controller: {{anti_windup: clamping}}
+training: {{episode_steps: {2 * HOLD}, setpoint_hold_steps: {HOLD}, measurement_noise_std: {noise}}}
+evaluation:
+  episode_steps: {len(setpoints) * HOLD}
+  setpoints: [{", ".join(f"{{at_step: {i * HOLD}, value: {v}}}" for i, v in enumerate(setpoints))}]
+"""
+    path = tmp_path / "lag.yaml"
+    path.write_text(text)
+    return load_scenario(path)
+
+
+def pi(Kp: float, Ti: float = 1.0) -> Gains:
+    return Gains(Kp=[Kp], Ti=[Ti], Td=[0.0])
+
+
+def run_check(sc, gains: Gains):
+    table = fixed_schedule(gains, sc.tuning)
+    config = sc.evaluation_config()
+
+    def replay(cfg, seed):
+        return replay_schedule(table, cfg, seed=seed)
+    metrics, traj = replay(config, 0)
+    return check([Episode("the evaluation", config, 0, metrics, traj)], replay, sc.deploy.max_overshoot,
+                 sc.deploy.max_chatter)
+
+
+def settling_time(Kp: float) -> float:
+    """2 % settling time [s] of y = 1 - exp(-Kp t)."""
+    return math.log(50.0) / Kp
+
+
+def test_a_step_that_settles_only_on_the_longer_hold_is_slow_not_failed(tmp_path):
+    Kp = 0.15  # settles in ln(50)/0.15 = 26 s: not within a 10 s hold, within a 40 s one
+    assert HOLD * TS < settling_time(Kp) < LONG_HOLD * HOLD * TS
+    a = run_check(scenario(tmp_path, [0.0, 1.0]), pi(Kp))
+    assert a.passed, a.failures
+    assert len(a.slow) == 1 and "the step to 1 at t = 10 s" in a.slow[0]
+    settles = float(a.slow[0].split("settles ")[1].split(" s")[0])
+    assert settles == pytest.approx(settling_time(Kp), abs=2 * TS)
+
+
+def test_a_loop_too_sluggish_to_settle_in_four_holds_fails_with_an_offset(tmp_path):
+    Kp = 0.02  # ln(50)/0.02 = 196 s, far beyond 40 s
+    assert settling_time(Kp) > LONG_HOLD * HOLD * TS
+    a = run_check(scenario(tmp_path, [0.0, 1.0]), pi(Kp))
+    assert not a.passed
+    (f,) = [f for f in a.failures if f.check == "settles"]
+    assert "the step to 1 at t = 10 s" in f.text and "sustained offset" in f.text
+    # the mean of exp(-Kp t) over the last quarter of the long hold, t in [30, 40] s
+    t0, t1 = 0.75 * LONG_HOLD * HOLD * TS, LONG_HOLD * HOLD * TS
+    mean = (math.exp(-Kp * t0) - math.exp(-Kp * t1)) / (Kp * (t1 - t0))
+    offset = float(f.text.split("sustained offset of ")[1].split(" ")[0])
+    assert offset == pytest.approx(mean, rel=0.02)
+
+
+def test_a_setpoint_no_input_within_the_limits_can_hold_is_excused_and_named(tmp_path):
+    sc = scenario(tmp_path, [0.0, 1.5, 0.5], u_limits=(-1, 1))  # y_ss = u <= 1 < 1.5
+    a = run_check(sc, pi(2.0))
+    assert a.passed, a.failures
+    assert len(a.excused) == 1 and a.excused[0].startswith("setpoint 1.5 ")
+    assert "upper limit u_max = 1" in a.excused[0]
+    assert a.steps == 2 and a.settled == 1  # the start at 0 is regulation, not a step; 1.5 excused; 0.5 settled
+
+
+def test_overshoot_above_the_floor_fails_and_within_it_is_reported(tmp_path):
+    """A PI with Ti shorter than the plant's lag overshoots; the check's overshoot is the simulated peak."""
+    sc = scenario(tmp_path, [0.0, 1.0])
+    config = sc.evaluation_config()
+    for Kp, Ti in ((1.0, 0.3), (4.0, 0.1)):
+        a = run_check(sc, pi(Kp, Ti))
+        metrics, traj = replay_schedule(fixed_schedule(pi(Kp, Ti), sc.tuning), config, seed=0)
+        peak = 100 * (traj.measurement[HOLD:, 0].max() - 1.0)
+        assert a.overshoot_pct == pytest.approx(peak, rel=1e-9)
+        assert (a.overshoot_pct > 25) == any(f.check == "overshoot" for f in a.failures)
+        assert a.above_user_overshoot == pytest.approx(max(0.0, peak - 5.0))
+    assert run_check(sc, pi(4.0, 0.1)).overshoot_pct > 25 > run_check(sc, pi(1.0, 0.3)).overshoot_pct > 5
+
+
+def test_the_long_hold_keeps_the_setpoints_in_order_and_scales_the_episode(tmp_path):
+    sc = scenario(tmp_path, [0.0, 1.0, -0.5])
+    config = sc.evaluation_config()
+    _, traj = replay_schedule(fixed_schedule(pi(1.0), sc.tuning), config, seed=0)
+    long = stretched(config, traj)
+    assert long.episode_steps == LONG_HOLD * config.episode_steps
+    assert [k for k, _ in long.setpoint_schedule] == [0, LONG_HOLD * HOLD, 2 * LONG_HOLD * HOLD]
+    assert [v for _, (v,) in long.setpoint_schedule] == [0.0, 1.0, -0.5]
+
+
+def test_a_loop_that_does_not_settle_is_never_deployed_whatever_its_ms(tmp_path):
+    """The rule with the check: a fixed PID at the floor of its gain range (what a strict noise limit chose) meets
+    Ms easily but never settles: nothing is deployed, and the verdict says which check failed."""
+    sc = scenario(tmp_path, [0.0, 1.0])
+    a = run_check(sc, pi(0.01))
+    fixed = Candidate(Deployed.FIXED_PID.value, {"overall": {"ISE": 1.0, "TotalVariation": 1.0}, "terminated": False},
+                      margins=[_margins(1.01)], breakpoints=[0.5], acceptance=a)
+    d = choose(None, fixed, 2.0)
+    assert d.deploy == Deployed.NONE
+    text = verdict(d, None, fixed, 2.0)
+    assert text.splitlines()[2].startswith("**Nothing here is safe to deploy.**")
+    assert "(settles)" in text and "To change it:" in text
+    assert "Deploy the" not in text
+
+
+def _margins(ms):
+    from types import SimpleNamespace
+    return SimpleNamespace(Ms=ms, reliable=True, problems=(), note="")
+
+
+def test_a_diverging_replay_fails_follows(tmp_path):
+    """1/(s - 1) (a = +1) with a gain below the stabilising 1: the loop runs away."""
+    sc = scenario(tmp_path, [0.0, 1.0])
+    import dataclasses
+    unstable = dataclasses.replace(sc.tuning, plant_parameters={"a": 1.0, "b": 1.0})
+    sc = dataclasses.replace(sc, tuning=unstable)
+    a = run_check(sc, pi(0.5, 5.0))
+    assert [f.check for f in a.failures][:1] == ["follows"]
+    assert np.isfinite(a.overshoot_pct) or math.isnan(a.overshoot_pct)
