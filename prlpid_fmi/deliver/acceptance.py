@@ -13,8 +13,9 @@ held-out episodes of the training distribution (deliver.evidence). On every one 
    quarter of the long hold while the measurement stays short of the setpoint on the side it came from. Such a
    setpoint is *excused* and named;
 3. its overshoot beyond NOISE_BAND standard deviations of the measurement noise is at most
-   max(OVERSHOOT_FLOOR, deploy.max_overshoot) of the step (of MIN_STEP of the setpoint range for smaller steps;
-   with random load steps, over the half of the hold before the load); between deploy.max_overshoot and that it passes, and the
+   max(OVERSHOOT_FLOOR, deploy.max_overshoot) of the step (of MIN_STEP of the setpoint range for smaller steps),
+   measured on episodes without random load steps (`random_loads`: deliver.evidence adds load-free replays of
+   the held-out episodes where the training distribution has them); between deploy.max_overshoot and that it passes, and the
    verdict says by how much it is above the user's limit;
 4. its command does not chatter: the Chatter metric (metrics.chatter_fraction) at most deploy.max_chatter.
 
@@ -163,7 +164,7 @@ def _check_episode(ep: Episode, replay: Replay, t: _Tally) -> None:
         step = _is_step(seg)
         if step:
             t.steps += 1
-            os = _overshoot(traj, seg, i, config)
+            os = _overshoot(traj, seg, i, config) if not random_loads(config) else math.nan
             if not os <= t.overshoot:
                 t.overshoot, t.overshoot_where = os, f"{ep.label}, the step to {traj.setpoint[seg['start_step'], i]:.4g} " \
                                                       f"at t = {seg['start_time_s']:g} s"
@@ -180,16 +181,20 @@ def _is_step(seg: dict) -> bool:
     return not math.isnan(seg["SettlingTime"])
 
 
+def random_loads(config: TuningConfig) -> bool:
+    """Whether the config's episodes carry random load steps (training.load_disturbance with random setpoints:
+    loop.core puts one in the second half of every hold and removes it as the setpoint changes, so the response
+    to a setpoint step there is also a load response and its overshoot is not the loop's)."""
+    return config.load_disturbance > 0 and config.setpoint_schedule is None
+
+
 def _overshoot(traj, seg: dict, i: int, config: TuningConfig) -> float:
     """Overshoot [%] of a step segment: its peak beyond the new setpoint less NOISE_BAND noise standard deviations,
     over max(|step|, MIN_STEP of the loop's setpoint range) (a percentage of a step much smaller than the range
-    measures the noise and the load steps, not the loop). With random load steps (training.load_disturbance, in
-    the second half of each hold: loop.core) only the first half of the hold counts."""
+    measures the noise, not the loop)."""
     s, e, delta = seg["start_step"], seg["end_step"], seg["StepSize"]
     if not (math.isfinite(delta) and delta != 0):
         return math.nan
-    if config.load_disturbance > 0 and config.setpoint_schedule is None:
-        e = min(e, s + max(2, config.setpoint_hold_steps // 2))
     y = traj.measurement[s:e, i]
     r = traj.setpoint[s, i]
     peak = float(np.max(np.sign(delta) * (y - r)))

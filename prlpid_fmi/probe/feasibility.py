@@ -6,9 +6,10 @@ operating point (plant.parameters; every other input at its start value):
 
 - the loop's input is stepped (probe.step_test): an output that does not move, or returns to where it was
   (a zero-gain pulse: a velocity under a spring), is refused: no PID can hold it at a setpoint;
-- the input is held at u_limits[0] and u_limits[1] until the output settles (step_test.sweep_input): a
+- the input is held at REACH_LEVELS levels over u_limits until the output settles (step_test.sweep_input): a
   stable or static output's setpoint_range must lie inside what it reaches there (2 % of the reach as
-  tolerance); an integrating output must move one way at one limit and the other way at the other;
+  tolerance); an integrating output, held at u_limits[0] and u_limits[1], must move one way at one limit and the
+  other way at the other;
 - a sample time longer than the loop can tolerate (an eighth of an oscillation period, half a time
   constant, half of 1/λ for an unstable plant) is a warning, not an error: the user may know better.
 Unstable plants are not refused on reach: their open-loop trims say nothing of what a closed loop holds.
@@ -19,9 +20,12 @@ import math
 from pathlib import Path
 from typing import Optional
 
+import numpy as np
+
 from prlpid_fmi.errors import PlantError, ScenarioError
 
 REACH_TOLERANCE = 0.02           # setpoints may pass the measured reach by this part of it
+REACH_LEVELS = 5                 # input levels over u_limits a stable output's reach is measured at
 
 
 def loop_findings(tuning) -> tuple[list[str], list[str]]:
@@ -46,7 +50,10 @@ def loop_findings(tuning) -> tuple[list[str], list[str]]:
             continue
         lo_u, hi_u = loop.u_min, loop.u_max
         if r.kind in ("stable", "static", "integrating") and math.isfinite(lo_u) and math.isfinite(hi_u) and hi_u > lo_u:
-            sweep = sweep_input(result, r, [lo_u, hi_u])
+            # an integrating output's slopes at both limits; a stable one's reach over the range (its steady-state
+            # map need not be monotone: probe.steady_state)
+            levels = [lo_u, hi_u] if r.kind == "integrating" else list(np.linspace(lo_u, hi_u, REACH_LEVELS))
+            sweep = sweep_input(result, r, levels)
             sp_lo, sp_hi = loop.setpoint_range
             if r.kind == "integrating":
                 if sweep.slopes[0] * sweep.slopes[1] > 0:

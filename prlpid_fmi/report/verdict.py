@@ -23,9 +23,10 @@ def _ratio(a: float, b: float) -> str:
 
 
 def verdict(decision: Decision, schedule: Candidate | None, fixed: Candidate, max_sensitivity: float,
-            gain_mapping: str = "anchored", classical: Candidate | None = None) -> str:
+            gain_mapping: str = "anchored", classical: Candidate | None = None, findings: tuple[str, ...] = ()) -> str:
     """The report's opening paragraph, in words (markdown); gain_mapping: the run's controller.gain_mapping;
-    classical: the classical gain schedule's evidence when one was built."""
+    classical: the classical gain schedule's evidence when one was built; findings: what was found about the plant
+    that explains why nothing passes (probe.steady_state), one sentence each."""
     lines = ["## Verdict", ""]
     if decision.deploy == Deployed.CLASSICAL:
         c, f = classical, fixed
@@ -67,9 +68,11 @@ def verdict(decision: Decision, schedule: Candidate | None, fixed: Candidate, ma
         lines.append("")
         for c in (fixed, classical, schedule):
             if c is not None:
-                lines += [f"- the {c.name}: {p}." for p in c.problems(max_sensitivity)]
-                lines += [f"  To change it: {r}." for r in _remedies(c)]
+                lines += [f"- the {c.name}: {p}." for p in _failed(c, max_sensitivity)]
+        lines += [f"- the plant: {f}." for f in findings]
         lines.append("")
+    if decision.deploy != Deployed.NONE:
+        lines += [f"Note on the plant: {f}." for f in findings]
     deployed = {Deployed.FIXED_PID: fixed, Deployed.CLASSICAL: classical, Deployed.SCHEDULE: schedule
                 }.get(decision.deploy)
     if deployed is not None and deployed.acceptance is not None:
@@ -100,11 +103,14 @@ def classical_note(record: dict | None) -> str:
     return ""
 
 
-def _remedies(c: Candidate) -> list[str]:
-    """What would change each failed acceptance check of a candidate, without repeats."""
-    if c.acceptance is None:
-        return []
-    return list(dict.fromkeys(f.remedy for f in c.acceptance.failures if f.remedy))
+def _failed(c: Candidate, max_sensitivity: float) -> list[str]:
+    """Why a candidate is refused (deliver.rule.Candidate.problems), each failed acceptance check with what would
+    change it."""
+    checks = c.check_failures()
+    out = [p for p in c.problems(max_sensitivity) if p not in checks]
+    shown = [f for f in c.acceptance.failures if f"it {f.text}" in " ".join(checks)] if c.acceptance else []
+    return out + [f"it fails the acceptance check ({f.check}): it {f.text}" + (f". To change it: {f.remedy}"
+                                                                              if f.remedy else "") for f in shown]
 
 
 def _acceptance_lines(a) -> list[str]:

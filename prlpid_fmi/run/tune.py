@@ -339,9 +339,13 @@ def files_stage(run_dir: Path, started: Started, ev: Evaluation, fixed: dict | N
                        fixed_pid_assessment=candidate_summary(choice.fixed),
                        classical_schedule_replay=candidate_summary(choice.classical)
                        if choice.classical is not None else None)
+        from prlpid_fmi.probe.steady_state import extrema_in_worker
+
+        findings = tuple(extrema_in_worker(scenario.tuning))  # a sign change of a loop's gain past an extremum
+        metrics["steady_state_extrema"] = list(findings)
         units = loop_units(scenario.tuning)
         opening = (verdict(choice.decision, choice.schedule, choice.fixed, max_sensitivity(scenario),
-                           scenario.tuning.gain_mapping, choice.classical).rstrip(), "",
+                           scenario.tuning.gain_mapping, choice.classical, findings).rstrip(), "",
                    *((note, "") if (note := classical_note(info.get("classical_schedule"))) else ()),
                    candidates_table(choice.schedule, choice.fixed, units, classical=choice.classical),
                    "### Robustness at each operating point", "",
