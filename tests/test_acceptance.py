@@ -153,3 +153,15 @@ def test_a_diverging_replay_fails_follows(tmp_path):
     a = run_check(sc, pi(0.5, 5.0))
     assert [f.check for f in a.failures][:1] == ["follows"]
     assert np.isfinite(a.overshoot_pct) or math.isnan(a.overshoot_pct)
+
+
+def test_a_gain_at_an_end_of_its_search_range_is_named():
+    from prlpid_fmi.config import GainRange, LoopConfig
+    from prlpid_fmi.report.verdict import range_notes
+
+    loop = LoopConfig(input="u", output="y", Kp=GainRange(0.2, 30, "log"), Ti=GainRange(1, 100, "log"))
+    # widened by 3 on a log scale: the search covered Kp [0.2/3, 90], Ti [1/3, 300]
+    (note,) = range_notes(Gains(Kp=[0.2 / 3], Ti=[20.0], Td=[0.0]), [loop], 3.0)
+    assert note.startswith("the fixed PID's Kp 0.06667 sits at the floor") and "gains.Kp [0.2, 30]" in note
+    assert "ceiling" in range_notes(Gains(Kp=[1.0], Ti=[299.0], Td=[0.0]), [loop], 3.0)[0]
+    assert range_notes(Gains(Kp=[1.0], Ti=[20.0], Td=[0.0]), [loop], 3.0) == []

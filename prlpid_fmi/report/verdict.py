@@ -69,10 +69,10 @@ def verdict(decision: Decision, schedule: Candidate | None, fixed: Candidate, ma
         for c in (fixed, classical, schedule):
             if c is not None:
                 lines += [f"- the {c.name}: {p}." for p in _failed(c, max_sensitivity)]
-        lines += [f"- the plant: {f}." for f in findings]
+        lines += [f"- {f[0].upper()}{f[1:]}." for f in findings]
         lines.append("")
     if decision.deploy != Deployed.NONE:
-        lines += [f"Note on the plant: {f}." for f in findings]
+        lines += [f"Note: {f}." for f in findings]
     deployed = {Deployed.FIXED_PID: fixed, Deployed.CLASSICAL: classical, Deployed.SCHEDULE: schedule
                 }.get(decision.deploy)
     if deployed is not None and deployed.acceptance is not None:
@@ -149,3 +149,27 @@ def acceptance_section(deployed: Deployed, a) -> str:
         lines.append("")
     lines += _acceptance_lines(a)
     return "\n".join(lines) + "\n"
+
+
+AT_BOUND = 1.05  # a gain within this factor of its search range's end sits at it
+
+
+def range_notes(gains, loops, widen: float) -> list[str]:
+    """One sentence per gain of the fixed PID (loop.gains.Gains) that sits at an end of the range its search
+    covered (plant.loops[i].gains, log ranges widened by baseline.widen_ranges: tuning.load_design): a range that
+    may exclude the gains that work."""
+    out = []
+    for i, loop in enumerate(loops):
+        for name in ("Kp", "Ti"):
+            r, value = getattr(loop, name), getattr(gains, name)[i]
+            lo, hi = (r.low / widen, r.high * widen) if r.scale == "log" else (r.low, r.high)
+            if not (math.isfinite(value) and lo > 0):
+                continue
+            end = ("floor" if lo / AT_BOUND <= value <= lo * AT_BOUND else
+                   "ceiling" if hi / AT_BOUND <= value <= hi * AT_BOUND else "")
+            if end:
+                out.append(f"the fixed PID's {name} {value:.4g} sits at the {end} of the range its search covered "
+                           f"([{lo:.4g}, {hi:.4g}], from plant.loops[{i}].gains.{name} [{r.low:g}, {r.high:g}]): "
+                           f"widen plant.loops[{i}].gains.{name} (or baseline.widen_ranges) so that it contains the "
+                           "gains that work")
+    return out

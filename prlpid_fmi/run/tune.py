@@ -315,7 +315,7 @@ def files_stage(run_dir: Path, started: Started, ev: Evaluation, fixed: dict | N
     the learning curve, and run.json marked finished."""
     from prlpid_fmi.deliver.evidence import candidate_summary, max_sensitivity
     from prlpid_fmi.report import plots
-    from prlpid_fmi.report.verdict import classical_note, verdict
+    from prlpid_fmi.report.verdict import classical_note, range_notes, verdict
     from prlpid_fmi.run.export import deployable_files
     from prlpid_fmi.tuning.schedule.csv_file import write_schedule_csv
     from prlpid_fmi.tuning.schedule.table import fixed_schedule
@@ -341,8 +341,12 @@ def files_stage(run_dir: Path, started: Started, ev: Evaluation, fixed: dict | N
                        if choice.classical is not None else None)
         from prlpid_fmi.probe.steady_state import extrema_in_worker
 
-        findings = tuple(extrema_in_worker(scenario.tuning))  # a sign change of a loop's gain past an extremum
-        metrics["steady_state_extrema"] = list(findings)
+        extrema = extrema_in_worker(scenario.tuning)  # a sign change of a loop's gain past an extremum
+        metrics["steady_state_extrema"] = extrema
+        findings = tuple(extrema)
+        if choice.decision.deploy == Deployed.NONE:
+            findings += tuple(range_notes(gains_from_dict(fixed["gains"]), scenario.tuning.loops,
+                                          scenario.baseline.widen_ranges))
         units = loop_units(scenario.tuning)
         opening = (verdict(choice.decision, choice.schedule, choice.fixed, max_sensitivity(scenario),
                            scenario.tuning.gain_mapping, choice.classical, findings).rstrip(), "",
