@@ -123,7 +123,7 @@ def _acceptance_lines(a) -> list[str]:
                    f"{a.overshoot_limit_pct:g} %.")
     if a.steps:
         where = ("on the evaluation" if a.episodes == 1 else
-                 f"on the evaluation and {a.episodes - 1} held-out episodes of the training distribution")
+                 f"over {a.episodes} replays (the evaluation and held-out episodes of the training distribution)")
         out.append(f"It settles {a.settled} of {a.steps} setpoint steps within their holds {where}"
                    + (f"; {len(a.excused)} excused" if a.excused else "") + ".")
     out += [f"Slow: {s}." for s in a.slow[:5]]
