@@ -165,3 +165,48 @@ def test_a_gain_at_an_end_of_its_search_range_is_named():
     assert note.startswith("the fixed PID's Kp 0.06667 sits at the floor") and "gains.Kp [0.2, 30]" in note
     assert "ceiling" in range_notes(Gains(Kp=[1.0], Ti=[299.0], Td=[0.0]), [loop], 3.0)[0]
     assert range_notes(Gains(Kp=[1.0], Ti=[20.0], Td=[0.0]), [loop], 3.0) == []
+
+
+def test_a_tune_whose_gain_range_cannot_settle_deploys_nothing_and_export_refuses_its_tables(tmp_path):
+    """End to end with token budgets on 1/(s + 1): a Kp range of [0.005, 0.02] (what a strict noise limit may leave)
+    makes every PID too slow (ln(50)/Kp >= 196 s to settle against holds of 5 s, 20 s replayed); the verdict
+    says nothing is safe, fixed_pid.csv says NOT DEPLOYABLE, and `export --fixed` refuses it in one line (exit 2)
+    unless forced."""
+    import subprocess
+    import sys
+
+    import yaml
+
+    doc = {
+        "name": "sluggish",
+        "plant": {"fmu": "FirstOrderUnstable", "sample_time": TS, "parameters": {"a": -1.0, "b": 1.0},
+                  "loops": [{"input": "u", "output": "y", "u_limits": [-10, 10], "setpoint_range": [-1, 1],
+                             "measurement_scale": 1.0, "divergence_bound": 50.0,
+                             "gains": {"Kp": [0.005, 0.02, "log"], "Ti": [0.5, 2, "log"],
+                                       "Td": [0.0, 0.1, "linear"]}}]},
+        "agent": {"algorithm": "ppo", "total_timesteps": 128, "seed": 0, "n_envs": 1, "n_steps": 128,
+                  "batch_size": 64, "n_epochs": 1},
+        "training": {"episode_steps": 100, "setpoint_hold_steps": 50},
+        "evaluation": {"episode_steps": 100, "setpoints": [{"at_step": 0, "value": 0.5}]},
+        "baseline": {"episodes": 1, "maxiter": 1, "popsize": 2, "widen_ranges": 1.0},
+        "deploy": {"schedule_points": 1, "schedule_by": "setpoint", "classical_schedule": False},
+    }
+    path = tmp_path / "sluggish.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    run = tmp_path / "run"
+
+    def cli(*args):
+        return subprocess.run([sys.executable, "-m", "prlpid_fmi", *args], capture_output=True, text=True, timeout=600)
+    done = cli("-q", "tune", str(path), "--out", str(run))
+    assert done.returncode == 0, done.stderr[-2000:]
+    report = (run / "report.md").read_text()
+    assert report.splitlines()[4].startswith("**Nothing here is safe to deploy.**")
+    assert "Deploy the" not in report and "(settles)" in report
+    assert (run / "fixed_pid.csv").read_text().startswith("# NOT DEPLOYABLE: ")
+    assert not (run / "schedule.csv").exists()
+    refused = cli("export", str(run), "--format", "st", "--fixed", "-o", str(tmp_path / "pid.st"))
+    assert refused.returncode == 2 and len(refused.stderr.strip().splitlines()) == 1
+    assert "NOT DEPLOYABLE" in refused.stderr and "--force-not-deployable" in refused.stderr
+    forced = cli("export", str(run), "--format", "st", "--fixed", "-o", str(tmp_path / "pid.st"),
+                 "--force-not-deployable")
+    assert forced.returncode == 0 and (tmp_path / "pid.st").is_file()
