@@ -73,7 +73,7 @@ def test_a_step_that_settles_only_on_the_longer_hold_is_slow_not_failed(tmp_path
     a = run_check(scenario(tmp_path, [0.0, 1.0]), pi(Kp))
     assert a.passed, a.failures
     assert len(a.slow) == 1 and "the step to 1 at t = 10 s" in a.slow[0]
-    settles = float(a.slow[0].split("settles ")[1].split(" s")[0])
+    settles = float(a.slow[0].split("(")[1].split(" s after")[0])
     assert settles == pytest.approx(settling_time(Kp), abs=2 * TS)
 
 
@@ -122,6 +122,23 @@ def test_the_long_hold_keeps_the_setpoints_in_order_and_scales_the_episode(tmp_p
     assert long.episode_steps == LONG_HOLD * config.episode_steps
     assert [k for k, _ in long.setpoint_schedule] == [0, LONG_HOLD * HOLD, 2 * LONG_HOLD * HOLD]
     assert [v for _, (v,) in long.setpoint_schedule] == [0.0, 1.0, -0.5]
+
+
+def test_the_long_hold_moves_the_random_load_steps_with_their_holds(tmp_path):
+    """training.load_disturbance puts a load step in the second half of every hold (loop.core): the long replay has
+    each one, with its loop and value, in the second half of the longer hold."""
+    import dataclasses
+    sc = scenario(tmp_path, [0.0])
+    config = dataclasses.replace(sc.tuning, load_disturbance=0.05)
+    _, traj = replay_schedule(fixed_schedule(pi(1.0), sc.tuning), config, seed=3)
+    assert len(traj.loads) == config.episode_steps // HOLD
+    long = stretched(config, traj)
+    assert long.load_disturbance == 0.0
+    for (start, end, i, value), d in zip(traj.loads, long.disturbances):
+        assert (start, end) == (end - HOLD + HOLD // 2, end)  # second half of the hold
+        assert (d.kind, d.target, d.value) == ("actuator", "y", value)
+        assert (d.start_step, d.end_step) == (LONG_HOLD * (end - HOLD) + LONG_HOLD * HOLD // 2, LONG_HOLD * end)
+        assert abs(value) == pytest.approx(0.05 * 20)  # load_disturbance x the control span (u_limits +-10)
 
 
 def test_a_loop_that_does_not_settle_is_never_deployed_whatever_its_ms(tmp_path):

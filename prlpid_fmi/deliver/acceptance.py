@@ -7,7 +7,8 @@ held-out episodes of the training distribution (deliver.evidence). On every one 
 1. it follows: the episode runs to its end (no divergence, no rejected FMU step);
 2. it settles every setpoint step (metrics: SettlingTime finite) and recovers from every disturbance (RecoveryTime
    finite). An episode with a step left unsettled is replayed once with every hold LONG_HOLD times as long (the
-   same setpoints in the same order, the scenario's disturbances moved with their holds, no random load steps).
+   same setpoints in the same order, the scenario's disturbances and the episode's random load steps moved with
+   their holds: `stretched`).
    A step that settles then is *slow*: reported, not failed. One that still does not settle fails, unless no input
    within the limits can hold its setpoint: the controller's command sits at one of its limits over the last
    quarter of the long hold while the measurement stays short of the setpoint on the side it came from. Such a
@@ -31,7 +32,7 @@ from typing import Callable
 
 import numpy as np
 
-from prlpid_fmi.config import TuningConfig
+from prlpid_fmi.config import Disturbance, TuningConfig
 from prlpid_fmi.metrics import NOISE_BAND, overall_metric
 
 LONG_HOLD = 4  # an unsettled step is replayed with holds this many times as long
@@ -204,15 +205,20 @@ def _overshoot(traj, seg: dict, i: int, config: TuningConfig) -> float:
 
 def stretched(config: TuningConfig, traj, factor: int = LONG_HOLD) -> TuningConfig:
     """The config of `traj`'s episode with every setpoint hold and disturbance `factor` times as long: the
-    setpoints the episode ran (traj.setpoint, (n+1, n_loops)) as an explicit schedule, no random load steps."""
+    setpoints the episode ran (traj.setpoint, (n+1, n_loops)) as an explicit schedule, and its random load steps
+    (traj.loads, each in the second half of its hold) as actuator disturbances in the second half of the longer
+    hold."""
     r = np.asarray(traj.setpoint)
     changes = [0] + [k for k in range(1, len(r)) if np.any(r[k] != r[k - 1])]
     schedule = tuple((k * factor, tuple(float(v) for v in r[k])) for k in changes)
     disturbances = tuple(dataclasses.replace(d, start_step=d.start_step * factor,
                                              end_step=None if d.end_step is None else d.end_step * factor)
                          for d in config.disturbances)
+    hold = config.setpoint_hold_steps
+    loads = tuple(Disturbance("actuator", config.loops[i].output, (end - hold) * factor + hold * factor // 2,
+                              float(value), end * factor) for start, end, i, value in traj.loads)
     return dataclasses.replace(config, setpoint_schedule=schedule, episode_steps=config.episode_steps * factor,
-                               disturbances=disturbances, load_disturbance=0.0)
+                               disturbances=disturbances + loads, load_disturbance=0.0)
 
 
 def _long_hold(ep: Episode, unsettled: list[dict], replay: Replay, t: _Tally, index: dict) -> None:
@@ -225,24 +231,27 @@ def _long_hold(ep: Episode, unsettled: list[dict], replay: Replay, t: _Tally, in
                                              + (f" at t = {ended['time_s']:g} s" if "time_s" in ended else ""),
                                   "a gain range that contains stabilising gains, or a shorter sample time"))
         return
-    long = {(s["loop"], s["start_step"]): s for s in metrics["segments"]}
     for seg in unsettled:
         i = index.get(seg["loop"], 0)
         step = _is_step(seg)
         target = float(ep.trajectory.setpoint[seg["start_step"], i])
-        what = (f"the step to {target:.4g} at t = {seg['start_time_s']:g} s" if step else
-                f"the disturbance at t = {seg['start_time_s']:g} s")
+        what = (f"the step to {target:.4g} at t = {seg['start_step'] * config.sample_time_s:g} s" if step else
+                f"the disturbance at t = {seg['start_step'] * config.sample_time_s:g} s")
         where = f"{what} of {ep.label}" + (f" (loop {seg['loop']})" if len(index) > 1 else "")
-        twin = long.get((seg["loop"], seg["start_step"] * LONG_HOLD))
-        if twin is None:
-            t.failures.append(Failure("settles", f"leaves {where} unsettled", ""))
+        # the segment's replay: the step's segment, then those its load steps start (events split segments)
+        parts = [s for s in metrics["segments"] if s["loop"] == seg["loop"]
+                 and seg["start_step"] * LONG_HOLD <= s["start_step"] < seg["end_step"] * LONG_HOLD]
+        if not parts:
+            t.failures.append(Failure("settles", f"leaves {where} unsettled", "", ep.label))
             continue
-        done = twin["SettlingTime"] if step else twin["RecoveryTime"]
-        if math.isfinite(done):
-            t.slow.append(f"{where}: settles {done:.4g} s after the step, beyond its hold of "
-                          f"{(seg['end_step'] - seg['start_step']) * config.sample_time_s:.4g} s")
-            t.settled += step
+        times = [p["SettlingTime"] if _is_step(p) else p["RecoveryTime"] for p in parts]
+        if all(math.isfinite(x) for x in times):
+            hold = (seg["end_step"] - seg["start_step"]) * ep.config.sample_time_s
+            settles = "it and its load step settle" if len(parts) > 1 else "settles"
+            t.slow.append(f"{where}: {settles} within a {LONG_HOLD}x longer hold "
+                          f"({times[0]:.4g} s after the step; its hold is {hold:.4g} s)")
             continue
+        twin = next(p for p, x in zip(parts, times) if not math.isfinite(x))
         limit = _at_limit(traj, twin, i, config)
         if step and limit is not None:
             t.excused.append(f"setpoint {target:.4g} ({where}): no input within the limits holds it, the command "

@@ -241,7 +241,8 @@ class LoopCore(LoopConstants):
         if c.actuator_noise_std > 0:
             self._noise_u = rng.normal(0.0, c.actuator_noise_std, (c.episode_steps + 1, self.n_loops)).tolist()
         self.setpoint = self._setpoint_at(0)
-        self._offsets["actuator"] = self._scenario_loads + self._random_loads(rng)
+        self.random_loads = self._random_loads(rng)  # (start, end, loop, value) of this episode, public for replays
+        self._offsets["actuator"] = self._scenario_loads + self.random_loads
         self.measurement = self._measure(y_true, 0)
         self.previous_error = [r - y for r, y in zip(self.setpoint, self.measurement)]
         self.applied_setpoint = list(self.setpoint)

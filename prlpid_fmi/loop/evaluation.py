@@ -46,7 +46,8 @@ class Trajectory:
     terminated: the episode ended before its last sample; termination: why and when (core.Termination),
     None when it ran to the end; after a rejected step or a non-finite output the last measurement row
     is NaN. scheduling_value (n,): the scheduling variable read before each step of a schedule replay
-    (schedule.replay_schedule), None otherwise.
+    (schedule.replay_schedule), None otherwise. loads: the random load steps of the episode (loop.core,
+    training.load_disturbance) as (start step, end step, loop index, value [input units]).
 
     ``traj["measurement"]`` reads a field by name, as the dicts this replaces did.
     """
@@ -61,6 +62,7 @@ class Trajectory:
     terminated: bool = False
     termination: Termination | None = None
     scheduling_value: np.ndarray | None = None
+    loads: tuple = ()  # the episode's random load steps (training.load_disturbance): (start, end, loop, value)
 
     @property
     def steps(self) -> int:
@@ -109,7 +111,8 @@ class _Recorder:
             time_s=np.arange(n + 1) * self.core.config.sample_time_s,
             setpoint=np.array(self.setpoints), measurement=np.array(self.measurements),
             control_signal=np.array(controls), pid_output=np.array(self.commands).reshape(n, -1),
-            reward=np.array(self.rewards), gains=gains, terminated=bool(terminated), termination=termination)
+            reward=np.array(self.rewards), gains=gains, terminated=bool(terminated), termination=termination,
+            loads=tuple(getattr(self.core, "random_loads", ())))
 
 
 def rollout(policy: Policy, config: TuningConfig, seed: int = 0, forecast: bool = False,

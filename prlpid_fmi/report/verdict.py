@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import math
 
+from prlpid_fmi.deliver.acceptance import LONG_HOLD
 from prlpid_fmi.deliver.rule import Candidate, Decision, Deployed
 from prlpid_fmi.robustness.status import ms_text
 
@@ -124,8 +125,10 @@ def _acceptance_lines(a) -> list[str]:
     if a.steps:
         where = ("on the evaluation" if a.episodes == 1 else
                  f"over {a.episodes} replays (the evaluation and held-out episodes of the training distribution)")
+        more = [f"{len(a.slow)} steps or disturbances settle only on a {LONG_HOLD}x longer hold (slow)" if a.slow else "",
+                f"{len(a.excused)} excused" if a.excused else ""]
         out.append(f"It settles {a.settled} of {a.steps} setpoint steps within their holds {where}"
-                   + (f"; {len(a.excused)} excused" if a.excused else "") + ".")
+                   + "".join(f"; {m}" for m in more if m) + ".")
     out += [f"Slow: {s}." for s in a.slow[:5]]
     if len(a.slow) > 5:
         out.append(f"({len(a.slow) - 5} more slow steps in metrics.json.)")
