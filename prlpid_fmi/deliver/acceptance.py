@@ -249,7 +249,7 @@ def _long_hold(ep: Episode, unsettled: list[dict], replay: Replay, t: _Tally, in
             hold = (seg["end_step"] - seg["start_step"]) * ep.config.sample_time_s
             settles = "it and its load step settle" if len(parts) > 1 else "settles"
             t.slow.append(f"{where}: {settles} within a {LONG_HOLD}x longer hold "
-                          f"({times[0]:.4g} s after the step; its hold is {hold:.4g} s)")
+                          f"({times[0]:.4g} s after {'the step' if step else 'it starts'}; its hold is {hold:.4g} s)")
             continue
         twin = next(p for p, x in zip(parts, times) if not math.isfinite(x))
         limit = _at_limit(traj, twin, i, config)

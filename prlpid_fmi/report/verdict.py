@@ -119,7 +119,8 @@ def _acceptance_lines(a) -> list[str]:
     user's limit, slow steps, excused setpoints."""
     out = []
     if a.above_user_overshoot > 0:
-        out.append(f"Its overshoot is {a.overshoot_pct:.0f} %, {a.above_user_overshoot:.0f} percentage points above "
+        out.append(f"Its overshoot beyond the measurement noise is {a.overshoot_pct:.0f} %, "
+                   f"{a.above_user_overshoot:.0f} percentage points above "
                    f"deploy.max_overshoot ({a.user_overshoot_pct:g} %), within the acceptance limit "
                    f"{a.overshoot_limit_pct:g} %.")
     if a.steps:
@@ -142,7 +143,8 @@ def acceptance_section(deployed: Deployed, a) -> str:
     lines = ["## Acceptance check on this evaluation", ""]
     if a.passed:
         lines.append(f"**The deployed {deployed} passes** the acceptance check on this evaluation: it follows, settles "
-                     f"every setpoint step, overshoots at most {a.overshoot_limit_pct:g} % and does not chatter.")
+                     f"every setpoint step (within a {LONG_HOLD}x longer hold where said below), overshoots at most "
+                     f"{a.overshoot_limit_pct:g} % and does not chatter.")
     else:
         lines.append(f"**The deployed {deployed} fails** the acceptance check on this evaluation; do not rely on it "
                      "for these setpoints and disturbances:")
