@@ -124,6 +124,29 @@ def test_the_long_hold_keeps_the_setpoints_in_order_and_scales_the_episode(tmp_p
     assert [v for _, (v,) in long.setpoint_schedule] == [0.0, 1.0, -0.5]
 
 
+def test_chatter_from_measurement_noise_is_reported_and_chatter_without_noise_fails(tmp_path):
+    """u = Kp e: with Kp = 5 and noise of std 0.05, u moves by about 5 * 0.05 * sqrt(2) = 0.35 per sample, above 1 %
+    of the 20-unit span, and reverses on about half the samples; without noise the same PI does not reverse."""
+    import dataclasses
+    sc = scenario(tmp_path, [0.0, 1.0], noise=0.05)
+    table = fixed_schedule(pi(5.0), sc.tuning)
+
+    def replay(cfg, seed):
+        return replay_schedule(table, cfg, seed=seed)
+    noisy = sc.evaluation_config()
+    clean = dataclasses.replace(noisy, measurement_noise_std=0.0)
+    episodes = [Episode(label, cfg, 0, *replay(cfg, 0)) for label, cfg in (("noisy", noisy), ("clean", clean))]
+    a = check(episodes, replay, 0.05, 0.05)
+    assert a.passed and a.chatter < 0.01 and 0.3 < a.noisy_chatter < 0.7 and a.noisy_chatter_where == "noisy"  # one reversal: the step
+    # a two-sample limit cycle without noise (hand-made trajectory): the command reverses at every sample
+    traj = episodes[1].trajectory
+    cycle = dataclasses.replace(traj, pid_output=np.where(np.arange(len(traj.pid_output))[:, None] % 2, 1.0, -1.0))
+    from prlpid_fmi.loop.evaluation import measure
+    m = measure(cycle, clean)
+    b = check([Episode("clean", clean, 0, m, cycle)], replay, 0.05, 0.05)
+    assert [f.check for f in b.failures] == ["chatter"] and b.chatter > 0.99
+
+
 def test_the_long_hold_moves_the_random_load_steps_with_their_holds(tmp_path):
     """training.load_disturbance puts a load step in the second half of every hold (loop.core): the long replay has
     each one, with its loop and value, in the second half of the longer hold."""

@@ -19,7 +19,7 @@ import dataclasses
 import math
 import warnings
 
-from prlpid_fmi.deliver.acceptance import Episode, check, random_loads
+from prlpid_fmi.deliver.acceptance import Episode, check, noise_free, random_loads
 from prlpid_fmi.deliver.rule import Candidate, Decision, Deployed, choose_among
 from prlpid_fmi.loop.evaluation import constant_gains, evaluate_gains, gains_rollout
 from prlpid_fmi.loop.gains import Gains
@@ -156,17 +156,20 @@ def range_points(config, loop: int) -> list[list[float]]:
     return points
 
 
-def held_out(scenario, schedule: GainSchedule, seed: int, load_free: bool = False) -> list[Episode]:
+def held_out(scenario, schedule: GainSchedule, seed: int, clean: bool = False) -> list[Episode]:
     """HOLDOUT_EPISODES seeded episodes of the training distribution (scenario.tuning: its random setpoints, noise,
     disturbances, randomisation) of the table replayed as a plain PID, up to the first that diverges. The seeds
     (seed + HOLDOUT_SEED_OFFSET + i) are disjoint from those the table was built and chosen on, and from the
-    evaluation's. load_free: the same episodes without training.load_disturbance's random load steps."""
-    config = dataclasses.replace(scenario.tuning, load_disturbance=0.0) if load_free else scenario.tuning
+    evaluation's. clean: the same setpoints without training.load_disturbance's random load steps and without
+    measurement or actuator noise (the acceptance check's overshoot and chatter of the controller itself)."""
+    config = scenario.tuning
+    if clean:
+        config = dataclasses.replace(config, load_disturbance=0.0, measurement_noise_std=0.0, actuator_noise_std=0.0)
     out = []
     for i in range(HOLDOUT_EPISODES):
         s = seed + HOLDOUT_SEED_OFFSET + i
         metrics, traj = replay_schedule(schedule, config, seed=s)
-        label = f"held-out episode {i + 1}" + (" without its load steps" if load_free else "")
+        label = f"held-out episode {i + 1}" + (" without its load steps and noise" if clean else "")
         out.append(Episode(label, config, s, metrics, traj))
         if metrics.get("terminated"):
             break
@@ -202,8 +205,8 @@ def assess(scenario, schedule: GainSchedule | None, fixed_gains: Gains, seed: in
         if c is not None and s is not None:
             held = held_out(scenario, s, seed)
             c.holdout_ise, c.holdout_tv, c.holdout_unsettled = _held_out_totals(held)
-            if random_loads(scenario.tuning):  # their overshoot is a load response: the setpoint steps without them
-                held += held_out(scenario, s, seed, load_free=True)
+            if random_loads(scenario.tuning) or not noise_free(scenario.tuning):
+                held += held_out(scenario, s, seed, clean=True)  # overshoot and chatter without loads and noise
             c.acceptance = check([c.evaluation, *held], lambda cfg, sd, s=s: replay_schedule(s, cfg, seed=sd),
                                  scenario.deploy.max_overshoot, scenario.deploy.max_chatter)
     decision = choose_among(sched, table, fixed, limit, scenario.deploy.allow_unverified)

@@ -130,6 +130,11 @@ def _acceptance_lines(a) -> list[str]:
                 f"{len(a.excused)} excused" if a.excused else ""]
         out.append(f"It settles {a.settled} of {a.steps} setpoint steps within their holds {where}"
                    + "".join(f"; {m}" for m in more if m) + ".")
+    if math.isfinite(a.noisy_chatter) and a.noisy_chatter > a.max_chatter:
+        out.append(f"With the measurement noise its command reverses direction on {a.noisy_chatter:.0%} of the samples "
+                   f"({a.noisy_chatter_where}; deploy.max_chatter {a.max_chatter:g} holds without noise): a "
+                   "measurement filter (controller.measurement_filter: tuned, or a larger Tf) or a smaller Td would "
+                   "spare the actuator.")
     out += [f"Slow: {s}." for s in a.slow[:5]]
     if len(a.slow) > 5:
         out.append(f"({len(a.slow) - 5} more slow steps in metrics.json.)")
