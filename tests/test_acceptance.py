@@ -240,6 +240,7 @@ def test_a_tune_whose_gain_range_cannot_settle_deploys_nothing_and_export_refuse
     done = cli("-q", "tune", str(path), "--out", str(run))
     assert done.returncode == 0, done.stderr[-2000:]
     report = (run / "report.md").read_text()
+    assert report.splitlines()[0] == "# sluggish: nothing here is safe to deploy"
     assert report.splitlines()[4].startswith("**Nothing here is safe to deploy.**")
     assert "Deploy the" not in report and "(settles)" in report
     assert (run / "fixed_pid.csv").read_text().startswith("# NOT DEPLOYABLE: ")

@@ -89,15 +89,16 @@ _DESIGNS = {"load": "designed for load rejection under the Ms and noise limits, 
 
 def render_report(scenario, policy_m: dict, fixed_m: dict | None, fixed_gains: dict | None,
                   source: Path | None = None, units: tuple[str, str] = ("", ""),
-                  learning_curve: bool = True, opening: tuple[str, ...] = ()) -> str:
+                  learning_curve: bool = True, opening: tuple[str, ...] = (), headline: str = "") -> str:
     """report.md of one evaluation: the metric table with units and the ratio adaptive ÷ fixed.
 
     opening: sections (markdown text each) placed between the title and the evaluation, in order (the verdict
-    of `tune`, the deployed controller of `evaluate`)."""
+    of `tune`, the deployed controller of `evaluate`); headline: the title's words after the scenario's name (the
+    verdict's, report.verdict.headline), default: what the report compares."""
     y_unit, u_unit = units
     loops = policy_m["loops"]
     keys = [k for k in policy_m["overall"] if k.split("[")[0] in METRIC_COLUMNS]
-    lines = [f"# {scenario.name}: adaptive PRL-PID policy vs tuned fixed PID", ""]
+    lines = [f"# {scenario.name}: {headline or 'adaptive PRL-PID policy vs tuned fixed PID'}", ""]
     if source is not None:
         lines += [f"Scenario file: `{source}`.", ""]
     lines += [f"Evaluation: {scenario.evaluation_config().episode_steps} steps at sample time "

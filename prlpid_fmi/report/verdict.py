@@ -104,6 +104,13 @@ def classical_note(record: dict | None) -> str:
     return ""
 
 
+def headline(decision: Decision) -> str:
+    """The verdict in a few words, for report.md's first line."""
+    if decision.deploy == Deployed.NONE:
+        return "nothing here is safe to deploy"
+    return f"deploy the {decision.deploy} (schedule.csv)"
+
+
 def _failed(c: Candidate, max_sensitivity: float) -> list[str]:
     """Why a candidate is refused (deliver.rule.Candidate.problems), each failed acceptance check with what would
     change it."""

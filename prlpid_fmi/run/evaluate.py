@@ -75,10 +75,11 @@ def evaluation_metrics(ev: Evaluation, fixed: dict | None) -> dict:
 
 
 def evaluation_report(scenario: Scenario, ev: Evaluation, fixed: dict | None, source: Path | None,
-                      learning_curve: bool, opening: tuple[str, ...] = ()) -> str:
-    """report.md of this evaluation, with `opening` sections between its title and the metric table."""
+                      learning_curve: bool, opening: tuple[str, ...] = (), headline: str = "") -> str:
+    """report.md of this evaluation, with `opening` sections between its title and the metric table; headline: the
+    title's words after the scenario's name (report.markdown.render_report)."""
     return render_report(scenario, ev.policy, ev.fixed, fixed["gains"] if fixed else None, source,
-                         loop_units(ev.config), learning_curve=learning_curve, opening=opening)
+                         loop_units(ev.config), learning_curve=learning_curve, opening=opening, headline=headline)
 
 
 def evaluate_run(run_dir: str | Path, scenario_path: str | Path | None = None) -> Path:
@@ -111,8 +112,12 @@ def evaluate_run(run_dir: str | Path, scenario_path: str | Path | None = None) -
             opening += (acceptance_section(deployed, acceptance),)
     metrics.update(other_tables(run_dir, ev.config, scenario, deployed))
     write_json(out_dir / rd.METRICS, metrics)
+    verdict_words = ""
+    if deployed is not None and "deployed_acceptance" in metrics:
+        verdict_words = (f"the deployed {deployed} " + ("passes" if metrics["deployed_acceptance"]["passed"] else
+                                                        "fails") + " the acceptance check here")
     write_atomic(out_dir / rd.REPORT, evaluation_report(scenario, ev, fixed, source, learning_curve=False,
-                                                        opening=opening))
+                                                        opening=opening, headline=verdict_words))
     return out_dir
 
 

@@ -315,13 +315,13 @@ def files_stage(run_dir: Path, started: Started, ev: Evaluation, fixed: dict | N
     the learning curve, and run.json marked finished."""
     from prlpid_fmi.deliver.evidence import candidate_summary, max_sensitivity
     from prlpid_fmi.report import plots
-    from prlpid_fmi.report.verdict import classical_note, range_notes, verdict
+    from prlpid_fmi.report.verdict import classical_note, headline, range_notes, verdict
     from prlpid_fmi.run.export import deployable_files
     from prlpid_fmi.tuning.schedule.csv_file import write_schedule_csv
     from prlpid_fmi.tuning.schedule.table import fixed_schedule
 
     scenario, info = started.scenario, started.info
-    metrics, opening = evaluation_metrics(ev, fixed), ()
+    metrics, opening, title = evaluation_metrics(ev, fixed), (), ""
     if choice is not None:
         deployed = {Deployed.SCHEDULE: table.table, Deployed.CLASSICAL: classical,
                     Deployed.FIXED_PID: fixed_schedule(gains_from_dict(fixed["gains"]), scenario.tuning)
@@ -348,6 +348,7 @@ def files_stage(run_dir: Path, started: Started, ev: Evaluation, fixed: dict | N
             findings += tuple(range_notes(gains_from_dict(fixed["gains"]), scenario.tuning.loops,
                                           scenario.baseline.widen_ranges))
         units = loop_units(scenario.tuning)
+        title = headline(choice.decision)
         opening = (verdict(choice.decision, choice.schedule, choice.fixed, max_sensitivity(scenario),
                            scenario.tuning.gain_mapping, choice.classical, findings).rstrip(), "",
                    *((note, "") if (note := classical_note(info.get("classical_schedule"))) else ()),
@@ -362,7 +363,8 @@ def files_stage(run_dir: Path, started: Started, ev: Evaluation, fixed: dict | N
         write_schedule_csv(table.table, run_dir / rd.ADAPTIVE_SCHEDULE,
                            not_deployable=refused.get(Deployed.SCHEDULE, "") if choice is not None else "")
     write_json(run_dir / rd.METRICS, metrics)
-    report = evaluation_report(scenario, ev, fixed, started.source, learning_curve=True, opening=opening)
+    report = evaluation_report(scenario, ev, fixed, started.source, learning_curve=True, opening=opening,
+                               headline=title)
     if table.note:
         report += "\n" + table.note
     report += "\n" + deployable_files(run_dir)
