@@ -15,7 +15,7 @@ computes it, and reads through python-control (``frd``, ``stability_margins``):
 The PID's transfer function (positional form, e = r - y)::
 
     u_k = Kp * (e_k + (Ts/Ti) * sum_{i<=k} e_i + Td * Df_k),  Df = backward-Euler low pass (Td/N) of (e_k - e_{k-1})/Ts
-    C(z) = Kp * (1 + (Ts/Ti) * z/(z - 1) + Td * (z - 1) / ((Tf + Ts) z - Tf)),   Tf = Td/N (0 without a filter)
+    C(z) = Kp * (1 + (Ts/Ti) * z/(z - 1) + Td * (z - 1) / ((Tdf + Ts) z - Tdf)),   Tdf = Td/N (0 without a filter)
 
 Frequency grid: the DFT bins of a multisine period of N samples, log-spaced from 2 pi/(N Ts) up to
 the Nyquist frequency pi/Ts, then every bin of that period around the |S| peak and the crossovers.
@@ -84,8 +84,8 @@ def pid_transfer_function(Kp: float, Ti: float, Td: float, sample_time_s: float,
     if math.isfinite(Ti):
         terms.append((np.array([Ts / Ti, 0.0]), np.array([1.0, -1.0])))
     if Td != 0:
-        Tf = Td / derivative_filter_N if derivative_filter_N else 0.0
-        terms.append((np.polymul([Td, -Td], F[0]), np.polymul([Tf + Ts, -Tf], F[1])))
+        Tdf = Td / derivative_filter_N if derivative_filter_N else 0.0  # the derivative filter; Tf is the measurement's
+        terms.append((np.polymul([Td, -Td], F[0]), np.polymul([Tdf + Ts, -Tdf], F[1])))
     num, den = np.array([0.0]), np.array([1.0])
     for n, d in terms:
         num, den = np.polyadd(np.polymul(num, d), np.polymul(n, den)), np.polymul(den, d)
@@ -108,8 +108,8 @@ def pid_frequency_response(Kp: float, Ti: float, Td: float, sample_time_s: float
     if math.isfinite(Ti):
         C = C + (Ts / Ti) * z / (z - 1)
     if Td != 0:
-        Tf = Td / derivative_filter_N if derivative_filter_N else 0.0
-        C = C + Td * (z - 1) / ((Tf + Ts) * z - Tf) * F
+        Tdf = Td / derivative_filter_N if derivative_filter_N else 0.0
+        C = C + Td * (z - 1) / ((Tdf + Ts) * z - Tdf) * F
     return Kp * C
 
 
