@@ -587,8 +587,9 @@ def load_step_figure(runs: dict, config: TuningConfig, title: str = "Load steps 
                 ax_y.plot(r.loaded.time_s[sl] - t_load, r.loaded.measurement[sl, i], **style)
                 su = _sliced(r.unloaded, a, b)
                 ax_y.plot(r.unloaded.time_s[su] - t_load, r.unloaded.measurement[su, i], color=COLORS.get(name), ls=":",
-                          lw=0.9, label="without the load (dotted)")
+                          lw=0.9)
                 ax_u.step(r.loaded.time_s[sl] - t_load, r.loaded.control_signal[sl, i], where="post", **style)
+            ax_y.plot([], [], color="0.3", ls=":", lw=0.9, label="the same without the load")
             _limits_on_scale(ax_u, loop)
             for ax in (ax_y, ax_u):
                 ax.set_xlim(a - t_load, b - t_load)
