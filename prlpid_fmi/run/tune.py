@@ -325,8 +325,11 @@ def files_stage(run_dir: Path, started: Started, ev: Evaluation, fixed: dict | N
         from prlpid_fmi.run.figures import write_run_figures
 
         with stage("figures", False):  # run.json stage_seconds: what the figures cost
-            figures = write_run_figures(run_dir, scenario, ev, choice, gains_from_dict(fixed["gains"]), table.table,
-                                        classical)
+            try:
+                figures = write_run_figures(run_dir, scenario, ev, choice, gains_from_dict(fixed["gains"]),
+                                            table.table, classical)
+            except PrlPidError as exc:  # a replay the FMU failed: the run's results are written all the same
+                warnings.warn(f"{run_dir}: figures not drawn: {exc}", stacklevel=2)
     if choice is not None:
         deployed = {Deployed.SCHEDULE: table.table, Deployed.CLASSICAL: classical,
                     Deployed.FIXED_PID: fixed_schedule(gains_from_dict(fixed["gains"]), scenario.tuning)
@@ -343,14 +346,14 @@ def files_stage(run_dir: Path, started: Started, ev: Evaluation, fixed: dict | N
                            scenario.tuning.gain_mapping, choice.classical).rstrip(), "",
                    *((note, "") if (note := classical_note(info.get("classical_schedule"))) else ()),
                    candidates_table(choice.schedule, choice.fixed, units, classical=choice.classical),
-                   figure(figures.load_steps, "load steps at the plant input, the design's load experiment (the load "
-                                              "IAE row)"),
+                   *((figure(figures.load_steps, "load steps at the plant input, the design's load experiment (the "
+                                                 "load IAE row)"),) if figures else ()),
                    *((figure(figures.schedule_gains, "PID gains over the scheduling variable"),)
-                     if figures.schedule_gains else ()),
+                     if figures and figures.schedule_gains else ()),
                    "### Robustness at each operating point", "",
                    margins_table((choice.fixed, choice.classical, choice.schedule), max_sensitivity(scenario),
                                  units[0]),
-                   frequency_section(figures.frequency, max_sensitivity(scenario)),
+                   frequency_section(figures.frequency if figures else {}, max_sensitivity(scenario)),
                    design_section(fixed, [l.output for l in scenario.tuning.loops]))
     elif table.table is not None:
         write_schedule_csv(table.table, run_dir / rd.SCHEDULE)
