@@ -129,7 +129,7 @@ def test_the_csv_columns_hold_p_c_l_s_t_per_point():
 
 
 def test_files_per_loop(tmp_path):
-    responses = loop_responses(candidates(), ["y"], TS)
+    responses = loop_responses(candidates(), ["y"], TS, draws=True)
     written = write_frequency_files(tmp_path / "frequency", responses, ["y", "q.out[1]"], [("", ""), ("", "")], 2.0,
                                     "fixed PID")
     assert written["y"] == {"csv": "y.csv", "nyquist": "nyquist_y.png", "sensitivity": "sensitivity_y.png",
@@ -138,5 +138,7 @@ def test_files_per_loop(tmp_path):
         assert (tmp_path / "frequency" / name).stat().st_size > 1000
     # a loop with no measured response: its CSV, the columns only
     assert written["q.out[1]"] == {"csv": "q_out_1_.csv"} and file_stem("q.out[1]") == "q_out_1_"
+    _, rows = _rows((tmp_path / "frequency" / "y.csv").read_text())
+    assert "0, draw 1" in {r["operating_point"] for r in rows}  # the CSV keeps the draws, the figures do not
     comments, rows = _rows((tmp_path / "frequency" / "q_out_1_.csv").read_text())
     assert rows == [] and (tmp_path / "frequency" / "q_out_1_.csv").read_text().splitlines()[3] == ",".join(CSV_COLUMNS)

@@ -92,6 +92,11 @@ class LoopResponse:
     def between_breakpoints(self) -> bool:
         return BETWEEN in self.point
 
+    @property
+    def on_draw(self) -> bool:
+        """Measured on a Monte-Carlo parameter draw of the plant ("<point>, draw <n>"), not the nominal plant."""
+        return ", draw " in self.point
+
 
 def _label(point) -> str:
     return f"{point:.4g}" if isinstance(point, (int, float)) else str(point)
@@ -324,9 +329,10 @@ def bode_figure(responses: list[LoopResponse], loop: str, units: tuple[str, str]
 
 def write_frequency_files(out_dir, responses: list[LoopResponse], loop_names, units_per_loop, ms_limit: float,
                           deployed: str | None = None) -> dict:
-    """Per loop, in out_dir (created): <loop>.csv (frequency_csv) and nyquist_, sensitivity_, bode_<loop>.png. Returns
-    {loop: {kind: file name}} of what was written (kind: csv, nyquist, sensitivity, bode); a loop without a
-    measured response gets only its CSV (the header and the columns)."""
+    """Per loop, in out_dir (created): <loop>.csv (frequency_csv: every response, the parameter draws' too) and
+    nyquist_, sensitivity_, bode_<loop>.png (the nominal plant's). Returns {loop: {kind: file name}} of what was
+    written (kind: csv, nyquist, sensitivity, bode); a loop without a measured response gets only its CSV (the header
+    and the columns)."""
     from prlpid_fmi.rundir import write_atomic
 
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -335,11 +341,12 @@ def write_frequency_files(out_dir, responses: list[LoopResponse], loop_names, un
         stem, units = file_stem(loop), units_per_loop[i]
         files = {"csv": f"{stem}.csv"}
         write_atomic(out_dir / files["csv"], frequency_csv(responses, loop, units))
-        if any(r.loop == loop for r in responses):
+        nominal = [r for r in responses if not r.on_draw]
+        if any(r.loop == loop for r in nominal):
             label = _point_title(loop_names, units_per_loop[0][0])
-            for kind, draw in (("nyquist", lambda: nyquist_figure(responses, loop, ms_limit, label, deployed)),
-                               ("sensitivity", lambda: sensitivity_figure(responses, loop, ms_limit, label, deployed)),
-                               ("bode", lambda: bode_figure(responses, loop, units, label, deployed))):
+            for kind, draw in (("nyquist", lambda: nyquist_figure(nominal, loop, ms_limit, label, deployed)),
+                               ("sensitivity", lambda: sensitivity_figure(nominal, loop, ms_limit, label, deployed)),
+                               ("bode", lambda: bode_figure(nominal, loop, units, label, deployed))):
                 files[kind] = f"{kind}_{stem}.png"
                 save_figure(draw(), out_dir / files[kind])
         written[loop] = files

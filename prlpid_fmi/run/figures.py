@@ -8,7 +8,8 @@
   classical and adaptive schedules where they exist): two short episodes per point and controller.
 - schedule_gains.png: Kp, Ti, Td of the gain tables over their scheduling variable, beside the fixed PID.
 - frequency/: per loop, the frequency responses the margin experiments measured (deliver.rule.Candidate's margins;
-  no new experiment) as <loop>.csv, and their Nyquist, |S| and |T|, and Bode figures (report.frequency).
+  no new experiment) as <loop>.csv (the Monte-Carlo parameter draws' too, with training.randomize), and the nominal
+  plant's Nyquist, |S| and |T|, and Bode figures (report.frequency).
 """
 from __future__ import annotations
 
@@ -112,7 +113,7 @@ def write_run_figures(run_dir: Path, scenario, ev, choice, fixed_gains, adaptive
     if choice is not None:
         names = [l.output for l in scenario.tuning.loops]
         responses = frequency.loop_responses((choice.fixed, choice.classical, choice.schedule), names,
-                                             scenario.tuning.sample_time_s)
+                                             scenario.tuning.sample_time_s, draws=True)
         ys, us = loop_units(scenario.tuning)
         written = frequency.write_frequency_files(run_dir / rd.FREQUENCY, responses, names, list(zip(ys, us)),
                                                   float(scenario.deploy.max_sensitivity), deployed)
