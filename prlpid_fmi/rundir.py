@@ -50,14 +50,19 @@ RESPONSE_PLOT = "response.png"
 CONTROL_SIGNAL_PLOT = "control_signal.png"
 GAINS_PLOT = "gains.png"
 LEARNING_CURVE_PLOT = "learning_curve.png"
+STEP_RESPONSE_PLOT = "step_response.png"  # the evaluation zoomed to its transients
+LOAD_STEPS_PLOT = "load_steps.png"  # the design's load experiment, every plain PID
+SCHEDULE_GAINS_PLOT = "schedule_gains.png"  # the gain tables over their scheduling variable
+FREQUENCY = "frequency"  # per loop: the measured frequency responses (CSV) and their figures
 CHECKPOINTS = "checkpoints"
 TENSORBOARD = "tensorboard"
 MONITOR = "monitor"
 EVALUATIONS = "evaluations"
 ACTIVE = ".active"
 OWNED_FILES = frozenset({ACTIVE, SCENARIO, RUN_INFO, MODEL, VECNORMALIZE, FIXED_PID, FIXED_PID_CSV, CLASSICAL_SCHEDULE, ADAPTIVE_SCHEDULE, METRICS, GAINS, SCHEDULE, REPORT,
-                         RESPONSE_PLOT, CONTROL_SIGNAL_PLOT, GAINS_PLOT, LEARNING_CURVE_PLOT})
-OWNED_DIRS = frozenset({CHECKPOINTS, TENSORBOARD, MONITOR, EVALUATIONS})
+                         RESPONSE_PLOT, CONTROL_SIGNAL_PLOT, GAINS_PLOT, LEARNING_CURVE_PLOT, STEP_RESPONSE_PLOT,
+                         LOAD_STEPS_PLOT, SCHEDULE_GAINS_PLOT})
+OWNED_DIRS = frozenset({CHECKPOINTS, TENSORBOARD, MONITOR, EVALUATIONS, FREQUENCY})
 PACKAGES = ("prlpid-fmi", "fmpy", "numpy", "scipy", "torch", "stable-baselines3", "gymnasium", "pyyaml", "matplotlib")
 
 Content = Union[bytes, str, Callable[[Path], object]]

@@ -42,6 +42,17 @@ def test_every_paper_scenario_runs_end_to_end(name, tmp_path, capsys):
     assert info["versions"]["torch"].startswith("2.13.0") and "stable-baselines3" in info["versions"]
     resolved = load_scenario(run / "scenario.yaml")
     assert resolved.agent.seed == 3 and resolved.tuning == load_scenario(scenario).tuning
+    # the engineer's figures (run.figures), embedded in the report, and the measured frequency responses per loop
+    for png in ("step_response.png", "load_steps.png"):
+        _assert_png(run / png)
+        assert f"]({png})" in report
+    from prlpid_fmi.report.frequency import CSV_COLUMNS, file_stem
+
+    for loop in resolved.tuning.loops:
+        csv_file = run / "frequency" / f"{file_stem(loop.output)}.csv"
+        assert ",".join(CSV_COLUMNS) in csv_file.read_text().splitlines()
+        if (run / "frequency" / f"nyquist_{file_stem(loop.output)}.png").is_file():
+            assert f"](frequency/nyquist_{file_stem(loop.output)}.png)" in report
     metrics = json.loads((run / "metrics.json").read_text())
     assert {"policy", "fixed_pid", "deployed", "decision"} <= set(metrics)
     assert "ISE" in "".join(metrics["policy"]["overall"])

@@ -16,8 +16,8 @@ from prlpid_fmi.config import Disturbance
 from prlpid_fmi.loop.core import Termination
 from prlpid_fmi.loop.evaluation import Trajectory, constant_gains, gains_rollout, rollout
 from prlpid_fmi.report.plots import (
-    control_signal_figure, gain_axis_limits, gains_figure, load_monitor_csvs, plot_control_signal, plot_gains,
-    plot_learning_curve, plot_response, response_figure)
+    control_signal_figure, events, gain_axis_limits, gains_figure, load_monitor_csvs, plot_control_signal, plot_gains,
+    plot_learning_curve, plot_response, response_figure, step_response_figure, transient_span)
 from prlpid_fmi.scenario.presets import preset
 from prlpid_fmi.run.gains_csv import trajectory_csv
 
@@ -246,3 +246,47 @@ def test_gains_csv_times_are_multiples_of_the_sample_time(trajs):
     for k, row in enumerate(rows):  # the decimal k·Ts, written as such: 0.3, never 0.30000000000000004
         assert row["time_s"] == repr(float(k * ts)), row["time_s"]
     assert rows[3]["time_s"] == "0.3"
+
+
+# -- transients, zoomed -----------------------------------------------------------------------------------------
+def test_a_first_order_step_lasts_tau_ln_50_to_two_percent():
+    tau, ts = 1.0, 0.01
+    t = np.arange(0, 20.0, ts)
+    deviation = -np.exp(-t / tau)  # y - r of y = 1 - exp(-t/tau) after a unit setpoint step at t = 0
+    assert transient_span(t, deviation, 0.0, 20.0) == pytest.approx(tau * np.log(50), abs=0.03)
+    # measurement noise of 1 % of the step does not stretch it to the end of the segment
+    noisy = deviation + np.random.default_rng(0).normal(0.0, 0.01, t.size)
+    assert 3.0 < transient_span(t, noisy, 0.0, 20.0, size=1.0) < 5.0
+    # settled from the start: no transient; never settling: the whole segment
+    assert transient_span(t, np.zeros_like(t), 0.0, 20.0) == 0.0
+    assert transient_span(t, np.sin(t), 0.0, 20.0) == pytest.approx(20.0, abs=0.05)
+
+
+def test_the_events_are_setpoint_changes_and_disturbances(trajs):
+    found = events(trajs["fixed"], DISTURBED)
+    assert found == [(0.0, "setpoint y 0 → 0.5"), (6.0, "setpoint y 0.5 → -0.5"),
+                     (8.0, "u -2 (actuator offset) for 1 s"), (10.0, "y +0.1 (measurement offset)")]
+
+
+def test_the_step_response_zooms_each_transient(trajs):
+    damped = gains_rollout(constant_gains([8.0], [0.25], [0.0]), DISTURBED)  # near the tuned fixed PID: settles in 1 s
+    fig = step_response_figure([("fixed PID", damped), ("adaptive policy", trajs["fixed"])], DISTURBED,
+                               "t", deployed="fixed PID")
+    try:
+        top = fig.axes[:4]  # first row: the measurement, one column per event
+        assert [ax.get_title() for ax in top] == ["t = 0 s: setpoint y 0 → 0.5", "t = 6 s: setpoint y 0.5 → -0.5",
+                                                  "t = 8 s: u -2 (actuator offset) for 1 s",
+                                                  "t = 10 s: y +0.1 (measurement offset)"]
+        starts, ends = zip(*(ax.get_xlim() for ax in top))
+        # each panel starts at most a tenth of its width before its event and ends by the next one
+        for (a, b), t0, t1 in zip(zip(starts, ends), (0.0, 6.0, 8.0, 10.0), (6.0, 8.0, 10.0, 12.0)):
+            assert t0 - 0.1 * (b - a) - 1e-9 <= a <= t0 and t0 < b <= t1 + 1e-9
+        assert ends[1] == pytest.approx(8.0)  # the ringing PID (Kp 2, Ti 0.4 s) does not settle before the pulse
+        fig_damped = step_response_figure([("fixed PID", damped)], DISTURBED, "t")
+        assert fig_damped.axes[0].get_xlim()[1] < 2.0  # alone, the damped one's first step fits in 2 s
+        plt.close(fig_damped)
+        assert top[0].get_ylabel() == "y" and fig.axes[4].get_ylabel() == "u"
+        legend = [t.get_text() for t in fig.axes[3].get_legend().get_texts()]
+        assert legend == ["setpoint", "fixed PID (deployed)", "adaptive policy"]
+    finally:
+        plt.close(fig)

@@ -29,7 +29,8 @@ METRIC_UNITS = {"ISE": "{y}²·s", "IAE": "{y}·s", "ITAE": "{y}·s²", "Oversho
                 "ControlEffort": "{u}²·s", "TotalVariation": "{u}",
                 "Chatter": "fraction"}
 GAIN_UNITS = {"Kp": "{u}/{y}", "Ti": "s", "Td": "s"}
-PLOTS = ((rd.RESPONSE_PLOT, "measurement and setpoint of each controller, disturbances marked"),
+PLOTS = ((rd.STEP_RESPONSE_PLOT, "the evaluation zoomed to each transient (setpoint change or disturbance)"),
+         (rd.RESPONSE_PLOT, "measurement and setpoint of each controller, disturbances marked"),
          (rd.CONTROL_SIGNAL_PLOT, "control signal of each controller, actuator limits and disturbances marked"),
          (rd.GAINS_PLOT, "Kp, Ti, Td set by the adaptive policy, beside the fixed PID's and the gain ranges"),
          (rd.LEARNING_CURVE_PLOT, "training reward"))
@@ -79,8 +80,30 @@ def ended_early_lines(named_metrics) -> list[str]:
 
 
 def plot_links() -> list[str]:
-    """Markdown links to the run's plots."""
-    return ["Plots:", ""] + [f"- [{name}]({name}): {what}" for name, what in PLOTS] + [""]
+    """The step response figure embedded, then markdown links to the run's plots."""
+    return [figure(rd.STEP_RESPONSE_PLOT, "the evaluation zoomed to its transients"), "Plots:", ""] + \
+        [f"- [{name}]({name}): {what}" for name, what in PLOTS] + [""]
+
+
+def figure(path: str, caption: str) -> str:
+    """A figure embedded in markdown, its caption below it (a paragraph each)."""
+    return f"![{caption}]({path})\n\n*{caption[:1].upper() + caption[1:]}* ([{path}]({path}))\n"
+
+
+def frequency_section(files: dict, limit: float) -> str:
+    """The measured frequency responses behind the margins table (run.figures: {loop: {kind: path}}): per loop the
+    Nyquist, |S| and |T|, and Bode figures embedded and the CSV named; "" when none were written."""
+    lines = []
+    for loop, kinds in files.items():
+        lines += [f"Measured frequency responses of loop {loop} behind this table, per controller and operating point "
+                  f"(data: [{kinds['csv']}]({kinds['csv']}), complex P, C, L = C P, S, T as real and imaginary parts):",
+                  ""]
+        for kind, caption in (("nyquist", f"Nyquist curve of L = C P with the Ms limit circle |1 + L| = 1/{limit:g}"),
+                              ("sensitivity", f"|S| and |T| against the Ms limit {limit:g}"),
+                              ("bode", "Bode plot of the plant P and the PID C")):
+            if kind in kinds:
+                lines.append(figure(kinds[kind], f"{caption}, loop {loop}"))
+    return "\n".join(lines)
 
 
 _DESIGNS = {"load": "designed for load rejection under the Ms and noise limits, then b for the setpoint response",

@@ -27,7 +27,8 @@ from prlpid_fmi.rundir import write_atomic
 
 DPI = 110
 POLICY, FIXED, SCHEDULE = "adaptive policy", "fixed PID", "gain schedule"  # the legends' controller names
-COLORS = {POLICY: "tab:blue", FIXED: "tab:orange", SCHEDULE: "tab:green"}
+CLASSICAL = "classical gain schedule"
+COLORS = {POLICY: "tab:blue", FIXED: "tab:orange", SCHEDULE: "tab:green", CLASSICAL: "tab:purple"}
 LINESTYLES = {SCHEDULE: (0, (4, 2))}  # signals of the controllers; "-" for those not named here
 DISTURBANCE_COLOR = "tab:red"
 # A gain axis shows at least this share of the gain's range (in decades on a log range) ...
@@ -38,7 +39,9 @@ MIN_SPAN_OF_VALUE = 0.2
 LOG_AXIS_MIN_RATIO = 10.0  # a log-scale gain gets a log axis only when the axis spans this factor
 
 __all__ = ["plot_response", "plot_control_signal", "plot_gains", "plot_learning_curve", "load_monitor_csvs",
-           "new_figure", "save_figure", "response_figure", "control_signal_figure", "gains_figure", "gain_axis_limits", "disturbance_label"]
+           "new_figure", "save_figure", "response_figure", "control_signal_figure", "gains_figure", "gain_axis_limits",
+           "disturbance_label", "transient_span", "events", "step_response_figure", "load_step_figure",
+           "schedule_gains_figure", "LoadResponse"]
 
 
 def new_figure(nrows: int = 1, ncols: int = 1, figsize=None, **kwargs):
@@ -392,3 +395,272 @@ def plot_learning_curve(monitor_dir, path, window: int = 20, title: str = "Learn
     ax.grid(True, alpha=0.3)
     fig.tight_layout()
     return save_figure(fig, path)
+
+
+# -- transients, zoomed ------------------------------------------------------------------------------------------
+SETTLING_BAND = 0.02  # a transient is over once its deviation stays within this share of its size ...
+NOISE_BAND = 3.0  # ... and within this many standard deviations of the measurement's noise
+SMOOTHING_SAMPLES = 5  # moving average of the deviation before that test
+MIN_WINDOW_SAMPLES = 10  # a zoomed panel spans at least this many samples
+ZOOM_MARGIN = 0.3  # a panel shows this share of the transient's duration after its end, a tenth before its start
+MAX_EVENT_PANELS = 6  # step_response_figure's panels at most (the first events)
+
+
+def transient_span(t, deviation, t0: float, t1: float, size: float | None = None) -> float:
+    """How long [s] a transient starting at t0 lasts within [t0, t1): until the deviation (e.g. y - r; (n+1,) over
+    t [s]), smoothed over SMOOTHING_SAMPLES, stays within max(SETTLING_BAND x size, NOISE_BAND x its noise) of the
+    value it settles at (the median over the last fifth of the interval; the noise from the sample-to-sample
+    differences there, divided by sqrt(SMOOTHING_SAMPLES) for the smoothing). size: the transient's size (default: its largest smoothed deviation). t1 - t0 when it
+    never settles; non-finite samples (an early end) are left out."""
+    t, e = np.asarray(t, float), np.asarray(deviation, float)
+    sel = (t >= t0) & (t < t1) & np.isfinite(e)
+    t, e = t[sel], e[sel]
+    if len(e) < 4:
+        return float(t1 - t0)
+    tail = e[-max(len(e) // 5, 3):]
+    noise = float(np.std(np.diff(tail)) / math.sqrt(2.0))
+    k = min(SMOOTHING_SAMPLES, len(e))
+    d = np.abs(np.convolve(e - float(np.median(tail)), np.ones(k) / k, mode="same"))
+    d[0] = abs(e[0] - float(np.median(tail)))  # the step itself, not averaged away
+    size = float(np.max(d)) if size is None else abs(float(size))
+    band = max(SETTLING_BAND * size, NOISE_BAND * noise / math.sqrt(k), 1e-12)  # the noise left after smoothing
+    outside = np.nonzero(d > band)[0]
+    if len(outside) == 0:
+        return 0.0
+    last = outside[-1] + 1
+    return float((t[last] if last < len(t) else t1) - t0)
+
+
+def events(traj, config: TuningConfig) -> list[tuple[float, str]]:
+    """(time [s], what) of the evaluation's transients in time order: setpoint changes (the trajectory's setpoint
+    rows; at t = 0 where the setpoint differs from the first measurement by more than 1 % of the setpoint range)
+    and the disturbances' starts (disturbance_label). Events at the same time are joined."""
+    ts = config.sample_time_s
+    found: dict[float, list[str]] = {}
+    r, y = np.asarray(traj.setpoint, float), np.asarray(traj.measurement, float)
+    for i, loop in enumerate(config.loops):
+        width = abs(loop.setpoint_range[1] - loop.setpoint_range[0]) or 1.0
+        if abs(r[0, i] - y[0, i]) > 0.01 * width:
+            found.setdefault(0.0, []).append(f"setpoint {loop.output} {y[0, i]:.4g} → {r[0, i]:.4g}")
+        for k in np.nonzero(np.abs(np.diff(r[:, i])) > 1e-12 * max(1.0, width))[0] + 1:
+            found.setdefault(round(float(traj.time_s[k]), 9), []).append(
+                f"setpoint {loop.output} {r[k - 1, i]:.4g} → {r[k, i]:.4g}")
+    for d in config.disturbances:
+        t0 = round(d.start_step * ts, 9)
+        if t0 <= float(traj.time_s[-1]):
+            pulse = "" if d.end_step is None else f" for {(d.end_step - d.start_step) * ts:g} s"
+            found.setdefault(t0, []).append(disturbance_label(d, config) + pulse)
+    return [(t, "; ".join(what)) for t, what in sorted(found.items())]
+
+
+def _window(t0: float, t1: float, span: float, ts: float) -> tuple[float, float]:
+    """A zoomed panel's time range around a transient of `span` s starting at t0, ending by t1."""
+    end = min(t0 + max(span * (1 + ZOOM_MARGIN), MIN_WINDOW_SAMPLES * ts), t1)
+    return max(t0 - 0.1 * (end - t0), 0.0), end
+
+
+def _sliced(traj, a: float, b: float) -> slice:
+    """The rows of traj within [a, b] [s]."""
+    k0 = int(np.searchsorted(traj.time_s, a - 1e-9))
+    k1 = int(np.searchsorted(traj.time_s, b + 1e-9, side="right"))
+    return slice(k0, max(k1, k0 + 2))
+
+
+def _limits_on_scale(ax, loop) -> None:
+    """The loop's actuator limits as dotted lines where they lie within the axis (the axis kept)."""
+    bottom, top = ax.get_ylim()
+    for limit in (loop.u_min, loop.u_max):
+        if np.isfinite(limit) and bottom <= limit <= top:
+            ax.axhline(limit, color="gray", ls=":", lw=1, label="actuator limits")
+    ax.set_ylim(bottom, top)
+
+
+def _named(name: str, deployed: str | None) -> str:
+    return f"{name} (deployed)" if deployed is not None and name == deployed else name
+
+
+def _unique_legend(ax) -> None:
+    handles, labels = ax.get_legend_handles_labels()
+    seen = dict(zip(labels, handles))
+    ax.legend(list(seen.values()), list(seen.keys()), loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0,
+              fontsize=8)
+
+
+def step_response_figure(pairs, config: TuningConfig, title: str = "Transients", deployed: str | None = None):
+    """The evaluation zoomed to its transients: one column per event (setpoint change or disturbance, `events`; the
+    first MAX_EVENT_PANELS), the measurement and the control signal of every loop in rows, for each controller in
+    pairs [(name, Trajectory), ...]; each column spans its transient (`transient_span` of the slowest controller,
+    ZOOM_MARGIN past it), at most up to the next event. deployed: the name to mark "(deployed)"."""
+    y_units, u_units = loop_units(config)
+    ts, n = config.sample_time_s, config.n_loops
+    first = pairs[0][1]
+    t_end = float(first.time_s[-1])
+    found = events(first, config) or [(0.0, "the evaluation (no setpoint change or disturbance)")]
+    shown = found[:MAX_EVENT_PANELS]
+    m = len(shown)
+    fig, axes = new_figure(2 * n, m, figsize=(1.9 + 3.7 * m, 0.9 + 2.1 * 2 * n), squeeze=False)
+    for j, (t0, what) in enumerate(shown):
+        t1 = found[j + 1][0] if j + 1 < len(found) else t_end
+        span = 0.0
+        for _, traj in pairs:
+            for i in range(n):
+                size = None
+                k = int(np.searchsorted(traj.time_s, t0 - 1e-9))
+                if "setpoint" in what and k < len(traj.time_s):
+                    before = traj.measurement[0, i] if k == 0 else traj.setpoint[max(k - 1, 0), i]
+                    size = abs(traj.setpoint[k, i] - before) or None
+                span = max(span, transient_span(traj.time_s, traj.measurement[:, i] - traj.setpoint[:, i], t0, t1, size))
+        a, b = _window(t0, t1, span, ts)
+        for i, loop in enumerate(config.loops):
+            ax_y, ax_u = axes[2 * i, j], axes[2 * i + 1, j]
+            sl = _sliced(first, a, b)
+            ax_y.plot(first.time_s[sl], first.setpoint[sl, i], "k--", lw=1.2, label="setpoint")
+            for name, traj in pairs:
+                sl = _sliced(traj, a, b)
+                style = dict(color=COLORS.get(name), ls=LINESTYLES.get(name, "-"), label=_named(name, deployed),
+                             lw=1.6 if name == deployed else 1.2)
+                ax_y.plot(traj.time_s[sl], traj.measurement[sl, i], **style)
+                ax_u.step(traj.time_s[sl], traj.control_signal[sl, i], where="post", **style)
+            _limits_on_scale(ax_u, loop)
+            for ax in (ax_y, ax_u):
+                ax.set_xlim(a, b)
+                ax.grid(True, alpha=0.3)
+                if t0 > a:
+                    ax.axvline(t0, color=DISTURBANCE_COLOR, ls="-.", lw=1.0, alpha=0.8)
+            if j == 0:
+                ax_y.set_ylabel(_label(loop.output, y_units[i]))
+                ax_u.set_ylabel(_label(loop.input, u_units[i]))
+        axes[0, j].set_title(f"t = {t0:g} s: {what}", fontsize=9)
+        axes[-1, j].set_xlabel("time [s]")
+    _unique_legend(axes[0, -1])
+    if len(axes) > 1:
+        _unique_legend(axes[1, -1])
+    more = f" (the first {m} of {len(found)} events)" if len(found) > m else ""
+    fig.suptitle(title + more, fontsize=11)
+    fig.tight_layout()
+    return fig
+
+
+# -- load steps -------------------------------------------------------------------------------------------------
+class LoadResponse:
+    """One operating point of the load experiment (tuning.load_design.load_experiment) with one controller:
+    point: setpoints per loop; loads: the load per loop [input units], loop i's from hold_steps x (i + 1) samples on;
+    loaded: the Trajectory with the loads, unloaded: the same controller's run without them."""
+
+    def __init__(self, point, loads, loaded, unloaded, hold_steps: int):
+        self.point, self.loads, self.loaded, self.unloaded = list(point), list(loads), loaded, unloaded
+        self.hold_steps = int(hold_steps)
+
+
+def load_step_figure(runs: dict, config: TuningConfig, title: str = "Load steps at the plant input",
+                     deployed: str | None = None):
+    """The load experiment's responses: runs {controller name: [LoadResponse per operating point]}; one column per
+    operating point, the measurement (dotted: the same controller's run without the load, from which the load IAE
+    counts y's deviation) and the control signal of every loop in rows, against the time since that loop's load step,
+    zoomed to the slowest controller's recovery (`transient_span` of y - y_unloaded)."""
+    y_units, u_units = loop_units(config)
+    ts, n = config.sample_time_s, config.n_loops
+    names = list(runs)
+    points = len(runs[names[0]]) if names else 0
+    fig, axes = new_figure(2 * n, max(points, 1), figsize=(1.9 + 3.7 * max(points, 1), 0.9 + 2.1 * 2 * n),
+                           squeeze=False)
+    for j in range(points):
+        reference = runs[names[0]][j]
+        for i, loop in enumerate(config.loops):
+            t_load = reference.hold_steps * (i + 1) * ts
+            t1 = t_load + reference.hold_steps * ts
+            span = 0.0
+            for name in names:
+                r = runs[name][j]
+                dev = r.loaded.measurement[:, i] - r.unloaded.measurement[:, i]
+                span = max(span, transient_span(r.loaded.time_s, dev, t_load, t1))
+            a, b = _window(t_load, t1, span, ts)
+            ax_y, ax_u = axes[2 * i, j], axes[2 * i + 1, j]
+            sl = _sliced(reference.loaded, a, b)
+            t = reference.loaded.time_s[sl] - t_load
+            ax_y.plot(t, reference.loaded.setpoint[sl, i], "k--", lw=1.2, label="setpoint")
+            for name in names:
+                r = runs[name][j]
+                sl = _sliced(r.loaded, a, b)
+                style = dict(color=COLORS.get(name), ls=LINESTYLES.get(name, "-"), label=_named(name, deployed),
+                             lw=1.6 if name == deployed else 1.2)
+                ax_y.plot(r.loaded.time_s[sl] - t_load, r.loaded.measurement[sl, i], **style)
+                su = _sliced(r.unloaded, a, b)
+                ax_y.plot(r.unloaded.time_s[su] - t_load, r.unloaded.measurement[su, i], color=COLORS.get(name), ls=":",
+                          lw=0.9)
+                ax_u.step(r.loaded.time_s[sl] - t_load, r.loaded.control_signal[sl, i], where="post", **style)
+            ax_y.plot([], [], color="0.3", ls=":", lw=0.9, label="the same without the load")
+            _limits_on_scale(ax_u, loop)
+            for ax in (ax_y, ax_u):
+                ax.set_xlim(a - t_load, b - t_load)
+                ax.axvline(0.0, color=DISTURBANCE_COLOR, ls="-.", lw=1.0, alpha=0.8, label="load step")
+                ax.grid(True, alpha=0.3)
+            if j == 0:
+                ax_y.set_ylabel(_label(loop.output, y_units[i]))
+                ax_u.set_ylabel(_label(loop.input, u_units[i]))
+        point = ", ".join(f"{l.output} = {v:.4g}" for l, v in zip(config.loops, reference.point))
+        loads = ", ".join(f"{d:+.3g} {u}".rstrip() + f" on {l.input}"
+                          for l, d, u in zip(config.loops, reference.loads, u_units))
+        axes[0, j].set_title(f"setpoint {point}; load {loads}", fontsize=9)
+        axes[-1, j].set_xlabel("time since the load step [s]")
+    if names:
+        _unique_legend(axes[0, -1])
+        if len(axes) > 1:
+            _unique_legend(axes[1, -1])
+    fig.suptitle(title, fontsize=11)
+    fig.tight_layout()
+    return fig
+
+
+# -- gains over the scheduling variable --------------------------------------------------------------------------
+def schedule_gains_figure(tables, config: TuningConfig, fixed=None, deployed: str | None = None,
+                          title: str = "PID gains over the scheduling variable"):
+    """Kp, Ti, Td (rows) of each gain table in tables [(name, tuning.schedule.table.GainSchedule), ...] against its
+    scheduling variable (one column per variable), marked at the breakpoints and linear between them as the PID
+    interpolates (held constant outside: not drawn); fixed: the fixed PID's loop.gains.Gains, dashed; each loop's
+    gain range shaded where on scale."""
+    y_units, u_units = loop_units(config)
+    variables = list(dict.fromkeys((t.variable, t.unit) for _, t in tables))
+    fig, axes = new_figure(3, max(len(variables), 1), figsize=(2.2 + 5.0 * max(len(variables), 1), 7.4),
+                           squeeze=False)
+    multi = config.n_loops > 1
+    loop_styles = ("-", "--", ":", "-.")
+    for c, (variable, unit) in enumerate(variables):
+        for r, key in enumerate(("Kp", "Ti", "Td")):
+            ax = axes[r, c]
+            drawn = []
+            for name, table in tables:
+                if (table.variable, table.unit) != (variable, unit):
+                    continue
+                values = np.asarray(getattr(table, key), float)
+                for i, loop in enumerate(config.loops):
+                    label = _named(name, deployed) + (f", {loop.output}" if multi else "")
+                    ax.plot(table.breakpoints, values[:, i], marker="o", ms=4, color=COLORS.get(name),
+                            ls=loop_styles[i % len(loop_styles)], lw=1.4, label=label)
+                    drawn.append(values[:, i])
+            if fixed is not None:
+                for i, loop in enumerate(config.loops):
+                    v = float(np.asarray(getattr(fixed, key), float)[i])
+                    ax.axhline(v, color=COLORS[FIXED], ls=loop_styles[i % len(loop_styles)] if multi else "--", lw=1.2,
+                               label=_named(FIXED, deployed) + (f", {loop.output}" if multi else ""))
+                    drawn.append(np.array([v]))
+            rng = [getattr(l, key) for l in config.loops]
+            low, high = min(g.low for g in rng), max(g.high for g in rng)
+            scale = "log" if all(g.scale == "log" for g in rng) else "linear"
+            bottom, top, log = gain_axis_limits(np.concatenate(drawn) if drawn else [], low, high, scale)
+            _format_gain_axis(ax, log)
+            ax.set_ylim(bottom, top)
+            _shade_outside(ax, low, high)
+            if key == "Kp":
+                units = {f"{u or 'u'}/{y or 'y'}" for u, y in zip(u_units, y_units)}
+                ax.set_ylabel(f"Kp [{units.pop() if len(units) == 1 else 'u/y'}]")
+            else:
+                ax.set_ylabel(f"{key} [s]")
+            ax.grid(True, alpha=0.3)
+        axes[-1, c].set_xlabel(_label(variable, unit))
+        for ax in axes[:, c]:
+            ax.xaxis.set_major_locator(ticker.MaxNLocator(nbins=6))
+        _unique_legend(axes[0, c])
+    fig.suptitle(title, fontsize=11)
+    fig.tight_layout()
+    return fig

@@ -55,7 +55,8 @@ def evaluate_controllers(scenario: Scenario, policy, fixed: dict | None, anchor=
 
 
 def write_evaluation_files(out_dir: Path, scenario: Scenario, ev: Evaluation, fixed: dict | None) -> None:
-    """gains.csv (the policy's trajectory) and the response, control-signal and gains plots."""
+    """gains.csv (the policy's trajectory) and the response (whole and zoomed to its transients), control-signal and
+    gains plots."""
     from prlpid_fmi.report import plots
 
     config = ev.config
@@ -65,6 +66,10 @@ def write_evaluation_files(out_dir: Path, scenario: Scenario, ev: Evaluation, fi
                         baseline_traj=ev.fixed_traj, schedule_traj=ev.schedule_traj)
     plots.plot_control_signal(ev.policy_traj, config, out_dir / rd.CONTROL_SIGNAL_PLOT, baseline_traj=ev.fixed_traj,
                               schedule_traj=ev.schedule_traj, title=f"{scenario.name}: control signal")
+    pairs = [(name, t) for name, t in ((plots.POLICY, ev.policy_traj), (plots.FIXED, ev.fixed_traj),
+                                       (plots.SCHEDULE, ev.schedule_traj)) if t is not None]
+    plots.save_figure(plots.step_response_figure(pairs, config, f"{scenario.name}: transients"),
+                      out_dir / rd.STEP_RESPONSE_PLOT)
     plots.plot_gains(ev.policy_traj, config, out_dir / rd.GAINS_PLOT, baseline_gains=fixed["gains"] if fixed else None,
                      schedule_traj=ev.schedule_traj, title=f"{scenario.name}: PID gains set by the adaptive policy")
 

@@ -27,7 +27,14 @@ from prlpid_fmi import rundir as rd
 from prlpid_fmi.deliver.rule import Decision, Deployed
 from prlpid_fmi.errors import ArgumentError, Interrupted, PrlPidError
 from prlpid_fmi.loop.gains import gains_from_dict
-from prlpid_fmi.report.markdown import candidates_table, design_section, loop_units, margins_table
+from prlpid_fmi.report.markdown import (
+    candidates_table,
+    design_section,
+    figure,
+    frequency_section,
+    loop_units,
+    margins_table,
+)
 from prlpid_fmi.run.evaluate import (
     Evaluation,
     evaluate_controllers,
@@ -322,6 +329,17 @@ def files_stage(run_dir: Path, started: Started, ev: Evaluation, fixed: dict | N
 
     scenario, info = started.scenario, started.info
     metrics, opening, title = evaluation_metrics(ev, fixed), (), ""
+    figures = None
+    if fixed is not None:
+        from prlpid_fmi.progress import stage
+        from prlpid_fmi.run.figures import write_run_figures
+
+        with stage("figures", False):  # run.json stage_seconds: what the figures cost
+            try:
+                figures = write_run_figures(run_dir, scenario, ev, choice, gains_from_dict(fixed["gains"]),
+                                            table.table, classical)
+            except PrlPidError as exc:  # a replay the FMU failed: the run's results are written all the same
+                warnings.warn(f"{run_dir}: figures not drawn: {exc}", stacklevel=2)
     if choice is not None:
         deployed = {Deployed.SCHEDULE: table.table, Deployed.CLASSICAL: classical,
                     Deployed.FIXED_PID: fixed_schedule(gains_from_dict(fixed["gains"]), scenario.tuning)
@@ -353,9 +371,14 @@ def files_stage(run_dir: Path, started: Started, ev: Evaluation, fixed: dict | N
                            scenario.tuning.gain_mapping, choice.classical, findings).rstrip(), "",
                    *((note, "") if (note := classical_note(info.get("classical_schedule"))) else ()),
                    candidates_table(choice.schedule, choice.fixed, units, classical=choice.classical),
+                   *((figure(figures.load_steps, "load steps at the plant input, the design's load experiment (the "
+                                                 "load IAE row)"),) if figures else ()),
+                   *((figure(figures.schedule_gains, "PID gains over the scheduling variable"),)
+                     if figures and figures.schedule_gains else ()),
                    "### Robustness at each operating point", "",
                    margins_table((choice.fixed, choice.classical, choice.schedule), max_sensitivity(scenario),
                                  units[0]),
+                   frequency_section(figures.frequency if figures else {}, max_sensitivity(scenario)),
                    design_section(fixed, [l.output for l in scenario.tuning.loops]))
     elif table.table is not None:
         write_schedule_csv(table.table, run_dir / rd.SCHEDULE)
