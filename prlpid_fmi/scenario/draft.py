@@ -68,7 +68,7 @@ def init_scenario(fmu_path: str | Path, output: Optional[str] = None,
     given = {k: v for k, v in start_values.items() if k not in d.input_names}
     others = "\n".join(f"    #   {line}" for line in loop.others) or "    #   none"
     strategies, agent = m.StrategiesModel(), m.AgentModel()
-    n_train = default(m.TrainingModel, "episode_steps")
+    n_train = loop.episode_steps
     n_eval = 2 * n_train
     prior_problems = d.prior_problems()
     if prior_problems:
@@ -118,8 +118,8 @@ agent:
   total_timesteps: {agent.total_timesteps}
   seed: {agent.seed}
 training:
-  episode_steps: {n_train}   # a few closed-loop settling times at the sample time above [samples]
-  setpoint_hold_steps: {default(m.TrainingModel, 'setpoint_hold_steps')}   # samples between random setpoint changes
+  episode_steps: {n_train}   # two setpoint holds at least [samples]
+  setpoint_hold_steps: {loop.hold_steps}   # samples between random setpoint changes: {w['hold']}
 evaluation:
   episode_steps: {n_eval}
   setpoints:   # value: a number (one loop) or a list with one number per loop
