@@ -245,6 +245,8 @@ def propose_loop(result: ProbeResult, output_why: str = "") -> LoopProposal:
     out = d.variable(result.output)
     _require_holdable(r, sweep, result)
     sp = _setpoint_range(r, out, u_trim, u_limits, result, why, sweep)
+    if "ADJUST" in why["u_limits"] and "ADJUST" not in why["setpoint_range"] and out.min is None and out.max is None:
+        why["setpoint_range"] += "; ADJUST with u_limits, which the FMU does not declare"
     scale = _round(max((sp[1] - sp[0]) / 2, 1e-12))
     design = _design(r, u_trim, u_limits, sp, result, why, d.own_step_s)
     kc, ti, td, sign = design.kp, design.ti, design.td, design.sign
@@ -441,13 +443,14 @@ def _design(r: StepResponse, u_trim: float, u_limits, sp, result: ProbeResult, w
         ts = snap_sample_time(r.sample_time_s)
         why["sample_time"] = (f"the probe's step: {result.output} follows {r.input} within one step, so there is no "
                               "time scale to choose it from; ADJUST to the controller's period")
-        if r.dead_time_s > 0:  # a gain behind a delay: low-gain integral action, slower the longer the delay
-            kc, ti = 0.15 / abs(K), 2 * (r.dead_time_s + ts)
+        if r.dead_time_s > 0:  # a gain behind a delay (the sample adds one step to it): AMIGO's PI for τ = 0
+            kc, ti = 0.15 / abs(K), 0.35 * (r.dead_time_s + ts)
         else:  # with the step's one-sample delay: closed-loop poles 0.78 and -0.38
             kc, ti = 0.3 / abs(K), ts
         why["gains"] = (f"a static gain {K:.4g}{f' behind a {r.dead_time_s:.3g} s delay' if r.dead_time_s else ''}: "
                         f"integral action does the work (Kp {kc:.3g}, Ti {ti:.3g} s)")
-        return Design(kc, ti, 0.0, ts, math.copysign(1.0, K), ts, 5 * (ti + r.dead_time_s))
+        # integral action alone: the closed loop's time constant is about Ti / (K Kp)
+        return Design(kc, ti, 0.0, ts, math.copysign(1.0, K), ts, 5 * ti / (abs(K) * kc) + r.dead_time_s)
     if r.kind == "unstable":
         return _unstable_design(r, headroom, step, why, fmu_step_s)
     if model is None:  # an integrator the probe could not model: its rate alone
@@ -461,12 +464,13 @@ def _design(r: StepResponse, u_trim: float, u_limits, sp, result: ProbeResult, w
     if tau_c <= 0:
         tau_c = 10 * (fmu_step_s or MIN_SAMPLE_TIME_S)
     tau2 = lags[-1] if (m == 0 and len(lags) == 2) or (m == 1 and lags) else 0.0
-    limits = [(tau_c / 5, "τc/5")] + ([(theta / 2, "θ/2")] if theta > 0 else []) + (
+    limits = [(tau_c / 5, "τc/5")] + (
         [(tau2 / 4, f"a quarter of the lag τ2 = {tau2:.3g} s the derivative acts on")] if tau2 > 0 else [])
     limit, reason = min(limits)
-    why["sample_time"] = (f"{limit:.3g} s, {reason}: τc = {tau_c:.3g} s = max(effective delay θ = "
-                          f"{theta:.3g} s, {t_act:.3g} s for the bandwidth the actuator's range allows"
-                          + (f", τ1/4 = {floor:.3g} s" if floor else "") + ")")
+    actuator = (f"{t_act:.3g} s for the bandwidth the actuator's range allows" if math.isfinite(t_act) else
+                "no bound from the actuator: by the probe's local gain its headroom moves less than a typical step")
+    why["sample_time"] = (f"{limit:.3g} s, {reason}: τc = {tau_c:.3g} s = max(effective delay θ = {theta:.3g} s, "
+                          f"{actuator}" + (f", τ1/4 = {floor:.3g} s" if floor else "") + ") (probe)")
     ts = _snap_floor(limit, fmu_step_s, why, f"the loop's closed-loop time constant is {tau_c:.3g} s")
     tc = tau_c + theta
     if m == 0:
@@ -483,7 +487,9 @@ def _design(r: StepResponse, u_trim: float, u_limits, sp, result: ProbeResult, w
     kp, ti, td = kc * (1 + tau2 / tau_i), tau_i + tau2, tau_i * tau2 / (tau_i + tau2)
     why["gains"] = (f"SIMC on the {r.mechanism} ({form}, θ = {theta:.3g} s by the half rule, τc = {tau_c:.3g} s): "
                     f"Kp {kp:.3g}, Ti {ti:.3g} s, Td {td:.3g} s")
-    settle = 5 * tc if m == 0 else 8 * tc
+    # the loop's fast mode settles in a few τc + θ; where the integral action does not cancel the slowest lag
+    # (τI < τ1, or an integrating plant), its slow mode of about Ti takes longer
+    settle = max(5 * tc, 2 * ti) if m == 0 else max(8 * tc, 4 * ti)
     return Design(kp, ti, td, max(3 * td, 2 * ts, r.dead_time_s), math.copysign(1.0, K), ts, settle)
 
 
@@ -520,4 +526,4 @@ def _unstable_design(r: StepResponse, headroom: float, step: float, why: dict, f
     if model is not None and _actuator_time(model, headroom, step) > 1 / (2 * lam):
         why["gains"] += (f"; ADJUST: the actuator's range moves a {step:.3g} setpoint step only below "
                          f"{1 / _actuator_time(model, headroom, step):.3g} rad/s, slower than the 2 λ a stabilising loop needs")
-    return Design(kc, ti, td, max(3 * td, 0.2 / lam, 2 * ts), math.copysign(1.0, b), ts, settle)
+    return Design(kc, ti, td, max(3 * td, 0.2 / lam, 2 * ts), math.copysign(1.0, b), ts, max(settle, 4 * ti))

@@ -12,6 +12,14 @@ p ≈ 0: integrating, rate = dΔy/dt / du (output units per second per input uni
 samples (a lag's slow start is not a dead time). The sampling grid adapts: 400 samples of T/40 (or 1/(40λ)), so a 2 ms motor and a room with an
 hour-long time constant are both resolved.
 
+The mechanism (MECHANISMS: pure integrator, integrator with lag, double integrator, oscillator, lag, lag with
+delay, delay, inverse response, unstable, static) comes from the model's poles at zero, the lags the grid
+resolves, a lightly damped pair, Δy first moving against its final value (a right-half-plane zero) and the dead
+time; the transfer function itself (`Model`) is the least-squares fit of Δy by the step response through the
+ARX poles, so its zeros and high-frequency gain are read as well. A run that reaches a stop (the output pinned
+at one value after moving: a ball on its magnet, an empty tank) is fitted up to the stop, so an unstable plant's
+growth rate and gain are read before it. An integrating response is sampled on the grid that resolves its lag.
+
 Beyond the dominant pole: a lightly damped complex pair gives the oscillation's period (2π/ω_d, the fit of
 the oscillation itself, not of its decay envelope) and damping ratio; a stable response whose steady
 change is below ZERO_GAIN_FRACTION of its peak is a zero-gain pulse (a rate of what the input moves, e.g. a
@@ -439,8 +447,10 @@ def _fit(t: np.ndarray, dy: np.ndarray, dt: float, du: float, y_scale: float, ma
         rate = float(np.mean(np.diff(dy[-max(3, n // 10):])) / dt / du)
         if model is None or model.integrators == 0:
             model = None
-        return _Fit("integrating", rate=rate, dead=dead, model=model,
-                    mechanism=_mechanism("integrating", model, dy, dt, horizon, dead, None))
+        mechanism = _mechanism("integrating", model, dy, dt, horizon, dead, None)
+        if mechanism == "integrator with lag":   # the final slope still carries the lag's tail: the model's rate
+            rate = model.low_frequency_gain
+        return _Fit("integrating", rate=rate, dead=dead, model=model, mechanism=mechanism)
     gain = float(b * scale / (1.0 - np.sum(a)) / du)           # G(0): the model's steady state (formal if unstable)
     period, damping = _oscillation(poles, dominant)
     kind = "unstable" if dominant.real > 0 else "stable"
@@ -764,8 +774,13 @@ def _time_unit(span_s: float) -> tuple[float, str]:
 
 
 def _model_response(r: StepResponse) -> Optional[np.ndarray]:
-    """The fitted first-order model's Δy(t) (None for "none")."""
+    """The identified model's Δy(t) (else the first-order one of its kind; None for "none")."""
     t = np.maximum(r.time_s - r.dead_time_s, 0.0)
+    if r.model is not None:
+        from scipy import signal
+
+        _, y = signal.step((r.model.num, r.model.den), T=t)
+        return np.where(r.time_s >= r.dead_time_s, y * r.du, 0.0)
     if r.kind == "stable":
         return r.gain * r.du * (1 - np.exp(-t / r.time_constant_s))
     if r.kind == "unstable":
