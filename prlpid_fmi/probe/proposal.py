@@ -125,9 +125,9 @@ def _unusable_reason(r: StepResponse) -> str:
 
 
 def choose_loop(results: dict) -> tuple[ProbeResult, str]:
-    """The output to measure of a multi-output probe ({output: ProbeResult}, `probe_outputs`): the first output in
-    the FMU's order with a usable pair whose input is not disturbance-like, else the first with any usable
-    pair. Returns (its ProbeResult, why). PlantError (one line) when no output has a usable input."""
+    """The output to measure of a multi-output probe ({output: ProbeResult}, `probe_outputs`): of a position and
+    its rate, the one the mechanism calls for (`_passed_over`); then the first output in the FMU's order with a
+    usable pair whose input is not disturbance-like, else the first with any usable pair. Returns (its ProbeResult, why). PlantError (one line) when no output has a usable input."""
     ordered = list(results.values())
     passed = _passed_over(results)
     candidates = [p for p in ordered if p.output not in passed]
