@@ -52,6 +52,8 @@ class FmuDescription:
     n_event_indicators: int = 0
     default_start_time_s: float | None = None   # DefaultExperiment startTime [s]
     default_stop_time_s: float | None = None    # DefaultExperiment stopTime [s] (some FMUs refuse steps past it)
+    own_step_s: float | None = None   # the only step a co-simulation FMU takes: its fixedInternalStepSize (FMI 3.0),
+                                      # or its DefaultExperiment stepSize when it cannot vary the step (FMI 2.0)
 
     def variable(self, name: str) -> FmuVariable | None:
         for v in self.variables:
@@ -185,7 +187,23 @@ def _describe(path: str, mtime: float) -> FmuDescription:
         once_per_process=bool(cs and cs.canBeInstantiatedOnlyOncePerProcess),
         n_states=int(md.numberOfContinuousStates or len(md.derivatives)),
         n_event_indicators=int(md.numberOfEventIndicators or 0), default_start_time_s=start,
-        default_stop_time_s=stop)
+        default_stop_time_s=stop, own_step_s=_own_step(md, step))
+
+
+def _own_step(md, step: float | None) -> float | None:
+    """The step a co-simulation FMU is bound to (None: it takes any step)."""
+    co = md.coSimulation
+    if co is None:
+        return None
+    fixed = getattr(co, "fixedInternalStepSize", None)
+    try:
+        if fixed is not None and float(fixed) > 0:
+            return float(fixed)
+    except (TypeError, ValueError):
+        pass
+    if getattr(co, "canHandleVariableCommunicationStepSize", True) is False and step:
+        return float(step)
+    return None
 
 
 def missing_fmu_text(path: Path) -> str:

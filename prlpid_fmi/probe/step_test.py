@@ -12,6 +12,14 @@ p ≈ 0: integrating, rate = dΔy/dt / du (output units per second per input uni
 samples (a lag's slow start is not a dead time). The sampling grid adapts: 400 samples of T/40 (or 1/(40λ)), so a 2 ms motor and a room with an
 hour-long time constant are both resolved.
 
+The mechanism (MECHANISMS: pure integrator, integrator with lag, double integrator, oscillator, lag, lag with
+delay, delay, inverse response, unstable, static) comes from the model's poles at zero, the lags the grid
+resolves, a lightly damped pair, Δy first moving against its final value (a right-half-plane zero) and the dead
+time; the transfer function itself (`Model`) is the least-squares fit of Δy by the step response through the
+ARX poles, so its zeros and high-frequency gain are read as well. A run that reaches a stop (the output pinned
+at one value after moving: a ball on its magnet, an empty tank) is fitted up to the stop, so an unstable plant's
+growth rate and gain are read before it. An integrating response is sampled on the grid that resolves its lag.
+
 Beyond the dominant pole: a lightly damped complex pair gives the oscillation's period (2π/ω_d, the fit of
 the oscillation itself, not of its decay envelope) and damping ratio; a stable response whose steady
 change is below ZERO_GAIN_FRACTION of its peak is a zero-gain pulse (a rate of what the input moves, e.g. a
@@ -51,6 +59,77 @@ def is_disturbance_like(name: str, description: str = "") -> bool:
     return any(word in text for word in DISTURBANCE_WORDS)
 
 
+MECHANISMS = ("pure integrator", "integrator with lag", "double integrator", "oscillator", "lag", "lag with delay",
+              "delay", "inverse response", "unstable", "static", "none")
+INVERSE_FRACTION = 0.01         # Δy first moving against its final value by more than this part of it: inverse response
+STOP_INCREMENTS = 4             # a run pinned at one value after at least this many moving samples ran onto a stop
+
+
+@dataclass(frozen=True)
+class Model:
+    """The identified linear model G(s) e^(-L s) = num(s)/den(s) e^(-L s) of a step response, per input unit:
+    num and den are polynomial coefficients, highest power first (den monic); integrating poles are exactly 0."""
+
+    num: tuple[float, ...]
+    den: tuple[float, ...]
+    dead_time_s: float = 0.0
+
+    @property
+    def poles(self) -> np.ndarray:
+        return np.roots(self.den) if len(self.den) > 1 else np.zeros(0)
+
+    @property
+    def zeros(self) -> np.ndarray:
+        return np.roots(self.num) if len(self.num) > 1 else np.zeros(0)
+
+    @property
+    def integrators(self) -> int:
+        """How many poles are at s = 0."""
+        k = 0
+        for c in reversed(self.den):
+            if c != 0.0:
+                break
+            k += 1
+        return k
+
+    @property
+    def low_frequency_gain(self) -> float:
+        """lim s->0 s^m G(s) for m integrators: the steady gain (m = 0), the rate (1), the curvature d²y/dt² (2)."""
+        den = self.den[:len(self.den) - self.integrators]
+        return float(self.num[-1] / den[-1]) if den[-1] else math.nan
+
+    @property
+    def high_frequency_gain(self) -> float:
+        """lim s->inf s^r G(s), r the relative degree: the sign and size of the first move after a step."""
+        return float(self.num[0] / self.den[0])
+
+    def magnitude(self, w: np.ndarray) -> np.ndarray:
+        """|G(jw)| (the delay does not change it), shape of w."""
+        s = 1j * np.asarray(w, dtype=float)
+        return np.abs(np.polyval(self.num, s) / np.polyval(self.den, s))
+
+    def text(self) -> str:
+        """G(s) as factors, e.g. '2 (1 - 5 s) / ((30 s + 1) (15 s + 1))' with e^(-L s) when delayed."""
+        k = self.low_frequency_gain
+        m = self.integrators
+        factors = []
+        for p in sorted(self.poles, key=lambda p: abs(p)):
+            if abs(p) == 0 or p.imag < 0:
+                continue
+            if p.imag > 0:
+                wn, zeta = abs(p), -p.real / abs(p)
+                factors.append(f"(s²/{wn:.3g}² + 2·{zeta:.3g} s/{wn:.3g} + 1)")
+            else:
+                factors.append(f"({-1 / p.real:.4g} s + 1)" if p.real < 0 else f"({1 / p.real:.4g} s - 1)")
+        zeros = [f"(1 - {1 / z.real:.4g} s)" if z.real > 0 else f"(1 + {-1 / z.real:.4g} s)"
+                 for z in self.zeros if abs(z.imag) < 1e-9 and z.real != 0]
+        unstable_sign = (-1) ** sum(1 for p in self.poles if p.real > 0 and abs(p.imag) < 1e-12)
+        text = f"{k * unstable_sign:.4g}" + (" " + " ".join(zeros) if zeros else "")
+        below = ("s" if m == 1 else f"s^{m}" if m else "") + (" " if m and factors else "") + " ".join(factors)
+        text += f" / ({below})" if below else ""
+        return text + (f" e^(-{self.dead_time_s:.3g} s)" if self.dead_time_s > 0 else "")
+
+
 @dataclass(frozen=True)
 class StepResponse:
     """One input's open-loop step response on one output, around the start values.
@@ -80,6 +159,9 @@ class StepResponse:
     period_s: Optional[float] = None         # oscillation period 2π/ω_d of the least damped complex pair
     damping_ratio: Optional[float] = None    # its damping ratio ζ
     rate_of: Optional[str] = None            # this output's response is the time derivative of that output's
+    mechanism: str = ""                      # what the response shows (MECHANISMS), said in the probe's output
+    model: Optional[Model] = None            # the identified linear model (None: static, none)
+    stop_s: Optional[float] = None           # when a run reached a stop (the output pinned): fitted before it
 
     @property
     def peak(self) -> float:
@@ -111,7 +193,7 @@ class StepResponse:
     def output_change_per_unit(self) -> float:
         """How much one input unit moves the output: |gain| (stable, unstable), |rate| x 10 T_sample
         (integrating: the change over ten samples), 0 (none)."""
-        if self.zero_gain or self.rate_of:
+        if self.zero_gain:
             return 0.0
         if self.kind in ("stable", "unstable", "static"):
             return abs(self.gain)
@@ -131,6 +213,8 @@ class StepResponse:
         elif self.kind == "unstable":
             what = (f"UNSTABLE, grows as e^(λt) with λ = {self.growth_rate_per_s:.4g} 1/s "
                     f"(time constant {self.time_constant_s:.4g} s), formal steady-state gain {self.gain:.4g}{osc}")
+        elif self.kind == "integrating" and self.mechanism == "double integrator":
+            what = f"integrating twice, d²y/dt² = {self.model.low_frequency_gain:.4g} per s² per input unit"
         elif self.kind == "integrating":
             what = f"integrating, rate {self.rate:.4g} per s per input unit"
         elif self.kind == "static":
@@ -138,6 +222,10 @@ class StepResponse:
         else:
             return f"{self.input}: does not move {self.output}"
         dead = f", dead time {self.dead_time_s:.4g} s" if self.dead_time_s > 0 else ""
+        if self.stop_s is not None:
+            dead += f"; reached a stop after {self.stop_s:.4g} s (fitted before it)"
+        if self.mechanism:
+            dead += f"; {self.mechanism.upper()}" + (f": G(s) = {self.model.text()}" if self.model is not None else "")
         flag = "  (looks like a disturbance input)" if self.disturbance_like else ""
         if self.rate_of:
             flag += f"  (the rate of {self.rate_of})"
@@ -236,6 +324,8 @@ class _Fit:
     dead: float = 0.0
     period: Optional[float] = None
     damping: Optional[float] = None
+    model: Optional[Model] = None
+    mechanism: str = ""
 
 
 def _oscillation(poles: np.ndarray, dominant: complex) -> tuple[Optional[float], Optional[float]]:
@@ -251,17 +341,89 @@ def _oscillation(poles: np.ndarray, dominant: complex) -> tuple[Optional[float],
     return float(2 * math.pi / p.imag), zeta
 
 
+def _model(t: np.ndarray, y: np.ndarray, poles: np.ndarray, integrators: int, dead: float) -> Optional[Model]:
+    """The transfer function whose step response through `poles` (plus `integrators` poles at 0) fits y(t) (per
+    input unit, t from the end of the dead time) best: y = c0 + Σ c_j t^j + Σ a_i e^(p_i t) by least squares,
+    then G(s) = s Y(s). The numerator is strictly proper; terms too small to matter at the fastest pole's
+    frequency are dropped (fitting noise, not zeros)."""
+    cols, kinds = [np.ones_like(t)], []
+    for j in range(1, integrators + 1):
+        cols.append(t ** j)
+    for p in poles:
+        if abs(p.imag) < 1e-12:
+            cols.append(np.exp(np.clip(p.real * t, -700, 700)))
+            kinds.append((complex(p.real, 0.0), False))
+        elif p.imag > 0:
+            e = np.exp(np.clip(p.real * t, -700, 700))
+            cols += [e * np.cos(p.imag * t), e * np.sin(p.imag * t)]
+            kinds.append((complex(p), True))
+    rows = np.column_stack(cols)
+    if rows.shape[0] <= rows.shape[1] + 2:
+        return None
+    coef, *_ = np.linalg.lstsq(rows, y, rcond=None)
+    c0, ramp, rest = coef[0], coef[1:1 + integrators], coef[1 + integrators:]
+    residues, k = [], 0
+    for p, pair in kinds:
+        if pair:
+            a = (rest[k] - 1j * rest[k + 1]) / 2
+            residues += [(p, a), (np.conj(p), np.conj(a))]
+            k += 2
+        else:
+            residues.append((p, complex(rest[k])))
+            k += 1
+    nonzero = np.array([p for p, _ in residues], dtype=complex)
+    base = np.poly(nonzero) if len(nonzero) else np.array([1.0 + 0j])
+    den = np.polymul(base, np.r_[1.0, np.zeros(integrators)])          # s^m Π (s - p_i)
+    num = c0 * den
+    for j, c in enumerate(ramp, start=1):                                 # c_j j!/s^j
+        num = np.polyadd(num, c * math.factorial(j) * np.polymul(base, np.r_[1.0, np.zeros(integrators - j)]))
+    for i, (p, a) in enumerate(residues):                                 # a_i s / (s - p_i)
+        others = np.poly(np.delete(nonzero, i)) if len(nonzero) > 1 else np.array([1.0 + 0j])
+        num = np.polyadd(num, a * np.polymul(others, np.r_[1.0, np.zeros(integrators + 1)]))
+    num, den = np.real(num), np.real(den)
+    num = np.r_[np.zeros(max(len(den) - len(num), 0)), num][1:]          # strictly proper
+    w0 = max([abs(p) for p in nonzero] + [1.0 / max(t[-1], 1e-300)])
+    size = np.abs(num) * w0 ** np.arange(len(num) - 1, -1, -1)
+    keep = np.nonzero(size > 1e-3 * np.max(size))[0] if np.max(size) > 0 else []
+    if not len(keep):
+        return None
+    return Model(tuple(float(c) for c in num[keep[0]:]), tuple(float(c) for c in den), dead)
+
+
+def _mechanism(kind: str, model: Optional[Model], dy: np.ndarray, dt: float, horizon: float, dead: float,
+               period: Optional[float]) -> str:
+    """The mechanism a response shows (one of MECHANISMS), from its kind, its model and Δy."""
+    if kind in ("none", "static"):
+        return "delay" if kind == "static" and dead > 0 else kind
+    if kind == "unstable":
+        return "unstable"
+    if kind == "integrating":
+        if model is not None and model.integrators >= 2:
+            return "double integrator"
+        lags = [-1 / p.real for p in (model.poles if model is not None else []) if p.real < 0]
+        return "integrator with lag" if any(2 * dt <= T <= horizon / 3 for T in lags) else "pure integrator"
+    if period:
+        return "oscillator"
+    final = dy[-1]
+    if final != 0 and np.min(dy * np.sign(final)) < -INVERSE_FRACTION * abs(final):
+        return "inverse response"
+    slowest = max((-1 / p.real for p in model.poles if p.real < 0), default=0.0) if model is not None else 0.0
+    if dead > 0:
+        return "delay" if dead >= slowest else "lag with delay"
+    return "lag"
+
+
 def _fit(t: np.ndarray, dy: np.ndarray, dt: float, du: float, y_scale: float, max_order: int = MAX_ORDER) -> _Fit:
     """The kind and numbers of a step response Δy sampled at t (see the module docstring)."""
     n = min(len(dy), len(t))
     t, dy = t[:n], dy[:n]
     scale = float(np.max(np.abs(dy))) if n else 0.0
     if n < 8 or scale <= 1e-12 * (1.0 + y_scale):
-        return _Fit("none")
+        return _Fit("none", mechanism="none")
     nz = int(np.argmax(np.abs(dy) > 1e-6 * scale))           # a transport delay: Δy stays at zero
     dead = (nz - 1) * dt if nz - 1 >= 2 else 0.0
     if np.all(np.abs(dy[nz:] - dy[-1]) <= 1e-6 * scale):      # at its final value from the first step it moves
-        return _Fit("static", gain=float(dy[-1] / du), dead=dead)
+        return _Fit("static", gain=float(dy[-1] / du), dead=dead, mechanism="delay" if dead > 0 else "static")
     data = dy[max(nz - 1, 0):] / scale
     best = None
     for order in range(1, min(max_order, (len(data) - 2) // 3) + 1):
@@ -276,14 +438,27 @@ def _fit(t: np.ndarray, dy: np.ndarray, dt: float, du: float, y_scale: float, ma
     dominant = poles[np.argmax(poles.real)]
     near_one = np.abs(z - 1.0) < 1e-6
     horizon = max(t[-1], dt)
+    at_zero = near_one | (np.abs(poles) * horizon < INTEGRATING_GROWTH)
+    resolved = ~at_zero & (np.abs(z) > 1e-3) & (np.abs(poles.imag) < 0.8 * math.pi / dt)  # not an artefact of the grid
+    shift = dead if dead > 0 else 0.0
+    since = t >= shift - 1e-12 * dt
+    model = _model(t[since] - shift, dy[since] / du, poles[resolved], int(np.count_nonzero(at_zero)), dead)
     if abs(dominant.real) * horizon < INTEGRATING_GROWTH or near_one.any():
         rate = float(np.mean(np.diff(dy[-max(3, n // 10):])) / dt / du)
-        return _Fit("integrating", rate=rate, dead=dead)
+        if model is None or model.integrators == 0:
+            model = None
+        mechanism = _mechanism("integrating", model, dy, dt, horizon, dead, None)
+        if mechanism == "integrator with lag":   # the final slope still carries the lag's tail: the model's rate
+            rate = model.low_frequency_gain
+        return _Fit("integrating", rate=rate, dead=dead, model=model, mechanism=mechanism)
     gain = float(b * scale / (1.0 - np.sum(a)) / du)           # G(0): the model's steady state (formal if unstable)
     period, damping = _oscillation(poles, dominant)
+    kind = "unstable" if dominant.real > 0 else "stable"
+    mech = _mechanism(kind, model, dy, dt, horizon, dead, period)
     if dominant.real > 0:
-        return _Fit("unstable", gain, 1.0 / float(dominant.real), float(dominant.real), None, dead, period, damping)
-    return _Fit("stable", gain, -1.0 / float(dominant.real), None, None, dead, period, damping)
+        return _Fit("unstable", gain, 1.0 / float(dominant.real), float(dominant.real), None, dead, period, damping,
+                    model, mech)
+    return _Fit("stable", gain, -1.0 / float(dominant.real), None, None, dead, period, damping, model, mech)
 
 
 def _analyse(t: np.ndarray, dy: np.ndarray, dt: float, du: float, y_scale: float, max_order: int = MAX_ORDER):
@@ -305,51 +480,82 @@ def _step_size(v, u0: float) -> float:
     return du
 
 
+def _lag_s(f: _Fit) -> Optional[float]:
+    """The slowest lag time constant of an integrating response's model (None: no lag)."""
+    lags = [-1 / p.real for p in (f.model.poles if f.model is not None else []) if p.real < 0]
+    return max(lags) if lags else None
+
+
 def _next_grid(f: _Fit, dt: float, n: int) -> float:
-    """The grid the next run should use after a fit `f` on grid dt with n samples."""
+    """The grid the next run should use after a fit `f` on grid dt with n samples (before any stop)."""
     if f.kind == "stable":
         scale = min(f.tau, f.period / (2 * math.pi)) if f.period else f.tau
         target = snap_sample_time(scale / SAMPLES_PER_TIME_CONSTANT)
     elif f.kind == "unstable":
         target = snap_sample_time(f.tau / SAMPLES_PER_TIME_CONSTANT)
+    elif f.kind == "integrating" and _lag_s(f) and 2 * dt <= _lag_s(f) <= n * dt / 3:
+        return snap_sample_time(_lag_s(f) / SAMPLES_PER_TIME_CONSTANT)    # the lag resolved: sample it as a lag
     else:  # integrating, none: too short to see it settle, or too slow to see it move
         return snap_sample_time(dt * 10)
-    if n < SAMPLES // 2:  # blew up early: finer grid
+    if n < SAMPLES // 8:  # blew up or ran onto a stop early: finer grid
         target = snap_sample_time(dt / 10)
     return target
 
 
+def _stop_index(y: np.ndarray) -> Optional[int]:
+    """The sample from which a run stays pinned at one value after moving (STOP_INCREMENTS moving samples or
+    more before it): the output ran onto a stop. None when it never does."""
+    if len(y) < 8:
+        return None
+    tol = 1e-9 * (1.0 + float(np.ptp(y)))
+    moving = np.abs(np.diff(y)) > tol
+    if moving[-1] or not moving.any():
+        return None
+    k = int(len(moving) - np.argmax(moving[::-1]))        # first sample of the final flat run
+    if k >= len(y) - 3 or np.count_nonzero(moving[:k]) < STOP_INCREMENTS:
+        return None
+    return k
+
+
 def _response(runs: _Runs, i: int, du: float, output: str, dt0: float, y0: float, v) -> StepResponse:
-    """The step response of input i on `output`, on a grid adapted to its time scale."""
+    """The step response of input i on `output`, on a grid adapted to its time scale; a run that reaches a stop
+    is fitted up to the stop."""
     u0 = [float(x) for x in runs.u0]
     stepped_u = list(u0)
     stepped_u[i] += du
-    dt, tried, result = snap_sample_time(dt0), set(), None
+    dt, tried, result, seen = snap_sample_time(dt0), set(), None, {}
 
     def measure(dt):
         trim, stepped = runs.column(u0, dt, output), runs.column(stepped_u, dt, output)
         n = min(len(trim), len(stepped))
         t = dt * np.arange(n)
-        return dt, t, trim[:n], stepped[:n], _fit(t, stepped[:n] - trim[:n], dt, du, abs(y0))
+        stops = [k for k in (_stop_index(trim[:n]), _stop_index(stepped[:n])) if k is not None]
+        m = min(stops) if stops else n
+        f = _fit(t[:m], stepped[:m] - trim[:m], dt, du, abs(y0))
+        return dt, t, trim[:n], stepped[:n], f, (m * dt if stops else None), m
 
     for _ in range(8):
         tried.add(dt)
         result = measure(dt)
+        seen[dt] = result
         f = result[4]
         if f.kind == "static":  # no time scale to resolve: a finer grid would show the same
             break
-        target = _next_grid(f, dt, len(result[1]))
+        target = _next_grid(f, dt, result[6])
         if target in tried or target == dt:
             break
-        if f.kind in ("integrating", "none") and len(tried) >= 3:
+        if f.kind in ("integrating", "none") and len(tried) >= 3 and f.mechanism != "integrator with lag":
             break
         dt = target
-    if result[4].kind == "integrating":  # report an integrator on the finest grid that showed it
-        result = measure(min(tried))
-    dt, t, trim, stepped, f = result
+    if result[4].kind == "integrating":  # the grid that resolves a lag; else the finest that showed an integrator
+        integrating = [r for r in seen.values() if r[4].kind == "integrating"]
+        with_lag = [r for r in integrating if r[4].mechanism == "integrator with lag"]
+        result = with_lag[-1] if with_lag else min(integrating, key=lambda r: r[0])
+    dt, t, trim, stepped, f, stop, _ = result
     name = runs.inputs[i]
     return StepResponse(name, output, u0[i], du, dt, t, trim, stepped, f.kind, f.gain, f.tau, f.growth, f.rate,
-                        f.dead, is_disturbance_like(name, v.description), f.period, f.damping)
+                        f.dead, is_disturbance_like(name, v.description), f.period, f.damping,
+                        mechanism=f.mechanism, model=f.model, stop_s=stop)
 
 
 def probe_input(path, name: str, output: str, inputs: Sequence[str], u0: Sequence[float],
@@ -568,8 +774,13 @@ def _time_unit(span_s: float) -> tuple[float, str]:
 
 
 def _model_response(r: StepResponse) -> Optional[np.ndarray]:
-    """The fitted first-order model's Δy(t) (None for "none")."""
+    """The identified model's Δy(t) (else the first-order one of its kind; None for "none")."""
     t = np.maximum(r.time_s - r.dead_time_s, 0.0)
+    if r.model is not None:
+        from scipy import signal
+
+        _, y = signal.step((r.model.num, r.model.den), T=t)
+        return np.where(r.time_s >= r.dead_time_s, y * r.du, 0.0)
     if r.kind == "stable":
         return r.gain * r.du * (1 - np.exp(-t / r.time_constant_s))
     if r.kind == "unstable":

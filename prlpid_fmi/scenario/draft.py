@@ -48,10 +48,10 @@ def init_scenario(fmu_path: str | Path, output: Optional[str] = None,
     """YAML text of a ready-to-edit scenario for an FMU, from a step and trim test (prlpid_fmi.probe).
 
     The measured output is `output`, else the one an engineer would pick (probe.proposal.choose_loop: a nonzero
-    steady effect, not the rate of another output); the loop's input is the one that moves it most, never a
+    steady effect; of a position and its rate, the one the identified mechanism calls for); the loop's input is the one that moves it most, never a
     disturbance-like input while another one moves it, never one that acts on/off; u_limits, setpoint range, sample time and gain
-    ranges come from the probe and the FMU's declared min, max and nominal values, each with a comment
-    saying where it came from. start_values {parameter or input: value}: the operating point to probe at
+    ranges, setpoint hold and episode length come from the probe's identified model and the FMU's declared
+    min, max and nominal values, each with a comment saying where it came from. start_values {parameter or input: value}: the operating point to probe at
     (parameters are written to plant.parameters). Raises ScenarioError with one line when the FMU cannot
     be read or probed.
     """
@@ -68,7 +68,7 @@ def init_scenario(fmu_path: str | Path, output: Optional[str] = None,
     given = {k: v for k, v in start_values.items() if k not in d.input_names}
     others = "\n".join(f"    #   {line}" for line in loop.others) or "    #   none"
     strategies, agent = m.StrategiesModel(), m.AgentModel()
-    n_train = default(m.TrainingModel, "episode_steps")
+    n_train = loop.episode_steps
     n_eval = 2 * n_train
     prior_problems = d.prior_problems()
     if prior_problems:
@@ -118,8 +118,8 @@ agent:
   total_timesteps: {agent.total_timesteps}
   seed: {agent.seed}
 training:
-  episode_steps: {n_train}   # a few closed-loop settling times at the sample time above [samples]
-  setpoint_hold_steps: {default(m.TrainingModel, 'setpoint_hold_steps')}   # samples between random setpoint changes
+  episode_steps: {n_train}   # two setpoint holds at least [samples]
+  setpoint_hold_steps: {loop.hold_steps}   # samples between random setpoint changes: {w['hold']}
 evaluation:
   episode_steps: {n_eval}
   setpoints:   # value: a number (one loop) or a list with one number per loop
