@@ -243,6 +243,7 @@ def test_a_tune_whose_gain_range_cannot_settle_deploys_nothing_and_export_refuse
     assert report.splitlines()[0] == "# sluggish: nothing here is safe to deploy"
     assert report.splitlines()[4].startswith("**Nothing here is safe to deploy.**")
     assert "Deploy the" not in report and "(settles)" in report
+    assert report.count("the fixed PID: it fails the acceptance check (settles)") == 1  # one line per check
     assert (run / "fixed_pid.csv").read_text().startswith("# NOT DEPLOYABLE: ")
     assert not (run / "schedule.csv").exists()
     refused = cli("export", str(run), "--format", "st", "--fixed", "-o", str(tmp_path / "pid.st"))

@@ -90,6 +90,7 @@ class Acceptance:
     episodes: int = 0
     noisy_chatter: float = math.nan
     noisy_chatter_where: str = ""
+    details: tuple[str, ...] = ()  # every failure found, one sentence each (failures groups them per check)
 
     @property
     def passed(self) -> bool:
@@ -111,7 +112,7 @@ class Acceptance:
                 "slow": list(self.slow), "excused": list(self.excused), "overshoot_pct": num(self.overshoot_pct),
                 "overshoot_limit_pct": self.overshoot_limit_pct, "user_overshoot_pct": self.user_overshoot_pct,
                 "chatter": num(self.chatter), "max_chatter": self.max_chatter,
-                "chatter_with_noise": num(self.noisy_chatter)}
+                "chatter_with_noise": num(self.noisy_chatter), "details": list(self.details)}
 
 
 @dataclass
@@ -148,8 +149,23 @@ def check(episodes: list[Episode], replay: Replay, max_overshoot: float, max_cha
                                              f"{max_chatter:g}",
                                   "a smaller Td or Kp (a loop that rings or limit-cycles at its sample time), a "
                                   "shorter sample time, or a larger deploy.max_chatter if the actuator tolerates it"))
-    return Acceptance(tuple(t.failures), t.steps, t.settled, tuple(t.slow), tuple(t.excused), t.overshoot, limit,
-                      user, t.chatter, max_chatter, len(episodes), t.noisy, t.noisy_where)
+    return Acceptance(_grouped(t.failures), t.steps, t.settled, tuple(t.slow), tuple(t.excused), t.overshoot,
+                      limit, user, t.chatter, max_chatter, len(episodes), t.noisy, t.noisy_where,
+                      tuple(f.text for f in t.failures))
+
+
+def _grouped(failures: list[Failure]) -> tuple[Failure, ...]:
+    """One failure per check: the first of each, with how many more there are (Acceptance.details lists all)."""
+    out = []
+    for check_name in dict.fromkeys(f.check for f in failures):
+        same = [f for f in failures if f.check == check_name]
+        first = same[0]
+        if len(same) > 1:
+            first = Failure(first.check, f"{first.text}; and in {len(same) - 1} more place"
+                                         f"{'s' if len(same) > 2 else ''} (metrics.json: acceptance.details)",
+                            first.remedy, "")
+        out.append(first)
+    return tuple(out)
 
 
 def _check_episode(ep: Episode, replay: Replay, t: _Tally) -> None:
