@@ -34,5 +34,5 @@ def test_the_load_steps_drawn_are_the_load_experiments():
     assert np.mean(iae) == pytest.approx(load_experiment(config, scenario.baseline.load_step, run), rel=1e-9)
     fig = load_step_figure(runs, config, "t", deployed="fixed PID")
     titles = [ax.get_title() for ax in fig.axes[:3]]
-    assert titles[0].startswith("setpoint y = -1; load ") and titles[1].startswith("setpoint y = 0; load ")
+    assert titles[0] == f"setpoint y = -1\nload {found[0].loads[0]:+.3g} on u" and titles[1].startswith("setpoint y = 0\n")
     assert fig.axes[-1].get_xlabel() == "time since the load step [s]"

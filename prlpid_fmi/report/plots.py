@@ -434,7 +434,7 @@ def transient_span(t, deviation, t0: float, t1: float, size: float | None = None
 def events(traj, config: TuningConfig) -> list[tuple[float, str]]:
     """(time [s], what) of the evaluation's transients in time order: setpoint changes (the trajectory's setpoint
     rows; at t = 0 where the setpoint differs from the first measurement by more than 1 % of the setpoint range)
-    and the disturbances' starts (disturbance_label). Events at the same time are joined."""
+    and the disturbances' starts (disturbance_label). Events at the same time are joined, a line each."""
     ts = config.sample_time_s
     found: dict[float, list[str]] = {}
     r, y = np.asarray(traj.setpoint, float), np.asarray(traj.measurement, float)
@@ -450,7 +450,7 @@ def events(traj, config: TuningConfig) -> list[tuple[float, str]]:
         if t0 <= float(traj.time_s[-1]):
             pulse = "" if d.end_step is None else f" for {(d.end_step - d.start_step) * ts:g} s"
             found.setdefault(t0, []).append(disturbance_label(d, config) + pulse)
-    return [(t, "; ".join(what)) for t, what in sorted(found.items())]
+    return [(t, "\n".join(what)) for t, what in sorted(found.items())]
 
 
 def _window(t0: float, t1: float, span: float, ts: float) -> tuple[float, float]:
@@ -499,6 +499,7 @@ def step_response_figure(pairs, config: TuningConfig, title: str = "Transients",
     shown = found[:MAX_EVENT_PANELS]
     m = len(shown)
     fig, axes = new_figure(2 * n, m, figsize=(1.9 + 3.7 * m, 0.9 + 2.1 * 2 * n), squeeze=False)
+    fig.set_layout_engine("constrained")
     for j, (t0, what) in enumerate(shown):
         t1 = found[j + 1][0] if j + 1 < len(found) else t_end
         span = 0.0
@@ -511,12 +512,13 @@ def step_response_figure(pairs, config: TuningConfig, title: str = "Transients",
                     size = abs(traj.setpoint[k, i] - before) or None
                 span = max(span, transient_span(traj.time_s, traj.measurement[:, i] - traj.setpoint[:, i], t0, t1, size))
         a, b = _window(t0, t1, span, ts)
+        drawn_to = b - 0.5 * ts if j + 1 < len(found) and b >= t1 - 1e-9 else b  # not the next event's first sample
         for i, loop in enumerate(config.loops):
             ax_y, ax_u = axes[2 * i, j], axes[2 * i + 1, j]
-            sl = _sliced(first, a, b)
+            sl = _sliced(first, a, drawn_to)
             ax_y.plot(first.time_s[sl], first.setpoint[sl, i], "k--", lw=1.2, label="setpoint")
             for name, traj in pairs:
-                sl = _sliced(traj, a, b)
+                sl = _sliced(traj, a, drawn_to)
                 style = dict(color=COLORS.get(name), ls=LINESTYLES.get(name, "-"), label=_named(name, deployed),
                              lw=1.6 if name == deployed else 1.2)
                 ax_y.plot(traj.time_s[sl], traj.measurement[sl, i], **style)
@@ -530,14 +532,13 @@ def step_response_figure(pairs, config: TuningConfig, title: str = "Transients",
             if j == 0:
                 ax_y.set_ylabel(_label(loop.output, y_units[i]))
                 ax_u.set_ylabel(_label(loop.input, u_units[i]))
-        axes[0, j].set_title(f"t = {t0:g} s: {what}", fontsize=9)
+        axes[0, j].set_title(f"t = {t0:g} s: {what}", fontsize=9 if "\n" not in what else 8)
         axes[-1, j].set_xlabel("time [s]")
     _unique_legend(axes[0, -1])
     if len(axes) > 1:
         _unique_legend(axes[1, -1])
     more = f" (the first {m} of {len(found)} events)" if len(found) > m else ""
     fig.suptitle(title + more, fontsize=11)
-    fig.tight_layout()
     return fig
 
 
@@ -564,6 +565,7 @@ def load_step_figure(runs: dict, config: TuningConfig, title: str = "Load steps 
     points = len(runs[names[0]]) if names else 0
     fig, axes = new_figure(2 * n, max(points, 1), figsize=(1.9 + 3.7 * max(points, 1), 0.9 + 2.1 * 2 * n),
                            squeeze=False)
+    fig.set_layout_engine("constrained")
     for j in range(points):
         reference = runs[names[0]][j]
         for i, loop in enumerate(config.loops):
@@ -599,16 +601,15 @@ def load_step_figure(runs: dict, config: TuningConfig, title: str = "Load steps 
                 ax_y.set_ylabel(_label(loop.output, y_units[i]))
                 ax_u.set_ylabel(_label(loop.input, u_units[i]))
         point = ", ".join(f"{l.output} = {v:.4g}" for l, v in zip(config.loops, reference.point))
-        loads = ", ".join(f"{d:+.3g} {u}".rstrip() + f" on {l.input}"
+        loads = "\n".join(f"load {d:+.3g} {u}".rstrip() + f" on {l.input}"
                           for l, d, u in zip(config.loops, reference.loads, u_units))
-        axes[0, j].set_title(f"setpoint {point}; load {loads}", fontsize=9)
+        axes[0, j].set_title(f"setpoint {point}\n{loads}", fontsize=9 if n == 1 else 8)
         axes[-1, j].set_xlabel("time since the load step [s]")
     if names:
         _unique_legend(axes[0, -1])
         if len(axes) > 1:
             _unique_legend(axes[1, -1])
     fig.suptitle(title, fontsize=11)
-    fig.tight_layout()
     return fig
 
 
@@ -623,6 +624,7 @@ def schedule_gains_figure(tables, config: TuningConfig, fixed=None, deployed: st
     variables = list(dict.fromkeys((t.variable, t.unit) for _, t in tables))
     fig, axes = new_figure(3, max(len(variables), 1), figsize=(2.2 + 5.0 * max(len(variables), 1), 7.4),
                            squeeze=False)
+    fig.set_layout_engine("constrained")
     multi = config.n_loops > 1
     loop_styles = ("-", "--", ":", "-.")
     for c, (variable, unit) in enumerate(variables):
@@ -662,5 +664,4 @@ def schedule_gains_figure(tables, config: TuningConfig, fixed=None, deployed: st
             ax.xaxis.set_major_locator(ticker.MaxNLocator(nbins=6))
         _unique_legend(axes[0, c])
     fig.suptitle(title, fontsize=11)
-    fig.tight_layout()
     return fig
