@@ -149,7 +149,7 @@ def build_fmus(plants: list[ZooPlant]) -> None:
 def tune(plant: ZooPlant, out: Path, timesteps: int, log) -> float:
     """Run `prlpid-fmi tune` unless out/<plant>/metrics.json exists; seconds taken (0 when reused)."""
     run = out / plant.name
-    if (run / "metrics.json").is_file():
+    if (run / "metrics.json").is_file() or (out / f"{plant.name}.failed").is_file():
         return 0.0
     if run.exists():   # an unfinished run: the tool never overwrites a run directory
         run.rename(run.with_name(f"{run.name}.unfinished.{int(time.time())}"))
@@ -159,6 +159,8 @@ def tune(plant: ZooPlant, out: Path, timesteps: int, log) -> float:
     with open(out / f"{plant.name}.log", "w") as f:
         rc = subprocess.run(cmd, stdout=f, stderr=subprocess.STDOUT, cwd=REPO).returncode
     log(f"{plant.name}: tune exit {rc} after {time.time() - t0:.0f} s")
+    if rc != 0:   # remembered: a rerun does not repeat a refused tune (delete OUT/<plant>.failed to retry)
+        (out / f"{plant.name}.failed").write_text(f"exit {rc}\n")
     return time.time() - t0
 
 
@@ -636,11 +638,21 @@ def assess(plant: ZooPlant, out: Path, quick: bool) -> dict:
     s = load_scenario(plant.scenario)
     ms_limit, max_os = float(s.deploy.max_sensitivity), float(s.deploy.max_overshoot)
     load_tol = float(s.baseline.load_tolerance)
+    lin = linear_models(plant)
+    if not (run / "metrics.json").is_file():   # tune refused the scenario or failed: judged by the reference alone
+        log = (out / f"{plant.name}.log").read_text().strip().splitlines() if (out / f"{plant.name}.log").is_file() else []
+        cache = {}
+        ref_table, cache = reference_table(plant, lin, ms_limit, quick, cache)
+        ref = judge(plant, ref_table, lin, max_os, ms_limit)
+        return dict(plant=plant.name, set=plant.set, family=plant.family, deployed="tune failed",
+                    verdict=(log[-1] if log else "(no log)"), eval=asdict(Replay()), held=asdict(Replay()),
+                    Ms=math.nan, failures=[], judged="MISS" if ref.passes else "refused (reference fails too)",
+                    reference=dict(gains=[float(ref_table.Kp[0]), float(ref_table.Ti[0]), float(ref_table.Td[0]),
+                                          float(ref_table.b[0])], failures=ref.failures, Ms=ref.ms))
     m = json.loads((run / "metrics.json").read_text())
     deployed = str(m.get("deployed"))
     table_path = run / ("schedule.csv" if deployed != "none" and (run / "schedule.csv").is_file() else "fixed_pid.csv")
     table = read_table(table_path)
-    lin = linear_models(plant)
     cache_path = run / "zoo_optima.json"
     cache = json.loads(cache_path.read_text()) if cache_path.is_file() else {}
     j = judge(plant, table, lin, max_os, ms_limit)
