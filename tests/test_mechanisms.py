@@ -9,6 +9,7 @@ torque -> speed 1000/(2 s + 1), torque -> angle 1000/(s (2 s + 1))); MagLev, m x
 between stops, linearised x'' = (2 g/x0) Δx - (2 g/V0) ΔV (poles ±44.3 1/s, b = -3.924 m/s² per V);
 MassSpringDamper (m = 1, k = 30, c = 1.1).
 """
+import importlib.util
 import math
 import subprocess
 import sys
@@ -37,6 +38,10 @@ def fmus(tmp_path_factory):
         subprocess.run([sys.executable, "-m", "pythonfmu", "build", "-f", str(DATA / f"{name}.py"), "-d", str(out)],
                        check=True, capture_output=True)
         built[name] = out / f"{name}.fmu"
+    if importlib.util.find_spec("pythonfmu3"):                       # the same inertia from the FMI 3.0 exporter
+        subprocess.run([sys.executable, "-m", "pythonfmu3", "build", "-f", str(DATA.parent / "pythonfmu3" /
+                        "FreeInertia3.py"), "-d", str(out)], check=True, capture_output=True)
+        built["FreeInertia3"] = out / "FreeInertia3.fmu"
     return built
 
 
@@ -74,15 +79,19 @@ def test_the_probe_names_each_mechanism_with_its_transfer_function(fmus, kind):
     assert sorted(z.real for z in model.zeros if z.real > 0) == pytest.approx(zeros, rel=2e-3)
 
 
-def test_free_inertia_init_tunes_the_speed_loop(fmus, tmp_path, capsys):
+@pytest.mark.parametrize("name", ["FreeInertia", "FreeInertia3"])
+def test_free_inertia_init_tunes_the_speed_loop(fmus, tmp_path, capsys, name):
     """Torque -> angle is an integrator with the speed's 2 s lag: a free mechanism, so init measures the speed,
-    with a sample time from the speed loop's bandwidth (not microseconds)."""
-    results = probe_outputs(fmus["FreeInertia"])
+    with a sample time from the speed loop's bandwidth (not microseconds); FMI 2.0 (pythonfmu) and 3.0
+    (pythonfmu3) alike."""
+    if name not in fmus:
+        pytest.skip("pythonfmu3 is not installed")
+    results = probe_outputs(fmus[name])
     phi, w = results["phi"].response("M"), results["w"].response("M")
     assert phi.mechanism == "integrator with lag" and w.mechanism == "lag" and w.rate_of == "phi"
     assert phi.model.low_frequency_gain == pytest.approx(1 / 0.001, rel=2e-3)       # 1/d rad/s per N m
     assert -1 / max(p.real for p in w.model.poles) == pytest.approx(0.002 / 0.001, rel=2e-3)   # J/d
-    assert main(["init", str(fmus["FreeInertia"])]) == 0
+    assert main(["init", str(fmus[name])]) == 0
     text = capsys.readouterr().out
     (tmp_path / "inertia.yaml").write_text(text)
     loop = yaml.safe_load(text)["plant"]["loops"][0]

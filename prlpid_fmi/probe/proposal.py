@@ -162,12 +162,14 @@ def _passed_over(results: dict) -> dict:
                 continue
             position = results[r.rate_of].response(r.input)
             if _rate_loop_wins(position, r):
-                passed[r.rate_of] = (f"{r.input} -> {r.rate_of} is a {position.mechanism}: a free mechanism, "
+                article = "an" if position.mechanism[0] in "aeiou" else "a"
+                passed[r.rate_of] = (f"{r.input} -> {r.rate_of} is {article} {position.mechanism}: a free mechanism, "
                                      f"its rate {rate_out} is the loop (a position loop goes around a tuned "
                                      f"{rate_out} loop)")
             elif r.rate_of not in passed:
+                kind = r.mechanism or r.kind
                 what = ("returns to zero (a mass on a spring)" if r.zero_gain else
-                        f"is a {r.mechanism or r.kind}" + (" (it follows the input: a flow)" if r.kind == "static" else ""))
+                        f"is {'an' if kind[0] in 'aeiou' else 'a'} {kind}" + (" (it follows the input: a flow)" if r.kind == "static" else ""))
                 passed[rate_out] = f"the rate of {r.rate_of}, which is the loop: {r.input} -> {rate_out} {what}"
     return passed
 
