@@ -561,8 +561,9 @@ def rule_gains(bp) -> dict:
     den = bp.den
     poles = np.roots(den)
     h = bp.Ts / 2
-    if np.any(poles.real > 1e-12) or np.any(np.abs(poles.imag) > 1e-9):
-        return {}   # unstable or oscillatory: no FOPDT / integrating model
+    if np.any(poles.real > 1e-9) or np.any(np.abs(poles.imag) > 0.1 * np.abs(poles)):
+        return {}   # unstable or oscillatory: no FOPDT / integrating model (a repeated pole of (s + 1)^n splits
+        #             into roots |imag| ~ eps^(1/n) off the axis: not an oscillation)
     n_int = int(np.sum(np.abs(poles) < 1e-12))
     if n_int > 1:
         return {}
