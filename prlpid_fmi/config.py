@@ -162,7 +162,7 @@ class TuningConfig:
         return len(self.loops)
 
 
-DEFAULT_N_ENVS = {"ppo": 8, "sac": 1, "td3": 1}  # measured: architecture.md "The loop core and its three drivers"
+DEFAULT_N_ENVS = {"ppo": 8, "sac": 1, "td3": 1}  # docs/results.md "Training defaults"
 
 
 def _agent(key: str):

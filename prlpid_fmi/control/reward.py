@@ -49,10 +49,9 @@ class RewardWeights:
     between 1.0 (|e| just under 0.05) and 2.0 (|e| = 0) per step.
     control_variation_weight: weight w of the control-variation term -w * min(|u_k - u_{k-1}| / u_scale, 1)
     per loop (at most -w per step, u_scale = the loop's control span); it also weights the moves of u in
-    the fixed-PID search. 0.3, measured by benchmarks/bench_control_variation.py: the smallest weight of
-    the grid at which the tuned fixed PID stops chattering on the noisy plants (a 0.5-0.6 fraction of
-    reversing samples down to 0.10 or less) at most 5 % ISE cost (docs/architecture.md, "Control-variation
-    penalty"). 0 gives the paper's eq. 10.
+    the fixed-PID search. Default 0.3: the smallest weight of benchmarks/bench_control_variation.py's grid at
+    which the tuned fixed PID stops chattering on the noisy plants at most 5 % ISE cost (docs/results.md,
+    "Control-variation weight"). 0 gives the paper's eq. 10.
     """
 
     alpha: float = 1.0

@@ -200,7 +200,7 @@ class ClosedLoopRig:
         y0, u = self._start()
         n = self.n_loops
         # PID.step, FmuPlant.step and the divergence bound on plain floats, element by element (this loop runs up to
-        # MAX_SETTLE_STEPS times per experiment; numpy per sample was most of a slow plant's experiments)
+        # MAX_SETTLE_STEPS times per experiment, where numpy's per-call overhead would dominate)
         start, gains = y0.tolist(), self._gains()
         pid_step, plant_step = self.pid.step_values, self.plant.step_values
         scale, bound = self.scale.tolist(), self.bound.tolist()

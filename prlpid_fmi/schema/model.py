@@ -466,8 +466,8 @@ class AgentModel(Section):
     total_timesteps: Count = Field(500_000, description="training budget [env steps]")
     seed: Seed = Field(0, description="seed of training")
     n_envs: Optional[Count] = Field(None, description="parallel environments; null: 8 for PPO (8 episodes in one "
-                                                      "process batch the policy's forward pass; measured in "
-                                                      "docs/architecture.md), 1 for SAC / TD3 (one gradient step "
+                                                      "process batch the policy's forward pass; docs/results.md "
+                                                      "\"Training defaults\"), 1 for SAC / TD3 (one gradient step "
                                                       "per env step, as their defaults assume)")
     vec_env: VecEnv = Field("dummy", description="dummy (one process) | subproc (one process per env)")
     normalize: Flag = Field(False, description="VecNormalize on observations and rewards")
