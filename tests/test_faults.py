@@ -198,27 +198,88 @@ def test_leak_guard_reinstantiates_an_fmu_whose_resets_grow(faulty, tmp_path):
     complete(run)
 
 
-def test_segfault_kills_an_unisolated_run_and_resume_isolates_it(faulty, tmp_path):
-    """In this process the FMU's segfault ends the tool (exit by SIGSEGV, the run directory kept); --resume sees
-    the abrupt end, runs the plant in a worker process and completes, every episode ended by the crash."""
+def error_lines(stderr: str) -> list[str]:
+    return [line for line in stderr.splitlines() if line.startswith("prlpid-fmi: error:")]
+
+
+def test_a_segfault_on_the_first_run_isolates_the_plant_and_repeated_faults_stop_training(faulty, tmp_path):
+    """`tune` as written on an FMU that segfaults in doStep from 3 s, first run: the loop check's worker crashes, so
+    the plant runs in a worker process for the rest of the run (one warning; run.json); every training episode then
+    ends at that crash, so training stops after REPEATED_FAULT_EPISODES of them (one line; run.json; the report),
+    and the run finishes: exit 0, a complete run directory, never a signal exit."""
+    from prlpid_fmi.tuning.agent import REPEATED_FAULT_EPISODES
+
     scenario = scenario_file(tmp_path, faulty["crash"])
     run = tmp_path / "run"
-    first = cli("-q", "tune", str(scenario), "--out", str(run))
-    assert first.returncode == -signal.SIGSEGV, first.stderr[-2000:]
-    assert (run / "scenario.yaml").is_file() and (run / ".active").is_file()
-    resumed = cli("-q", "tune", str(scenario), "--out", str(run), "--resume")
-    assert resumed.returncode == 0, resumed.stderr[-3000:]
-    assert "Traceback" not in resumed.stderr
-    assert "worker process" in resumed.stderr and "crashed (SIGSEGV)" in resumed.stderr
+    first = cli("-q", "tune", str(scenario), "--out", str(run), "--timesteps", "5000")
+    assert first.returncode == 0, first.stderr[-3000:]
+    assert "Traceback" not in first.stderr and not error_lines(first.stderr)
     complete(run)
     assert not (run / ".active").exists()
-    assert json.loads((run / "run.json").read_text())["isolation"] == "process"
+    info = json.loads((run / "run.json").read_text())
+    assert info["isolation"] == "process"
+    assert "crashed (SIGSEGV) in fmi2DoStep from t = 3 s" in info["isolation_reason"]  # the switch's time
+    assert "loop check" in info["isolation_reason"]
+    switched = [line for line in first.stderr.splitlines() if "for the rest of this run" in line]
+    assert len(switched) == 1
+    stopped = [line for line in first.stderr.splitlines() if "training stopped early" in line]
+    assert len(stopped) == 1 and f"{REPEATED_FAULT_EPISODES} training episodes in a row" in stopped[0]
+    record = info["training_stopped"]
+    assert record["episodes"] == REPEATED_FAULT_EPISODES and record["termination"]["kind"] == "crash"
+    # the truth: the crash at 3 s, reached by the plant, or N = 3 samples earlier by the forecast's prior
+    t = record["termination"]["time_s"]
+    assert FAULT_S - 3 * TS - 1e-9 <= t <= FAULT_S + TS + 1e-9
+    # the Monitor's episode lengths: the last REPEATED_FAULT_EPISODES episodes all ended at that sample
+    lengths = [int(row.split(",")[1]) for row in _monitor_rows(run)]
+    assert lengths[-REPEATED_FAULT_EPISODES:] == [record["termination"]["step"]] * REPEATED_FAULT_EPISODES
+    assert info["trained_timesteps"] == record["steps"] < 5000
+    assert "Training stopped early" in (run / "report.md").read_text()
     metrics = json.loads((run / "metrics.json").read_text())
-    t = metrics["policy"]["termination"]
-    assert t["kind"] == "crash" and "FirstOrderUnstable.fmu crashed (SIGSEGV)" in t["message"]
-    assert FAULT_S - 1 <= t["time_s"] <= FAULT_S + TS + 1e-9  # the forecast's prior reaches 3 s N steps early
+    assert metrics["policy"]["termination"]["kind"] == "crash"
     evaluated = cli("-q", "evaluate", str(run))
     assert evaluated.returncode == 0 and "Traceback" not in evaluated.stderr, evaluated.stderr[-2000:]
+
+
+def test_a_segfault_in_the_tools_own_process_resumes_the_run_isolated(tmp_path):
+    """The crash acts only once the gate opens (after the fixed PID is saved), so no worker saw it first: it kills the
+    process that runs `tune` (in-process plant); the supervising parent resumes the run from its last checkpoint with
+    the plant in a worker process (one warning naming the FMU, the call and the time) and the run finishes, exit 0.
+    With plant.isolation: none the resumed run crashes again: exit 2, one line naming the FMU, the call, the time
+    and the run directory kept. Never a signal exit."""
+    gated = build_fmu("FirstOrderUnstable", out_dir=tmp_path / "fmu",
+                      defines={"PRLPID_FAULT_CRASH_AFTER_S": FAULT_S, "PRLPID_FAULT_GATED": None})
+    gate = tmp_path / "gate"
+    scenario = scenario_file(tmp_path, gated)
+    run = tmp_path / "run"
+    proc = subprocess.Popen([sys.executable, "-m", "prlpid_fmi", "-q", "tune", str(scenario), "--out", str(run)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**ENV, "PRLPID_FAULT_GATE": str(gate)})
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and proc.poll() is None and not (run / "fixed_pid.json").is_file():
+        time.sleep(0.05)
+    gate.write_text("")
+    out, err = proc.communicate(timeout=600)
+    assert proc.returncode == 0, err[-3000:]
+    assert "Traceback" not in err and not error_lines(err)
+    complete(run)
+    info = json.loads((run / "run.json").read_text())
+    assert info["isolation"] == "process"
+    reason = info["isolation_reason"]
+    assert "FirstOrderUnstable.fmu crashed (SIGSEGV)" in reason and "the tool's process" in reason
+    assert float(reason.split("t = ")[1].split(" s")[0]) >= FAULT_S - 1e-9  # the switch's time, or later in a roll-out
+    assert sum("the run continues from its last checkpoint" in line for line in err.splitlines()) == 1
+
+    (tmp_path / "none").mkdir()
+    scenario = scenario_file(tmp_path / "none", gated, plant={"isolation": "none"})
+    run = tmp_path / "run_none"
+    failed = subprocess.run([sys.executable, "-m", "prlpid_fmi", "-q", "tune", str(scenario), "--out", str(run)],
+                            capture_output=True, text=True, env={**ENV, "PRLPID_FAULT_GATE": str(gate)}, timeout=600)
+    assert failed.returncode == 2, failed.stderr[-3000:]
+    lines = error_lines(failed.stderr)
+    assert len(lines) == 1 and "Traceback" not in failed.stderr, failed.stderr[-3000:]
+    assert "FirstOrderUnstable.fmu crashed (SIGSEGV) in fmi2DoStep from t = " in lines[0] and str(run) in lines[0]
+    assert float(lines[0].split("from t = ")[1].split(" s")[0]) >= FAULT_S - 1e-9
+    assert (run / "scenario.yaml").is_file()
 
 
 def _monitor_rows(run: Path) -> list[str]:
