@@ -240,46 +240,49 @@ def test_a_segfault_on_the_first_run_isolates_the_plant_and_repeated_faults_stop
     assert evaluated.returncode == 0 and "Traceback" not in evaluated.stderr, evaluated.stderr[-2000:]
 
 
-def test_a_segfault_in_the_tools_own_process_resumes_the_run_isolated(tmp_path):
-    """The crash acts only once the gate opens (after the fixed PID is saved), so no worker saw it first: it kills the
-    process that runs `tune` (in-process plant); the supervising parent resumes the run from its last checkpoint with
-    the plant in a worker process (one warning naming the FMU, the call and the time) and the run finishes, exit 0.
-    With plant.isolation: none the resumed run crashes again: exit 2, one line naming the FMU, the call, the time
-    and the run directory kept. Never a signal exit."""
-    gated = build_fmu("FirstOrderUnstable", out_dir=tmp_path / "fmu",
-                      defines={"PRLPID_FAULT_CRASH_AFTER_S": FAULT_S, "PRLPID_FAULT_GATED": None})
-    gate = tmp_path / "gate"
-    scenario = scenario_file(tmp_path, gated)
+def test_a_crashing_prior_in_the_tools_own_process_is_survived_and_replaced_by_the_rollback_prior(tmp_path):
+    """An FMU whose second instance (the forecast's prior) crashes in doStep; nothing before training has a prior, so
+    no worker saw the crash first: it kills the process running `tune` (in-process plant). The supervising parent
+    resumes the run with the plant in a worker process (one warning naming the FMU, the call and the time); there
+    every training episode ends at the prior's first step, so after REPEATED_FAULT_EPISODES of them the prior is
+    blamed (the worker's crumb names it; the plant alone passes that time) and replaced by the rollback prior (the
+    plant's own instance), and training completes. Exit 0, a complete run directory, never a signal exit."""
+    from prlpid_fmi.tuning.agent import REPEATED_FAULT_EPISODES
+
+    fmu = build_fmu("FirstOrderUnstable", out_dir=tmp_path / "fmu", defines={"PRLPID_FAULT_CRASH_IN_PRIOR": None})
     run = tmp_path / "run"
-    proc = subprocess.Popen([sys.executable, "-m", "prlpid_fmi", "-q", "tune", str(scenario), "--out", str(run)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            env={**ENV, "PRLPID_FAULT_GATE": str(gate)})
-    deadline = time.monotonic() + 300
-    while time.monotonic() < deadline and proc.poll() is None and not (run / "fixed_pid.json").is_file():
-        time.sleep(0.05)
-    gate.write_text("")
-    out, err = proc.communicate(timeout=600)
-    assert proc.returncode == 0, err[-3000:]
-    assert "Traceback" not in err and not error_lines(err)
+    first = cli("-q", "tune", str(scenario_file(tmp_path, fmu)), "--out", str(run))
+    assert first.returncode == 0, first.stderr[-3000:]
+    assert "Traceback" not in first.stderr and not error_lines(first.stderr)
     complete(run)
     info = json.loads((run / "run.json").read_text())
-    assert info["isolation"] == "process"
+    assert info["isolation"] == "process" and "training_stopped" not in info
     reason = info["isolation_reason"]
-    assert "FirstOrderUnstable.fmu crashed (SIGSEGV)" in reason and "the tool's process" in reason
-    assert float(reason.split("t = ")[1].split(" s")[0]) >= FAULT_S - 1e-9  # the switch's time, or later in a roll-out
-    assert sum("the run continues from its last checkpoint" in line for line in err.splitlines()) == 1
+    assert "FirstOrderUnstable.fmu crashed (SIGSEGV) in fmi2DoStep from t = 0 s of the forecast's prior" in reason
+    assert "the tool's process" in reason
+    assert sum("the run continues from its last checkpoint" in line for line in first.stderr.splitlines()) == 1
+    assert info["prior_fallback"] == "rollback" and info["trained_timesteps"] >= 256
+    assert sum("the forecast's prior (the FMU's second instance) crashes" in line
+               for line in first.stderr.splitlines()) == 1
+    # the truth: the prior crashes at its first step, so the episodes before the fallback lasted one sample; after
+    # it none ends early (Kp, Ti of the fixed PID on 1/(s - 1), a fault-free plant instance)
+    lengths = [int(row.split(",")[1]) for row in _monitor_rows(run)]
+    assert lengths[:REPEATED_FAULT_EPISODES] == [1] * REPEATED_FAULT_EPISODES
+    assert "Training stopped early" not in (run / "report.md").read_text()
 
-    (tmp_path / "none").mkdir()
-    scenario = scenario_file(tmp_path / "none", gated, plant={"isolation": "none"})
-    run = tmp_path / "run_none"
-    failed = subprocess.run([sys.executable, "-m", "prlpid_fmi", "-q", "tune", str(scenario), "--out", str(run)],
-                            capture_output=True, text=True, env={**ENV, "PRLPID_FAULT_GATE": str(gate)}, timeout=600)
+
+def test_a_segfault_that_kills_the_resumed_run_too_is_one_line_and_exit_2(faulty, tmp_path):
+    """plant.isolation: none keeps the crashing plant in the tool's process: the first run dies, the parent resumes
+    it, that dies too: exit 2, one line naming the FMU, the call, the time and the run directory kept."""
+    run = tmp_path / "run"
+    failed = cli("-q", "tune", str(scenario_file(tmp_path, faulty["crash"], plant={"isolation": "none"})),
+                 "--out", str(run))
     assert failed.returncode == 2, failed.stderr[-3000:]
     lines = error_lines(failed.stderr)
     assert len(lines) == 1 and "Traceback" not in failed.stderr, failed.stderr[-3000:]
-    assert "FirstOrderUnstable.fmu crashed (SIGSEGV) in fmi2DoStep from t = " in lines[0] and str(run) in lines[0]
-    assert float(lines[0].split("from t = ")[1].split(" s")[0]) >= FAULT_S - 1e-9
-    assert (run / "scenario.yaml").is_file()
+    assert "FirstOrderUnstable.fmu crashed (SIGSEGV) in fmi2DoStep from t = 3 s" in lines[0]  # the switch's time
+    assert "the tool's process" in lines[0] and f"the run directory {run} is kept" in lines[0]
+    assert (run / "scenario.yaml").is_file() and (run / ".active").is_file()
 
 
 def _monitor_rows(run: Path) -> list[str]:

@@ -192,6 +192,12 @@ class FmuPlant:
             if c is not None:
                 c.busy = 0
 
+    @property
+    def crumb(self) -> Crumb | None:
+        """The crumb this plant's calls write (in a worker or a supervised `tune`; None elsewhere): a caller that
+        runs the FMU's code in a call of its own (the native forecast) marks it there."""
+        return self._crumb
+
     def call_name(self, call: str | None = None) -> str:
         """The FMI function(s) behind a watched call ('fmi2DoStep', 'fmi2Reset', ...)."""
         names = adapter_class(self.description.fmi_version, self.description.co_simulation).call_names

@@ -81,6 +81,36 @@ def make_core(config: TuningConfig, forecast_path: str = "auto"):
     return LoopCore(config, forecast_path)
 
 
+def _step_alone(config: TuningConfig, steps: int) -> int:
+    """In a worker: the plant FMU as the only instance, its inputs held at their start values, `steps` samples."""
+    from prlpid_fmi.loop.core import plant_limits
+    from prlpid_fmi.fmu import FmuPlant
+
+    inputs, outputs = [l.input for l in config.loops], [l.output for l in config.loops]
+    with FmuPlant(resolve_fmu(config.fmu, config.fmi_version), inputs, outputs, config.sample_time_s,
+                  config.plant_parameters, "plant", **plant_limits(config)) as plant:
+        u = plant.get(inputs).tolist()
+        for _ in range(steps):
+            plant.step_values(u)
+    return steps
+
+
+def plant_alone_survives(config: TuningConfig, until_s: float) -> bool:
+    """Whether the plant FMU alone (one instance in a worker process, no prior, its inputs held at their start
+    values) steps past until_s [s] plus the forecast's horizon without crashing or failing: the test that tells a
+    crash of the forecast's prior (its second instance) from one the plant meets at that time anyway."""
+    from prlpid_fmi.fmu.worker import call_in_worker
+
+    steps = int(np.ceil(until_s / config.sample_time_s - 1e-9)) + config.forecast_horizon + 1
+    path = resolve_fmu(config.fmu, config.fmi_version)
+    try:
+        call_in_worker(_step_alone, config, steps, fmus=[path], what="the check of the plant without its prior",
+                       step_timeout_s=config.step_timeout_s)
+    except Exception:  # noqa: BLE001 - a crash, a hang or a failed step: the plant fails alone too
+        return False
+    return True
+
+
 # -- the worker ------------------------------------------------------------------------------------
 def _snapshot(core: LoopCore) -> tuple:
     return tuple(getattr(core, name, None) for name in _SNAPSHOT)

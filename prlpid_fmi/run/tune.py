@@ -282,7 +282,11 @@ def training_stage(scenario: Scenario, run_dir: Path, info: dict, resume: bool, 
     prior (the FMU's second instance) was the instance in the crashing call, it is replaced once (the plant's own
     instance rolled back, or no forecast: run.trained.prior_fallback_for; one warning, run.json "prior_fallback")
     and training goes on from the checkpoint; otherwise training ends there, said in one warning, run.json
-    "training_stopped" and the report, and the run goes on with the policy learnt so far."""
+    "training_stopped" and the report, and the run goes on with the policy learnt so far. The prior is blamed when
+    the worker's crumb names it in the crashing call and the plant alone passes that time
+    (loop.isolated.plant_alone_survives): a fault the plant meets at that time anyway reaches the prior first,
+    which runs N samples ahead."""
+    from prlpid_fmi.loop.isolated import plant_alone_survives
     from prlpid_fmi.tuning import agent as agent_module
 
     agent = scenario.agent
@@ -301,7 +305,8 @@ def training_stage(scenario: Scenario, run_dir: Path, info: dict, resume: bool, 
             write_json(run_dir / rd.RUN_INFO, info)
             return scenario
         where = f"{faults.episodes} training episodes in a row ended at the same fault ({stopped.message})"
-        if stopped.instance == "prior" and scenario.tuning.forecast_horizon and "prior_fallback" not in info:
+        if stopped.instance == "prior" and scenario.tuning.forecast_horizon and "prior_fallback" not in info \
+                and plant_alone_survives(scenario.tuning, stopped.time_s):
             fallback = prior_fallback_for(scenario)
             info["prior_fallback"] = fallback
             info["prior_fallback_reason"] = where
