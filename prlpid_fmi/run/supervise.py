@@ -12,6 +12,11 @@ reads what it left:
   one line naming the FMU, the FMI call and the simulation time (read from the crumb the child's FMU calls write,
   fmu.worker) and the run directory kept, exit 2;
 - the child dies by another signal (SIGKILL, e.g. out of memory): one line, exit 128 + the signal.
+
+The child ends with the parent (Linux: PR_SET_PDEATHSIG, SIGTERM), so a parent killed with SIGKILL leaves no run
+going on unseen. Cost: the fork (the parent has imported the command line only), a waiting parent of about 40 MB,
+and in the child the crumb's stores on every FMU call (about 1 us a step); a resumed child starts afresh (its
+imports again), only after a crash.
 """
 from __future__ import annotations
 
@@ -49,6 +54,7 @@ def supervised(work: Work) -> int:
             from prlpid_fmi.fmu.worker import attach_crumb
 
             os.close(read_end)
+            _end_with_parent()
             attach_crumb(crumb)
             signal.pthread_sigmask(signal.SIG_SETMASK, blocked)
             return work(_announcer(write_end), restart)
@@ -72,6 +78,17 @@ def supervised(work: Work) -> int:
         print(f"{PROG}: error: {line}{again}{where}", file=sys.stderr, flush=True)
         return 2 if signum in CRASH_SIGNALS else 128 + signum
     raise AssertionError("unreachable")
+
+
+def _end_with_parent() -> None:
+    """Linux: SIGTERM to this child when the parent dies (kill -9 of the parent): the run stops as interrupted,
+    its checkpoint saved, instead of running on unseen."""
+    try:
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGTERM))  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
 
 
 def _announcer(fd: int) -> Callable[[Path], None]:
