@@ -197,7 +197,7 @@ class LoopCore(LoopConstants):
             if mode is None:
                 raise PlantError(f"{path.name}: cannot serve as its own prior ({self.plant.description.prior_summary()}); "
                                  "set strategies.forecast_horizon: 0, or give a prior.fmu with a state_map")
-        if mode == "rollback" or (c.prior_rollback and mode is not None and prior_path == path):
+        if mode == "rollback" or (c.prior_mode == "rollback" and mode is not None and prior_path == path):
             # one instance: the plant itself, its state saved and set back
             prior = self.plant
         else:

@@ -57,7 +57,7 @@ def prior_fallback_for(scenario: Scenario) -> str:
     from prlpid_fmi.fmu.resolve import resolve_fmu
 
     t = scenario.tuning
-    if t.prior.fmu or t.prior.state_map or t.prior_rollback:
+    if t.prior.fmu or t.prior.state_map or t.prior_mode == "rollback":
         return "off"
     return "rollback" if describe_fmu(resolve_fmu(t.fmu, t.fmi_version)).prior_mode else "off"
 
@@ -65,7 +65,7 @@ def prior_fallback_for(scenario: Scenario) -> str:
 def with_prior_fallback(scenario: Scenario, fallback: str | None) -> Scenario:
     """The scenario with a crashing prior replaced (run.json's "prior_fallback"): "rollback" or "off" (None: as is)."""
     if fallback == "rollback":
-        tuning = dataclasses.replace(scenario.tuning, prior_rollback=True)
+        tuning = dataclasses.replace(scenario.tuning, prior_mode="rollback")
     elif fallback == "off":
         tuning = dataclasses.replace(scenario.tuning, forecast_horizon=0)
     else:
@@ -140,7 +140,7 @@ def on_other_evaluation(trained: Scenario, scenario_path: str | Path) -> Scenari
                        f"(got {[l.output for l in other.tuning.loops]}; expected the same loops and coupling)")
     return with_isolation(dataclasses.replace(other, tuning=dataclasses.replace(
         other.tuning, loops=trained.tuning.loops, coupled=trained.tuning.coupled,
-        prior_rollback=trained.tuning.prior_rollback,
+        prior_mode=trained.tuning.prior_mode,
         forecast_horizon=other.tuning.forecast_horizon if trained.tuning.forecast_horizon else 0,
         coupling_range=trained.tuning.coupling_range, tuned_structure=trained.tuning.tuned_structure,
         measurement_filter_order=trained.tuning.measurement_filter_order,
