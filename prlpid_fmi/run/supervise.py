@@ -15,7 +15,8 @@ reads what it left:
 
 The child ends with the parent (Linux: PR_SET_PDEATHSIG, SIGTERM), so a parent killed with SIGKILL leaves no run
 going on unseen. Cost: the fork (the parent has imported the command line only), a waiting parent of about 40 MB,
-and in the child the crumb's stores on every FMU call (about 1 us a step); a resumed child starts afresh (its
+and in the child the crumb's stores on every FMU step (0.2-0.4 us idle, about 1 us on a loaded machine:
+benchmarks/bench_supervise.py); a resumed child starts afresh (its
 imports again), only after a crash.
 """
 from __future__ import annotations
