@@ -169,15 +169,35 @@ def _interrupt_on_signals():
 
 
 def _tune(args: argparse.Namespace) -> int:
+    """`tune`; as the program (not a library call of main), under a supervising parent (run.supervise): a crash of
+    the process that runs it resumes the run with the plant in a worker process, or ends with one line."""
+    if not args.supervised:
+        return _tune_here(args)
+    from prlpid_fmi.run.supervise import supervised
+
+    def work(announce, restart) -> int:
+        args.supervised = False  # the child: errors are its own (main's handlers), exit codes its own
+        return _tune_here(args, announce, restart)
+
+    return supervised(work)
+
+
+def _tune_here(args: argparse.Namespace, announce=None, restart=None) -> int:
+    """`tune` in this process; announce(run_dir) as soon as the run directory exists; restart: (run_dir, the crash's
+    line) to resume a run whose process crashed (run.supervise)."""
     import signal
 
     from prlpid_fmi.run.tune import tune
 
+    scenario, out, resume, crash = _scenario(args.scenario), args.out, args.resume, None
+    if restart is not None:
+        out, crash = restart
+        scenario, resume = out / "scenario.yaml", True
     previous = _interrupt_on_signals()
     try:
-        run_dir = tune(_scenario(args.scenario), timesteps=args.timesteps, seed=args.seed, out=args.out,
-                       resume=args.resume, progress_bar=not (args.no_progress or args.quiet),
-                       baseline=not args.no_baseline)
+        run_dir = tune(scenario, timesteps=args.timesteps, seed=args.seed, out=out, resume=resume,
+                       progress_bar=not (args.no_progress or args.quiet), baseline=not args.no_baseline,
+                       on_run_dir=announce, crash=crash)
     finally:
         for s, h in previous.items():
             signal.signal(s, h)
@@ -414,6 +434,7 @@ def _os_error_line(exc: OSError) -> str:
 def main(argv: list[str] | None = None) -> int:
     warnings.formatwarning = _one_line_warning
     args = make_parser().parse_args(argv)
+    args.supervised = argv is None  # the program (its own command line), not a library call: `tune` is supervised
     try:
         return args.func(args)
     except PrlPidError as exc:

@@ -124,6 +124,10 @@ class TuningConfig:
     leak_limit_mb: float = _d(_m.PlantModel, "leak_limit_mb")  # growth [MB] over one check that re-instantiates
     step_timeout_s: Optional[float] = _d(_m.PlantModel, "step_timeout_s")  # watchdog [s]; None: measured (fmu.watchdog)
     prior: PriorConfig = PriorConfig()
+    # how the plant FMU serves as its own prior: None = as its description says (FmuDescription.prior_mode);
+    # "rollback" = its own instance rolled back even where a second instance could be one (that instance kept
+    # crashing: run.tune's prior fallback); not a scenario key
+    prior_mode: Optional[str] = None
     # controller
     anti_windup: AntiWindup = _d(_m.ControllerModel, "anti_windup")
     gain_change: GainChange = _d(_m.ControllerModel, "gain_change")  # bumpless | positional (control.pid)

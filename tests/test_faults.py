@@ -198,27 +198,91 @@ def test_leak_guard_reinstantiates_an_fmu_whose_resets_grow(faulty, tmp_path):
     complete(run)
 
 
-def test_segfault_kills_an_unisolated_run_and_resume_isolates_it(faulty, tmp_path):
-    """In this process the FMU's segfault ends the tool (exit by SIGSEGV, the run directory kept); --resume sees
-    the abrupt end, runs the plant in a worker process and completes, every episode ended by the crash."""
+def error_lines(stderr: str) -> list[str]:
+    return [line for line in stderr.splitlines() if line.startswith("prlpid-fmi: error:")]
+
+
+def test_a_segfault_on_the_first_run_isolates_the_plant_and_repeated_faults_stop_training(faulty, tmp_path):
+    """`tune` as written on an FMU that segfaults in doStep from 3 s, first run: the loop check's worker crashes, so
+    the plant runs in a worker process for the rest of the run (one warning; run.json); every training episode then
+    ends at that crash, so training stops after REPEATED_FAULT_EPISODES of them (one line; run.json; the report),
+    and the run finishes: exit 0, a complete run directory, never a signal exit."""
+    from prlpid_fmi.tuning.agent import REPEATED_FAULT_EPISODES
+
     scenario = scenario_file(tmp_path, faulty["crash"])
     run = tmp_path / "run"
-    first = cli("-q", "tune", str(scenario), "--out", str(run))
-    assert first.returncode == -signal.SIGSEGV, first.stderr[-2000:]
-    assert (run / "scenario.yaml").is_file() and (run / ".active").is_file()
-    resumed = cli("-q", "tune", str(scenario), "--out", str(run), "--resume")
-    assert resumed.returncode == 0, resumed.stderr[-3000:]
-    assert "Traceback" not in resumed.stderr
-    assert "worker process" in resumed.stderr and "crashed (SIGSEGV)" in resumed.stderr
+    first = cli("-q", "tune", str(scenario), "--out", str(run), "--timesteps", "5000")
+    assert first.returncode == 0, first.stderr[-3000:]
+    assert "Traceback" not in first.stderr and not error_lines(first.stderr)
     complete(run)
     assert not (run / ".active").exists()
-    assert json.loads((run / "run.json").read_text())["isolation"] == "process"
+    info = json.loads((run / "run.json").read_text())
+    assert info["isolation"] == "process"
+    assert "crashed (SIGSEGV) in fmi2DoStep from t = 3 s" in info["isolation_reason"]  # the switch's time
+    assert "loop check" in info["isolation_reason"]
+    switched = [line for line in first.stderr.splitlines() if "for the rest of this run" in line]
+    assert len(switched) == 1
+    stopped = [line for line in first.stderr.splitlines() if "training stopped early" in line]
+    assert len(stopped) == 1 and f"{REPEATED_FAULT_EPISODES} training episodes in a row" in stopped[0]
+    record = info["training_stopped"]
+    assert record["episodes"] == REPEATED_FAULT_EPISODES and record["termination"]["kind"] == "crash"
+    # the truth: the crash at 3 s, reached by the plant, or N = 3 samples earlier by the forecast's prior
+    t = record["termination"]["time_s"]
+    assert FAULT_S - 3 * TS - 1e-9 <= t <= FAULT_S + TS + 1e-9
+    # the Monitor's episode lengths: the last REPEATED_FAULT_EPISODES episodes all ended at that sample
+    lengths = [int(row.split(",")[1]) for row in _monitor_rows(run)]
+    assert lengths[-REPEATED_FAULT_EPISODES:] == [record["termination"]["step"]] * REPEATED_FAULT_EPISODES
+    assert info["trained_timesteps"] == record["steps"] < 5000
+    assert "Training stopped early" in (run / "report.md").read_text()
     metrics = json.loads((run / "metrics.json").read_text())
-    t = metrics["policy"]["termination"]
-    assert t["kind"] == "crash" and "FirstOrderUnstable.fmu crashed (SIGSEGV)" in t["message"]
-    assert FAULT_S - 1 <= t["time_s"] <= FAULT_S + TS + 1e-9  # the forecast's prior reaches 3 s N steps early
+    assert metrics["policy"]["termination"]["kind"] == "crash"
     evaluated = cli("-q", "evaluate", str(run))
     assert evaluated.returncode == 0 and "Traceback" not in evaluated.stderr, evaluated.stderr[-2000:]
+
+
+def test_a_crashing_prior_in_the_tools_own_process_is_survived_and_replaced_by_the_rollback_prior(tmp_path):
+    """An FMU whose second instance (the forecast's prior) crashes in doStep; nothing before training has a prior, so
+    no worker saw the crash first: it kills the process running `tune` (in-process plant). The supervising parent
+    resumes the run with the plant in a worker process (one warning naming the FMU, the call and the time); there
+    every training episode ends at the prior's first step, so after REPEATED_FAULT_EPISODES of them the prior is
+    blamed (the worker's crumb names it; the plant alone passes that time) and replaced by the rollback prior (the
+    plant's own instance), and training completes. Exit 0, a complete run directory, never a signal exit."""
+    from prlpid_fmi.tuning.agent import REPEATED_FAULT_EPISODES
+
+    fmu = build_fmu("FirstOrderUnstable", out_dir=tmp_path / "fmu", defines={"PRLPID_FAULT_CRASH_IN_PRIOR": None})
+    run = tmp_path / "run"
+    first = cli("-q", "tune", str(scenario_file(tmp_path, fmu)), "--out", str(run))
+    assert first.returncode == 0, first.stderr[-3000:]
+    assert "Traceback" not in first.stderr and not error_lines(first.stderr)
+    complete(run)
+    info = json.loads((run / "run.json").read_text())
+    assert info["isolation"] == "process" and "training_stopped" not in info
+    reason = info["isolation_reason"]
+    assert "FirstOrderUnstable.fmu crashed (SIGSEGV) in fmi2DoStep from t = 0 s of the forecast's prior" in reason
+    assert "the tool's process" in reason
+    assert sum("the run continues from its last checkpoint" in line for line in first.stderr.splitlines()) == 1
+    assert info["prior_fallback"] == "rollback" and info["trained_timesteps"] >= 256
+    assert sum("the forecast's prior (the FMU's second instance) crashes" in line
+               for line in first.stderr.splitlines()) == 1
+    # the truth: the prior crashes at its first step, so the episodes before the fallback lasted one sample; after
+    # it none ends early (Kp, Ti of the fixed PID on 1/(s - 1), a fault-free plant instance)
+    lengths = [int(row.split(",")[1]) for row in _monitor_rows(run)]
+    assert lengths[:REPEATED_FAULT_EPISODES] == [1] * REPEATED_FAULT_EPISODES
+    assert "Training stopped early" not in (run / "report.md").read_text()
+
+
+def test_a_segfault_that_kills_the_resumed_run_too_is_one_line_and_exit_2(faulty, tmp_path):
+    """plant.isolation: none keeps the crashing plant in the tool's process: the first run dies, the parent resumes
+    it, that dies too: exit 2, one line naming the FMU, the call, the time and the run directory kept."""
+    run = tmp_path / "run"
+    failed = cli("-q", "tune", str(scenario_file(tmp_path, faulty["crash"], plant={"isolation": "none"})),
+                 "--out", str(run))
+    assert failed.returncode == 2, failed.stderr[-3000:]
+    lines = error_lines(failed.stderr)
+    assert len(lines) == 1 and "Traceback" not in failed.stderr, failed.stderr[-3000:]
+    assert "FirstOrderUnstable.fmu crashed (SIGSEGV) in fmi2DoStep from t = 3 s" in lines[0]  # the switch's time
+    assert "the tool's process" in lines[0] and f"the run directory {run} is kept" in lines[0]
+    assert (run / "scenario.yaml").is_file() and (run / ".active").is_file()
 
 
 def _monitor_rows(run: Path) -> list[str]:

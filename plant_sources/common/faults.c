@@ -69,6 +69,12 @@ Status prlpid_fault_before_step(Instance *c, double t, double h) {
         *nowhere = 1;
     }
 #endif
+#ifdef PRLPID_FAULT_CRASH_IN_PRIOR
+    if (c->name && strcmp(c->name, "prior") == 0) {
+        volatile int *nowhere = NULL;
+        *nowhere = 1;
+    }
+#endif
 #ifdef PRLPID_FAULT_DISCARD_AFTER_S
     if (t >= PRLPID_FAULT_DISCARD_AFTER_S) {
         instance_log(c, STATUS_DISCARD, "fault switch: discarding the step from t = %g", t);

@@ -15,6 +15,8 @@
  *   PRLPID_FAULT_STOP_TIME=t         doStep past the stop time fails with an error log message; the stop
  *                                    time is the one setupExperiment defines, else t (the DefaultExperiment's)
  *   PRLPID_FAULT_HANG_AFTER_S=t      doStep from communication point t on never returns (sleeps in a loop)
+ *   PRLPID_FAULT_CRASH_IN_PRIOR      doStep of an instance named "prior" dereferences NULL (a second instance
+ *                                    that crashes where the first runs, as an FMU with global state may)
  *   PRLPID_FAULT_GATED               the hang and the crash act only while the file named by the environment
  *                                    variable PRLPID_FAULT_GATE exists (a test opens the gate when it wants)
  *   PRLPID_FAULT_BANNER              instantiation prints a banner on stdout (printf, as some exporters do)

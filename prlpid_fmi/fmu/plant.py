@@ -38,15 +38,17 @@ _warned_resets: set[str] = set()
 
 
 class Crumb(ctypes.Structure):
-    """The FMI call a worker process is in, in memory its parent reads after the worker died (fmu.worker):
-    busy (1 inside the call), call (index into CALL_CODES), plant (FmuPlant.crumb_id), t [s]."""
+    """The FMI call a process is in, in memory its parent reads after the process died (fmu.worker): busy (1 inside
+    the call), call (index into CALL_CODES), plant (FmuPlant.crumb_id), role (index into CRUMB_ROLES: which instance
+    of the loop, the plant or the forecast's prior), t [s]."""
 
     _fields_ = [("busy", ctypes.c_int32), ("call", ctypes.c_int32), ("plant", ctypes.c_int32),
-                ("pad", ctypes.c_int32), ("t", ctypes.c_double)]
+                ("role", ctypes.c_int32), ("t", ctypes.c_double)]
 
 
-crumb: Crumb | None = None      # set in a worker process (fmu.worker.attach_crumb)
-crumb_fmus: list[str] = []      # FMU file names of this process's plants, indexed by Crumb.plant
+CRUMB_ROLES = ("plant", "prior")  # Crumb.role: the FMI instance name of the loop's two instances (else 0)
+crumb: Crumb | None = None      # set in a worker process, and in a supervised `tune` (fmu.worker.attach_crumb)
+crumb_fmus: list[str] = []      # FMU file paths of this process's plants (each once), indexed by Crumb.plant
 crumb_names = None              # where the worker's crumb file keeps them (fmu.worker.CrumbFile)
 
 
@@ -160,10 +162,13 @@ class FmuPlant:
         self._call = "step"         # which one (a key of the adapter's call_names)
         self._strict = bool(self.check_outputs)
         self._crumb = crumb
+        self.crumb_id = self.crumb_role = 0
         if crumb is not None:
-            crumb_fmus.append(self.path.name)
-            crumb_names.names = "\n".join(crumb_fmus).encode("utf-8", "replace")[:1023]
-        self.crumb_id = len(crumb_fmus) - 1
+            if str(self.path) not in crumb_fmus:
+                crumb_fmus.append(str(self.path))
+                crumb_names.names = "\n".join(crumb_fmus).encode("utf-8", "replace")[:1023]
+            self.crumb_id = crumb_fmus.index(str(self.path))
+            self.crumb_role = CRUMB_ROLES.index(instance_name) if instance_name in CRUMB_ROLES else 0
         self._fmi = None
         self._applied = None        # parameters of the fresh, unstepped instance (None once it moved)
         self._stop_defined = None   # the stop time the experiment was set up with [s] (None: none)
@@ -178,7 +183,7 @@ class FmuPlant:
         self._seq += 1
         c = self._crumb
         if c is not None:
-            c.call, c.plant, c.t, c.busy = CALL_CODES.index(call), self.crumb_id, self.time, 1
+            c.call, c.plant, c.role, c.t, c.busy = CALL_CODES.index(call), self.crumb_id, self.crumb_role, self.time, 1
         try:
             yield
         finally:
@@ -186,6 +191,12 @@ class FmuPlant:
             self._call = "step"
             if c is not None:
                 c.busy = 0
+
+    @property
+    def crumb(self) -> Crumb | None:
+        """The crumb this plant's calls write (in a worker or a supervised `tune`; None elsewhere): a caller that
+        runs the FMU's code in a call of its own (the native forecast) marks it there."""
+        return self._crumb
 
     def call_name(self, call: str | None = None) -> str:
         """The FMI function(s) behind a watched call ('fmi2DoStep', 'fmi2Reset', ...)."""
@@ -435,7 +446,7 @@ class FmuPlant:
         """`step` on plain floats: u (n_inputs floats) -> outputs (list of n_outputs floats). The hot path."""
         c = self._crumb
         if c is not None:  # a worker: the parent reads which call and time after a crash
-            c.call, c.plant, c.t, c.busy = 4, self.crumb_id, self.time, 1
+            c.call, c.plant, c.role, c.t, c.busy = 4, self.crumb_id, self.crumb_role, self.time, 1
         self._seq += 1
         try:
             if self._n_in:

@@ -94,7 +94,8 @@ def attach_crumb(path: str) -> None:
 
 
 def read_crumb(path: str | None):
-    """(busy, call, fmu name, t) from a worker's crumb file, or None."""
+    """(busy, call, fmu name, t, fmu path, role) from a crumb file, or None (role: "plant" or "prior", the
+    instance of the loop that was in the call)."""
     try:
         raw = Path(path).read_bytes()
     except (OSError, TypeError):
@@ -102,22 +103,27 @@ def read_crumb(path: str | None):
     if len(raw) < ctypes.sizeof(CrumbFile):
         return None
     c = CrumbFile.from_buffer_copy(raw)
-    names = c.names.decode("utf-8", "replace").splitlines()
-    name = names[c.crumb.plant] if 0 <= c.crumb.plant < len(names) else None
+    paths = c.names.decode("utf-8", "replace").splitlines()
+    path = paths[c.crumb.plant] if 0 <= c.crumb.plant < len(paths) else None
     call = plant_module.CALL_CODES[c.crumb.call] if 0 <= c.crumb.call < len(plant_module.CALL_CODES) else ""
-    return bool(c.crumb.busy), call, name, float(c.crumb.t)
+    roles = plant_module.CRUMB_ROLES
+    role = roles[c.crumb.role] if 0 <= c.crumb.role < len(roles) else roles[0]
+    return bool(c.crumb.busy), call, Path(path).name if path else None, float(c.crumb.t), path, role
 
 
-def crash_text(fmus, crumb_path: str | None, how: str, what: str) -> str:
-    """One line: which FMU crashed how, in which FMI call at which time (from the crumb), during what."""
+def crash_text(fmus, crumb_path: str | None, how: str, what: str, process: str = "a worker process") -> str:
+    """One line: which FMU crashed how, in which FMI call at which time (from the crumb), during what, in which
+    process. fmus: the FMU files the process opened (() : those the crumb names)."""
     from prlpid_fmi.fmu.adapters import adapter_class
     from prlpid_fmi.fmu.description import describe_fmu
 
     found = read_crumb(crumb_path)
+    if found and found[4] and not fmus:
+        fmus = [found[4]]
     names = ", ".join(Path(p).name for p in fmus) or "the FMU"
     if not found or not found[1]:
-        return f"{names} crashed ({how}) in a worker process during {what}"
-    busy, call, name, t = found
+        return f"{names} crashed ({how}) in {process} during {what}"
+    busy, call, name, t = found[:4]
     path = next((p for p in fmus if Path(p).name == name), None)
     call_name = call
     if path is not None:
@@ -125,8 +131,9 @@ def crash_text(fmus, crumb_path: str | None, how: str, what: str) -> str:
         call_name = adapter_class(d.fmi_version, d.co_simulation).call_names.get(call, call)
     where = plant_module.describe_call(name or names, call_name, call, t).split(": ", 1)[1]
     if busy:
-        return f"{name or names} crashed ({how}) in {where} (in a worker process during {what})"
-    return f"{name or names} crashed ({how}) in a worker process during {what}, after {where}"
+        of = " of the forecast's prior (the FMU's second instance)" if found[5] == "prior" else ""
+        return f"{name or names} crashed ({how}) in {where}{of} (in {process} during {what})"
+    return f"{name or names} crashed ({how}) in {process} during {what}, after {where}"
 
 
 def mp_context():
@@ -154,6 +161,26 @@ def signal_name(exitcode: int | None) -> str:
 
 class WorkerCrashed(PlantError):
     """A worker process running an FMU died (the FMU crashed it)."""
+
+
+# -- crashes seen in this process's workers (loop.isolated.runs_isolated reads them) -----------------
+_crashes: dict[str, str] = {}   # resolved FMU path -> the line of the first worker it crashed or hung
+
+
+def note_crash(fmus, line: str) -> None:
+    """Remember that a worker running these FMU files crashed or hung (`line`: what happened, one line); from
+    then on, loop.isolated.runs_isolated puts a plant with isolation "auto" on them in a worker process."""
+    for path in fmus:
+        _crashes.setdefault(str(Path(path).resolve()), line)
+
+
+def crash_seen(fmus) -> str | None:
+    """The line of the first worker crash seen on any of these FMU files in this process, or None."""
+    for path in fmus:
+        line = _crashes.get(str(Path(path).resolve()))
+        if line is not None:
+            return line
+    return None
 
 
 def _run_one(conn, fn, args, extracted: dict, options: dict) -> None:
@@ -197,12 +224,15 @@ def call_in_worker(fn, *args, fmus=(), what: str = "the call", step_timeout_s: f
         tag, payload = parent.recv()
     except (EOFError, OSError):
         proc.join(JOIN_TIMEOUT_S)
-        raise WorkerCrashed(crash_text(fmus, crumb, signal_name(proc.exitcode), what)) from None
+        line = crash_text(fmus, crumb, signal_name(proc.exitcode), what)
+        note_crash(fmus, line)
+        raise WorkerCrashed(line) from None
     finally:
         parent.close()
         proc.join(JOIN_TIMEOUT_S)
         remove_crumb_file(crumb)
     if tag == "hang":
+        note_crash(fmus, f"{payload}, in a worker process during {what}")
         raise WorkerCrashed(f"{payload}, in a worker process during {what}")
     if tag == "error":
         raise payload

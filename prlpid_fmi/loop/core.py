@@ -41,13 +41,16 @@ class Termination:
     kind: "nan" (the FMU returned a non-finite output), "discard" (doStep discarded the step), "error"
     (the FMU returned error or fatal), "crash" (the FMU's worker process died), "diverged" (|error| /
     measurement_scale passed divergence_bound). step: samples done including the failed one; time_s:
-    when it happened [s] (a rejected step: its communication point); message: one line for the report.
+    when it happened [s] (a rejected step: its communication point); message: one line for the report;
+    instance: for a crash inside an FMI call, which instance was in it ("plant" or "prior", from the worker's
+    crumb), else "".
     """
 
     kind: str
     step: int
     time_s: float
     message: str
+    instance: str = ""
 
     def as_dict(self) -> dict:
         return {"kind": self.kind, "step": self.step, "time_s": self.time_s, "message": self.message}
@@ -194,7 +197,8 @@ class LoopCore(LoopConstants):
             if mode is None:
                 raise PlantError(f"{path.name}: cannot serve as its own prior ({self.plant.description.prior_summary()}); "
                                  "set strategies.forecast_horizon: 0, or give a prior.fmu with a state_map")
-        if mode == "rollback":  # one instance: the plant itself, its state saved and set back
+        if mode == "rollback" or (c.prior_mode == "rollback" and mode is not None and prior_path == path):
+            # one instance: the plant itself, its state saved and set back
             prior = self.plant
         else:
             prior = FmuPlant(prior_path, self.inputs, self.loop_names, c.sample_time_s,

@@ -139,9 +139,11 @@ class PidTuningEnv(gym.Env):
         reward, terminated = self.core.step(*gains)
         truncated = self.core.k >= self.config.episode_steps
         info = {}
+        if terminated and self.core.termination is not None:  # why the episode ended (tuning.agent's fault watch)
+            info["termination"] = self.core.termination
         if self._info:
             core = self.core
-            info = {"time_s": core.k * self.config.sample_time_s, "setpoint": np.array(core.applied_setpoint),
+            info = {**info, "time_s": core.k * self.config.sample_time_s, "setpoint": np.array(core.applied_setpoint),
                     "measurement": np.array(core.measurement), "control_signal": np.array(core.control_signal),
                     "gains": gains_from_values(*gains).as_dict(), "forecast_reward": core.forecast_reward,
                     "step_reward": core.step_reward}

@@ -13,7 +13,9 @@ Workers come from prlpid_fmi.fmu.worker (the fork server, FMUs extracted once by
 restart costs a fork and the FMU's instantiation, not an interpreter start.
 
 `plant.isolation` in a scenario: "none" runs LoopCore in this process (the fast path, unchanged);
-"process" runs IsolatedCore; "auto" is "none" until `tune --resume` finds the run ended in a crash.
+"process" runs IsolatedCore; "auto" is "none" until an FMU of the loop has crashed (or hung) a worker process of
+this process (any worker: the loop check, a margin experiment, a search pool's, an isolated core's;
+fmu.worker.note_crash), or `tune --resume` finds the run ended abruptly; from then on it is "process".
 """
 from __future__ import annotations
 
@@ -32,8 +34,8 @@ from prlpid_fmi.errors import PlantError
 from prlpid_fmi.fmu.plant import extracted_folders, reuse_extracted
 from prlpid_fmi.fmu.resolve import resolve_fmu
 from prlpid_fmi.fmu.watchdog import MIN_STEP_TIMEOUT_S, STEP_TIMEOUT_FACTOR
-from prlpid_fmi.fmu.worker import (JOIN_TIMEOUT_S, become_worker, crash_text, mp_context, new_crumb_file,
-                                   read_crumb, remove_crumb_file, signal_name)
+from prlpid_fmi.fmu.worker import (JOIN_TIMEOUT_S, become_worker, crash_seen, crash_text, mp_context,
+                                   new_crumb_file, note_crash, read_crumb, remove_crumb_file, signal_name)
 from prlpid_fmi.loop.core import LoopConstants, LoopCore, Termination
 
 _SNAPSHOT = ("k", "setpoint", "measurement", "previous_error", "applied_setpoint", "control_signal", "pid_output",
@@ -41,9 +43,35 @@ _SNAPSHOT = ("k", "setpoint", "measurement", "previous_error", "applied_setpoint
 _warned: set[str] = set()
 
 
+_switched: dict[str, str] = {}  # plant FMU file -> the crash line that put it in a worker process (auto)
+
+
+def loop_fmus(config: TuningConfig) -> list[Path]:
+    """The FMU files a loop core on `config` opens: the plant, and a prior FMU of its own when it forecasts."""
+    paths = [resolve_fmu(config.fmu, config.fmi_version)]
+    if config.prior.fmu and config.forecast_horizon:
+        paths.append(resolve_fmu(config.prior.fmu, config.fmi_version))
+    return paths
+
+
 def runs_isolated(config: TuningConfig) -> bool:
-    """Whether `config` puts the plant in a worker process (isolation "process")."""
-    return config.isolation == "process"
+    """Whether `config` puts the plant in a worker process: isolation "process", or "auto" once one of its FMUs
+    crashed a worker process of this process (said once per FMU, in one warning; crash_isolation)."""
+    if config.isolation != "auto":
+        return config.isolation == "process"
+    return crash_isolation(config) is not None
+
+
+def crash_isolation(config: TuningConfig) -> str | None:
+    """For isolation "auto": the line of the worker crash that put the plant in a worker process for the rest of
+    this process's run (None: none seen). The first time, one warning says so."""
+    paths = loop_fmus(config)
+    line = crash_seen(paths)
+    if line is not None and str(paths[0]) not in _switched:
+        _switched[str(paths[0])] = line
+        warnings.warn(f"{line}; the plant runs in a worker process for the rest of this run (plant.isolation: "
+                      "process)", stacklevel=3)
+    return line
 
 
 def make_core(config: TuningConfig, forecast_path: str = "auto"):
@@ -51,6 +79,36 @@ def make_core(config: TuningConfig, forecast_path: str = "auto"):
     if runs_isolated(config):
         return IsolatedCore(config, forecast_path)
     return LoopCore(config, forecast_path)
+
+
+def _step_alone(config: TuningConfig, steps: int) -> int:
+    """In a worker: the plant FMU as the only instance, its inputs held at their start values, `steps` samples."""
+    from prlpid_fmi.loop.core import plant_limits
+    from prlpid_fmi.fmu import FmuPlant
+
+    inputs, outputs = [l.input for l in config.loops], [l.output for l in config.loops]
+    with FmuPlant(resolve_fmu(config.fmu, config.fmi_version), inputs, outputs, config.sample_time_s,
+                  config.plant_parameters, "plant", **plant_limits(config)) as plant:
+        u = plant.get(inputs).tolist()
+        for _ in range(steps):
+            plant.step_values(u)
+    return steps
+
+
+def plant_alone_survives(config: TuningConfig, until_s: float) -> bool:
+    """Whether the plant FMU alone (one instance in a worker process, no prior, its inputs held at their start
+    values) steps past until_s [s] plus the forecast's horizon without crashing or failing: the test that tells a
+    crash of the forecast's prior (its second instance) from one the plant meets at that time anyway."""
+    from prlpid_fmi.fmu.worker import call_in_worker
+
+    steps = int(np.ceil(until_s / config.sample_time_s - 1e-9)) + config.forecast_horizon + 1
+    path = resolve_fmu(config.fmu, config.fmi_version)
+    try:
+        call_in_worker(_step_alone, config, steps, fmus=[path], what="the check of the plant without its prior",
+                       step_timeout_s=config.step_timeout_s)
+    except Exception:  # noqa: BLE001 - a crash, a hang or a failed step: the plant fails alone too
+        return False
+    return True
 
 
 # -- the worker ------------------------------------------------------------------------------------
@@ -233,6 +291,7 @@ class IsolatedCore(LoopConstants):
         paths = [self.plant.path] + ([resolve_fmu(self.config.prior.fmu, self.config.fmi_version)]
                                      if self.config.prior.fmu and self.config.forecast_horizon else [])
         text = self._hang or crash_text(paths, self._crumb, how, during)
+        note_crash(paths, text)
         found = read_crumb(self._crumb)
         if found and found[0] and found[1] == "reset":  # the next worker instantiates afresh instead
             from prlpid_fmi.fmu import verdicts
@@ -282,12 +341,14 @@ class IsolatedCore(LoopConstants):
         return reward, terminated
 
     def _crashed(self) -> tuple[float, bool]:
+        found = read_crumb(self._crumb)
+        instance = found[5] if found and found[0] else ""  # the instance inside an FMI call when it died
         how = self._lost()
         t = self.k * self.config.sample_time_s
         self.k += 1
         self.forecast_reward = self.step_reward = None
         name = self.plant.path.name
-        self.termination = Termination("crash", self.k, t, f"{how} (the loop's step from t = {t:g} s)")
+        self.termination = Termination("crash", self.k, t, f"{how} (the loop's step from t = {t:g} s)", instance)
         if name not in _warned:
             _warned.add(name)
             warnings.warn(f"{how}: the episode ends with the divergence penalty at t = {t:g} s and a fresh worker "

@@ -391,7 +391,9 @@ def loop_margins(config: TuningConfig, Kp: Sequence[float], Ti: Sequence[float],
     path = fmu_file(c)
     from prlpid_fmi.fmu.worker import WorkerCrashed, call_in_worker, in_worker
 
-    if not in_worker() and (c.isolation == "process" or describe_fmu(path).once_per_process):
+    from prlpid_fmi.loop.isolated import runs_isolated
+
+    if not in_worker() and (runs_isolated(c) or describe_fmu(path).once_per_process):
         try:
             return call_in_worker(loop_margins, dataclasses.replace(c, isolation="none", fmu=str(path)), Kp, Ti, Td,
                                   operating_point, coupling, frequencies, amplitude, fmus=[path],

@@ -50,6 +50,29 @@ def with_isolation(scenario: Scenario, isolation: str) -> Scenario:
     return dataclasses.replace(scenario, tuning=dataclasses.replace(scenario.tuning, isolation=isolation))
 
 
+def prior_fallback_for(scenario: Scenario) -> str:
+    """What replaces a forecast prior that keeps crashing: "rollback" (the plant's own instance, its state saved
+    and set back, where the FMU can get and set its state and the prior is the plant's FMU) or "off" (no forecast)."""
+    from prlpid_fmi.fmu import describe_fmu
+    from prlpid_fmi.fmu.resolve import resolve_fmu
+
+    t = scenario.tuning
+    if t.prior.fmu or t.prior.state_map or t.prior_mode == "rollback":
+        return "off"
+    return "rollback" if describe_fmu(resolve_fmu(t.fmu, t.fmi_version)).prior_mode else "off"
+
+
+def with_prior_fallback(scenario: Scenario, fallback: str | None) -> Scenario:
+    """The scenario with a crashing prior replaced (run.json's "prior_fallback"): "rollback" or "off" (None: as is)."""
+    if fallback == "rollback":
+        tuning = dataclasses.replace(scenario.tuning, prior_mode="rollback")
+    elif fallback == "off":
+        tuning = dataclasses.replace(scenario.tuning, forecast_horizon=0)
+    else:
+        return scenario
+    return dataclasses.replace(scenario, tuning=tuning)
+
+
 def training_anchor(scenario: Scenario, fixed: dict | None, classical=None):
     """What action 0 of the anchored gain map gives (loop.env): the classical gain table when one was built and
     controller.anchor_on is auto, else the fixed PID's Gains; None for the absolute map or without a fixed PID."""
@@ -99,11 +122,12 @@ def load_trained(run_dir: Path) -> Scenario:
         raise RunError(f"{run_dir}: not a finished run directory (expected {rd.SCENARIO} and {rd.MODEL} from `tune`)")
     scenario = load_scenario(run_dir / rd.SCENARIO)
     try:  # a run whose plant crashed the tool once keeps its plant in a worker process
-        isolation = json.loads((run_dir / rd.RUN_INFO).read_text()).get("isolation", "auto")
+        info = json.loads((run_dir / rd.RUN_INFO).read_text())
+        isolation, fallback = info.get("isolation", "auto"), info.get("prior_fallback")
     except (OSError, ValueError, AttributeError):
-        isolation = "auto"
+        isolation, fallback = "auto", None
     fixed = json.loads((run_dir / rd.FIXED_PID).read_text()) if (run_dir / rd.FIXED_PID).is_file() else None
-    return with_structure(with_isolation(scenario, isolation), fixed)
+    return with_structure(with_prior_fallback(with_isolation(scenario, isolation), fallback), fixed)
 
 
 def on_other_evaluation(trained: Scenario, scenario_path: str | Path) -> Scenario:
@@ -116,6 +140,8 @@ def on_other_evaluation(trained: Scenario, scenario_path: str | Path) -> Scenari
                        f"(got {[l.output for l in other.tuning.loops]}; expected the same loops and coupling)")
     return with_isolation(dataclasses.replace(other, tuning=dataclasses.replace(
         other.tuning, loops=trained.tuning.loops, coupled=trained.tuning.coupled,
+        prior_mode=trained.tuning.prior_mode,
+        forecast_horizon=other.tuning.forecast_horizon if trained.tuning.forecast_horizon else 0,
         coupling_range=trained.tuning.coupling_range, tuned_structure=trained.tuning.tuned_structure,
         measurement_filter_order=trained.tuning.measurement_filter_order,
         derivative_filter_N=trained.tuning.derivative_filter_N)), trained.tuning.isolation)

@@ -42,7 +42,8 @@ from prlpid_fmi.run.evaluate import (
     evaluation_report,
     write_evaluation_files,
 )
-from prlpid_fmi.run.trained import anchor_name, load_policy, training_anchor, with_isolation, with_structure
+from prlpid_fmi.run.trained import (anchor_name, load_policy, prior_fallback_for, training_anchor, with_isolation,
+                                   with_prior_fallback, with_structure)
 from prlpid_fmi.rundir import write_atomic, write_json
 from prlpid_fmi.scenario.load import Scenario, load_scenario, scenario_to_yaml
 from prlpid_fmi.schema.types import MAX_SEED
@@ -50,7 +51,7 @@ from prlpid_fmi.schema.types import MAX_SEED
 
 def tune(scenario_path: str | Path, timesteps: int | None = None, seed: int | None = None,
          out: str | Path | None = None, resume: bool = False, progress_bar: bool = True,
-         baseline: bool = True) -> Path:
+         baseline: bool = True, on_run_dir=None, crash: str | None = None) -> Path:
     """Train the scenario's agent, evaluate it against a tuned fixed PID, deploy the better plain PID.
 
     Returns the run directory. With resume, training continues from the run's latest checkpoint
@@ -59,6 +60,8 @@ def tune(scenario_path: str | Path, timesteps: int | None = None, seed: int | No
     model or a checkpoint leaves no directory behind. progress_bar: training and fixed-PID search
     progress, and the steps after training, on stderr. baseline=False skips the fixed-PID search where
     nothing needs it: with the absolute gain map only (the anchored map trains around the fixed PID).
+    on_run_dir(run_dir): called once the run directory exists (run.supervise). crash: with resume, the line of the
+    crash that ended the previous process (run.supervise): said in the warning and kept in run.json.
     """
     if timesteps is not None and timesteps < 1:
         raise ArgumentError(f"{{timesteps}}: must be at least 1 (got {timesteps}; expected a number of training steps >= 1)")
@@ -75,10 +78,12 @@ def tune(scenario_path: str | Path, timesteps: int | None = None, seed: int | No
             warnings.warn(note, stacklevel=2)
     run_dir, created = rd.prepare_run_dir(out, scenario.name, resume)
     crashed = rd.mark_active(run_dir)
+    if on_run_dir is not None:
+        on_run_dir(run_dir)
     watchdog.context["run_dir"] = run_dir  # what a hang's one line says is kept
     try:
         return _tune(scenario, Path(scenario_path), run_dir, timesteps, seed, resume, progress_bar, baseline,
-                     crashed and resume)
+                     (crash or True) if crashed and resume else False)
     except BaseException as exc:
         if isinstance(exc, Interrupted):
             exc.run_dir = run_dir
@@ -120,7 +125,7 @@ class ScheduleResult:
 
 
 def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None, seed: int | None, resume: bool,
-          progress_bar: bool, baseline: bool, crashed: bool = False) -> Path:
+          progress_bar: bool, baseline: bool, crashed: bool | str = False) -> Path:
     from prlpid_fmi.progress import stage, stage_seconds
 
     stage_seconds(clear=True)  # this run's stage times from here (run.json's stage_seconds)
@@ -128,15 +133,18 @@ def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None
     if started is None:
         return run_dir
     scenario, info = started.scenario, started.info
+    scenario = isolation_stage(scenario, run_dir, info)
     fixed = fixed_pid_stage(scenario, run_dir, progress_bar, baseline)
-    scenario = with_structure(scenario, fixed)  # the tuned b, c, Tf from here on
-    started = dataclasses.replace(started, scenario=scenario)
+    scenario = isolation_stage(with_structure(scenario, fixed), run_dir, info)  # the tuned b, c, Tf from here on
     classical = classical_stage(scenario, run_dir, fixed, info, progress_bar) if fixed is not None else None
+    scenario = isolation_stage(scenario, run_dir, info)
     anchor = training_anchor(scenario, fixed, classical)
     info["anchor"] = anchor_name(anchor)
     write_json(run_dir / rd.RUN_INFO, info)
     with stage("training", False):
-        training_stage(scenario, run_dir, info, resume, anchor, progress_bar)
+        scenario = training_stage(scenario, run_dir, info, resume, anchor, progress_bar)
+    scenario = isolation_stage(scenario, run_dir, info)
+    started = dataclasses.replace(started, scenario=scenario)
     policy = load_policy(run_dir, scenario.agent.algorithm)
     table = schedule_stage(policy, scenario, anchor, progress_bar)
     info.update(table.info)
@@ -147,19 +155,24 @@ def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None
 
 
 def start_stage(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None, seed: int | None,
-                resume: bool, crashed: bool) -> Started | None:
+                resume: bool, crashed: bool | str) -> Started | None:
     """The scenario as this run trains it, scenario.yaml (a new run) and run.json; None when a resumed run has
-    finished already with this budget (nothing to do; said in a warning)."""
+    finished already with this budget (nothing to do; said in a warning). crashed: the previous run ended abruptly
+    (a string: the line of the crash that ended it)."""
     info = {"command": sys.argv, "started": rd.now(), "versions": rd.package_versions()}
     if resume:
         scenario = load_scenario(run_dir / rd.SCENARIO)
         source = run_dir / rd.SCENARIO
         info = {**json.loads((run_dir / rd.RUN_INFO).read_text()), "resumed": rd.now()}
         if crashed and scenario.tuning.isolation == "auto":
-            warnings.warn(f"{run_dir}: the previous run ended abruptly (did the FMU crash it?); the plant now runs "
-                          "in a worker process (plant.isolation: process)", stacklevel=3)
+            why = crashed if isinstance(crashed, str) else "the previous run ended abruptly (did the FMU crash it?)"
+            warnings.warn(f"{run_dir}: {why}; the run continues from its last checkpoint with the plant in a worker "
+                          "process (plant.isolation: process)", stacklevel=3)
             info["isolation"] = "process"
-        scenario = with_isolation(scenario, info.get("isolation", "auto"))
+            if isinstance(crashed, str):
+                info["isolation_reason"] = crashed
+        scenario = with_prior_fallback(with_isolation(scenario, info.get("isolation", "auto")),
+                                       info.get("prior_fallback"))
     agent = scenario.agent
     if seed is not None:
         agent = dataclasses.replace(agent, seed=seed)
@@ -177,6 +190,22 @@ def start_stage(scenario: Scenario, source: Path, run_dir: Path, timesteps: int 
     info.update(seed=agent.seed, total_timesteps=agent.total_timesteps, algorithm=agent.algorithm)
     write_json(run_dir / rd.RUN_INFO, info)
     return Started(scenario, source, info)
+
+
+def isolation_stage(scenario: Scenario, run_dir: Path, info: dict) -> Scenario:
+    """The scenario with plant.isolation "process" once a worker crash in this process put its "auto" plant in a
+    worker process (loop.isolated.crash_isolation; the warning is said there, once); run.json records it (isolation,
+    and isolation_reason: the crash's line), so later stages' processes, `--resume`, `evaluate` and `export` follow."""
+    from prlpid_fmi.loop.isolated import crash_isolation
+
+    if scenario.tuning.isolation != "auto":
+        return scenario
+    line = crash_isolation(scenario.tuning)
+    if line is None:
+        return scenario
+    info.update(isolation="process", isolation_reason=line)
+    write_json(run_dir / rd.RUN_INFO, info)
+    return with_isolation(scenario, "process")
 
 
 NO_BASELINE_ANCHORED = ("--no-baseline: the fixed PID is searched anyway, because the anchored gain map "
@@ -252,19 +281,57 @@ def classical_stage(scenario: Scenario, run_dir: Path, fixed: dict, info: dict, 
     return table
 
 
-def training_stage(scenario: Scenario, run_dir: Path, info: dict, resume: bool, anchor, progress_bar: bool) -> None:
+def training_stage(scenario: Scenario, run_dir: Path, info: dict, resume: bool, anchor, progress_bar: bool) -> Scenario:
     """Train the agent around the anchor (resume: from the latest checkpoint) up to agent.total_timesteps;
-    run.json records the steps trained."""
+    run.json records the steps trained. Returns the scenario as trained on (with a prior fallback, below).
+
+    Episodes that keep ending at the same FMU fault (tuning.agent.FaultWatch) stop the training: when the forecast's
+    prior (the FMU's second instance) was the instance in the crashing call, it is replaced once (the plant's own
+    instance rolled back, or no forecast: run.trained.prior_fallback_for; one warning, run.json "prior_fallback")
+    and training goes on from the checkpoint; otherwise training ends there, said in one warning, run.json
+    "training_stopped" and the report, and the run goes on with the policy learnt so far. The prior is blamed when
+    the worker's crumb names it in the crashing call and the plant alone passes that time
+    (loop.isolated.plant_alone_survives): a fault the plant meets at that time anyway reaches the prior first,
+    which runs N samples ahead."""
+    from prlpid_fmi.loop.isolated import plant_alone_survives
     from prlpid_fmi.tuning import agent as agent_module
 
     agent = scenario.agent
-    resume_from, done = rd.latest_checkpoint(run_dir, info.get("trained_timesteps", 0)) if resume else (None, 0)
-    remaining = max(agent.total_timesteps - done, 0)
-    if remaining > 0:
+    resumed = resume
+    while True:
+        resume_from, done = rd.latest_checkpoint(run_dir, info.get("trained_timesteps", 0)) if resumed else (None, 0)
+        remaining = max(agent.total_timesteps - done, 0)
+        if remaining <= 0:
+            return scenario
+        faults = agent_module.FaultWatch()
         model = agent_module.train(scenario.tuning, agent, run_dir, progress_bar=progress_bar,
-                                   resume_from=resume_from, total_timesteps=remaining, anchor=anchor)
+                                   resume_from=resume_from, total_timesteps=remaining, anchor=anchor, faults=faults)
         info["trained_timesteps"] = int(model.num_timesteps)
+        stopped = faults.stopped
+        if stopped is None:
+            write_json(run_dir / rd.RUN_INFO, info)
+            return scenario
+        where = f"{faults.episodes} training episodes in a row ended at the same fault ({stopped.message})"
+        if stopped.instance == "prior" and scenario.tuning.forecast_horizon and "prior_fallback" not in info \
+                and plant_alone_survives(scenario.tuning, stopped.time_s):
+            fallback = prior_fallback_for(scenario)
+            info["prior_fallback"] = fallback
+            info["prior_fallback_reason"] = where
+            write_json(run_dir / rd.RUN_INFO, info)
+            warnings.warn(f"{where}: the forecast's prior (the FMU's second instance) crashes; the forecast now "
+                          + ("rolls the plant's own instance ahead and back (the rollback prior)" if fallback == "rollback"
+                             else "is off (strategies.forecast_horizon: 0)")
+                          + " and training goes on from its last checkpoint", stacklevel=2)
+            scenario = with_prior_fallback(scenario, fallback)
+            resumed = True
+            continue
+        info["training_stopped"] = {"steps": int(model.num_timesteps), "episodes": faults.episodes,
+                                    "termination": stopped.as_dict()}
         write_json(run_dir / rd.RUN_INFO, info)
+        warnings.warn(f"training stopped early at step {int(model.num_timesteps)} of {agent.total_timesteps}: {where}; "
+                      "nothing is learnt from such episodes; the run goes on with the policy trained so far",
+                      stacklevel=2)
+        return scenario
 
 
 def schedule_stage(policy, scenario: Scenario, anchor, progress_bar: bool) -> ScheduleResult:
@@ -314,6 +381,20 @@ def refusals(choice: Choice, limit: float) -> dict:
         if c is not None and (problems := c.problems(limit)):
             out[Deployed(c.name)] = "; ".join(problems)
     return out
+
+
+def training_note(info: dict) -> str:
+    """The report's lines on a training stopped early, or a prior replaced, for repeated FMU faults ("" if neither)."""
+    note = ""
+    if "prior_fallback" in info:
+        note += (f"\nThe forecast's prior was replaced ({'the rollback prior' if info['prior_fallback'] == 'rollback' else 'no forecast'}): "
+                 f"{info.get('prior_fallback_reason', '')}.\n")
+    stopped = info.get("training_stopped")
+    if stopped:
+        note += (f"\n**Training stopped early** at step {stopped['steps']}: {stopped['episodes']} episodes in a row "
+                 f"ended at the same fault ({stopped['termination']['message']}); the policy is what was learnt "
+                 "until then.\n")
+    return note
 
 
 def files_stage(run_dir: Path, started: Started, ev: Evaluation, fixed: dict | None, table: ScheduleResult,
@@ -390,6 +471,7 @@ def files_stage(run_dir: Path, started: Started, ev: Evaluation, fixed: dict | N
                                headline=title)
     if table.note:
         report += "\n" + table.note
+    report += training_note(info)
     report += "\n" + deployable_files(run_dir)
     write_atomic(run_dir / rd.REPORT, report)
     plots.plot_learning_curve(run_dir / rd.MONITOR, run_dir / rd.LEARNING_CURVE_PLOT)

@@ -247,7 +247,9 @@ class PlantModel(Section):
     isolation: Isolation = Field(
         "auto", description="where the FMU (plant and prior) runs: none = in this process (fastest); process = in a "
                             "worker process, so a crashing FMU ends its episode instead of the tool; auto = in this "
-                            "process, switched to process when `tune --resume` finds the run ended in a crash")
+                            "process, switched to process for the rest of the run once the FMU crashed a worker (the "
+                            "loop check, a margin experiment, a search) or the tool's own process (`tune` then "
+                            "resumes the run), and when `tune --resume` finds the run ended abruptly")
     leak_check_every: Steps = Field(
         100, description="resets between checks of the memory the FMU's resets added; 0 = no check")
     leak_limit_mb: Positive = Field(

@@ -135,6 +135,56 @@ def _timed_checkpoints(run_dir: Path, agent: AgentConfig):
     return TimedCheckpoint()
 
 
+REPEATED_FAULT_EPISODES = 20  # training episodes in a row ending at the same fault that stop the training
+
+
+def fault_key(termination) -> tuple | None:
+    """What makes two episode ends "the same fault": the kind, the sample and the FMI call named (fmi2DoStep, ...);
+    None for an end that is not the FMU's fault (a divergence is the gains')."""
+    if termination is None or termination.kind == "diverged":
+        return None
+    call = re.search(r"\bfmi[0-9]?[A-Z]\w*", termination.message)
+    return termination.kind, termination.step, call.group(0) if call else ""
+
+
+class FaultWatch:
+    """Stops training when REPEATED_FAULT_EPISODES episodes in a row (over all envs, in the order they end) end at
+    the same fault (fault_key): nothing is learnt from them. After training, `stopped` is the last such episode's
+    Termination (None: training was not stopped) and `episodes` the count."""
+
+    def __init__(self, limit: int = REPEATED_FAULT_EPISODES):
+        self.limit = limit
+        self.stopped = None
+        self.episodes = 0
+        self._key = None
+
+    def ended(self, termination) -> bool:
+        """Count one episode's end (its Termination, or None); True when training should stop."""
+        key = fault_key(termination)
+        self.episodes = self.episodes + 1 if key is not None and key == self._key else int(key is not None)
+        self._key = key
+        if key is not None and self.episodes >= self.limit:
+            self.stopped = termination
+            return True
+        return False
+
+    def callback(self):
+        """An SB3 callback that feeds `ended` from the envs' infos (PidTuningEnv puts a Termination there)."""
+        from stable_baselines3.common.callbacks import BaseCallback
+
+        watch = self
+
+        class RepeatedFault(BaseCallback):
+            def _on_step(self) -> bool:
+                go_on = True
+                for done, info in zip(self.locals.get("dones", ()), self.locals.get("infos", ())):
+                    if done and watch.ended(info.get("termination")):
+                        go_on = False
+                return go_on
+
+        return RepeatedFault()
+
+
 def save_checkpoint(model, run_dir: Path, normalize: bool) -> Path:
     """checkpoints/model_<timesteps>_steps.zip (+ the VecNormalize statistics) atomically; returns its path."""
     steps = int(model.num_timesteps)
@@ -178,10 +228,13 @@ def torch_threads(requested: int) -> int:
 
 
 def train(config: TuningConfig, agent: AgentConfig, run_dir: Path, progress_bar: bool = False,
-          resume_from: Path | None = None, total_timesteps: int | None = None, anchor=None):
+          resume_from: Path | None = None, total_timesteps: int | None = None, anchor=None,
+          faults: FaultWatch | None = None):
     """Train an agent; checkpoints, TensorBoard logs and Monitor CSVs go under run_dir.
 
     Returns the trained model (also saved as run_dir/model.zip, with run_dir/vecnormalize.pkl when used).
+    faults: a FaultWatch that stops training early when episodes keep ending at the same FMU fault (its `stopped`
+    says so afterwards; a checkpoint is saved there).
     """
     from stable_baselines3.common.callbacks import CheckpointCallback
     from stable_baselines3.common.vec_env import VecNormalize
@@ -219,9 +272,13 @@ def train(config: TuningConfig, agent: AgentConfig, run_dir: Path, progress_bar:
                                     save_path=str(run_dir / rd.CHECKPOINTS), name_prefix="model",
                                     save_vecnormalize=agent.normalize)
     callbacks = [checkpoint, _timed_checkpoints(run_dir, agent)] + ([training_progress()] if progress_bar else [])
+    if faults is not None:
+        callbacks.append(faults.callback())
     try:
         model.learn(total_timesteps=steps, callback=callbacks, reset_num_timesteps=resume_from is None,
                     tb_log_name=agent.algorithm)
+        if faults is not None and faults.stopped is not None and model.num_timesteps > 0:
+            save_checkpoint(model, run_dir, agent.normalize)
     except BaseException:  # a signal (SIGTERM, SIGINT) or an error: keep what was learnt for --resume
         if model.num_timesteps > 0:
             save_checkpoint(model, run_dir, agent.normalize)

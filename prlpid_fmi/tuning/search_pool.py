@@ -7,8 +7,9 @@ the caller's own evaluator between hand-outs. The results come back in the order
 the same evaluation gives in this process, so a search's result does not depend on the number of workers.
 
 A worker that dies (an FMU that crashes it) or hangs (its step watchdog ends it) hands its vector back: it and
-everything after are evaluated in this process, where the FMU behaves as it does without a pool (a crash ends the
-run, and `tune --resume` then isolates the plant; a hang ends it with the watchdog's line).
+everything after are evaluated in this process, where the FMU behaves as it does without a pool. The crash is noted
+(fmu.worker.note_crash), so loop cores made from then on run the plant in a worker process (plant.isolation auto); a
+crash of this process's own cores ends it, and the CLI's supervising parent resumes the run isolated (run.supervise).
 
 Workers fork from the fork server of prlpid_fmi.fmu.worker, the FMUs extracted once by this process.
 """
@@ -16,12 +17,13 @@ from __future__ import annotations
 
 import os
 from collections import deque
+from pathlib import Path
 from multiprocessing.connection import wait
 
 from prlpid_fmi.fmu import watchdog
 from prlpid_fmi.fmu.plant import FmuPlant, extracted_folders, reuse_extracted
 from prlpid_fmi.fmu.watchdog import in_worker
-from prlpid_fmi.fmu.worker import JOIN_TIMEOUT_S, become_worker, mp_context
+from prlpid_fmi.fmu.worker import JOIN_TIMEOUT_S, become_worker, mp_context, note_crash, signal_name
 from prlpid_fmi.loop.isolated import IsolatedCore
 
 QUEUED = 2  # vectors handed to a worker at a time
@@ -94,6 +96,7 @@ class SearchPool:
 
     def __init__(self, local, factory, args: tuple, workers: int, fmus=()):
         self.local = local
+        self._fmus = list(fmus)
         self._workers: list = []  # (process, connection)
         if workers <= 1:
             return
@@ -148,14 +151,18 @@ class SearchPool:
                         conn.send((method, vectors[i]))
                     except (BrokenPipeError, OSError):
                         todo.appendleft(i)
-                        lose(conn)
+                        lose(conn, "lost")
                         break
                     indices.append(i)
 
-        def lose(conn):
+        def lose(conn, tag="error", payload=None):
             worker, indices = queued.pop(conn)
             todo.extendleft(reversed(indices))  # evaluated here (or by the others), in order
             self._lose(worker)
+            if tag != "error":  # it died or hung: the FMU, not the evaluation, ended it
+                names = ", ".join(Path(p).name for p in self._fmus) or "the FMU"
+                note_crash(self._fmus, payload if tag == "hang" else
+                           f"{names} crashed ({signal_name(worker[0].exitcode)}) in a worker process of a search")
 
         while todo or any(indices for _, indices in queued.values()):
             hand_out()
@@ -173,7 +180,7 @@ class SearchPool:
                     except (EOFError, OSError):
                         tag, payload = "lost", None
                     if tag != "ok":  # an error, a hang (the watchdog's line) or a crash: evaluated here
-                        lose(conn)
+                        lose(conn, tag, payload)
                         break
                     results[queued[conn][1].popleft()] = payload
         return results

@@ -207,7 +207,14 @@ class NativeForecast(Forecast):
         if (self.plant.component, self.prior.component) != self._components:  # re-instantiated (reset fallback)
             self._components = (self.plant.component, self.prior.component)
             self._args[0].value, self._args[1].value = self._components
+        crumb = self.prior.crumb  # a worker's (fmu.worker): a crash in this call is the prior's doStep
+        if crumb is not None:
+            prior = self.prior
+            crumb.call, crumb.plant, crumb.role, crumb.t, crumb.busy = 4, prior.crumb_id, prior.crumb_role, \
+                self.plant.time, 1
         rc = self._call(*self._args)
+        if crumb is not None:
+            crumb.busy = 0
         if rc:
             self._raise(rc)
         result = self._result
