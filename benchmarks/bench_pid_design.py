@@ -9,7 +9,7 @@ the setpoint weight b. For each plant this measures, on the sampled linear close
 with code of its own (numpy / scipy / python-control; only the tool's fixed-PID *search* is imported, for its
 result):
 
-- the tool's fixed PID, found by prlpid_fmi.tuning.fixed_pid.tune_fixed_pid exactly as `tune` calls it
+- the tool's fixed PID, found by prlpid_fmi.tuning.design_rule.tune_fixed_pid exactly as `tune` calls it
   (with the scenario's baseline and deploy sections), evaluated with the structure it returns (b, c, Tf);
 - SIMC (Skogestad 2003) PI from a first-order-plus-dead-time model (half rule), and SIMC PID from a
   second-order-plus-dead-time model where the plant has one, tau_c = theta;
@@ -970,7 +970,7 @@ def tool_fixed_pid(plant: Plant, timeout_s: float):
     from prlpid_fmi.progress import Steps
     from prlpid_fmi.robustness.margins import margins_of, setpoint_range_points
     from prlpid_fmi.scenario.load import load_scenario
-    from prlpid_fmi.tuning.fixed_pid import tune_fixed_pid
+    from prlpid_fmi.tuning.design_rule import tune_fixed_pid
 
     if not plant.bundled:
         from prlpid_fmi.fmu import build_fmu
@@ -1003,7 +1003,7 @@ def tool_fixed_pid(plant: Plant, timeout_s: float):
     g = fixed.gains
     b, c, tf = (list(x) for x in fixed.structure)
     law = Law(float(b[0]), float(c[0]), float(tf[0]), plant.filter_order)
-    info = dict(fixed.info)
+    info = dict(fixed.report.as_json() if fixed.report else {})
     notes, oddities = [], []
     if info.get("load_optimum"):
         notes.append(f"the tool's load cost {info['load_cost']:.4g} (its own optimum {info['load_optimum']:.4g}, "

@@ -145,7 +145,7 @@ APPROACH_STEPS = 25  # setpoint values of the ramp from the FMU's start state to
 
 def start_measurement(config: TuningConfig) -> list[float]:
     """The measurement per loop of the FMU's start state (a reset loop core, no noise, nothing stepped)."""
-    core = _open_core(dataclasses.replace(config, forecast_horizon=0, measurement_noise_std=0.0,
+    core = open_core(dataclasses.replace(config, forecast_horizon=0, measurement_noise_std=0.0,
                                           actuator_noise_std=0.0, randomize={}))
     try:
         core.reset(np.random.default_rng(0))
@@ -180,7 +180,7 @@ def _load_config(config: TuningConfig, point: list[float], loads: list[float],
                                actuator_noise_std=0.0, randomize={}, forecast_horizon=0, load_disturbance=0.0)
 
 
-def _open_core(config: TuningConfig):
+def open_core(config: TuningConfig):
     """A loop core for `config`, in a worker process when the FMU may be instantiated only once per process (the
     design holds several cores open at once: one per operating point)."""
     from prlpid_fmi.fmu import describe_fmu
@@ -437,25 +437,34 @@ class LoadDesign(OutcomeCache):
         return out
 
     # -- the load cost -----------------------------------------------------------------------------------------
-    def prepare(self, gains: tuple) -> None:
-        """Measure the plant responses with `gains` in the loop and open one load-experiment core per point, the
-        load signed away from the actuator limit nearer to u at the point (as `gains` hold it)."""
-        self.plants = plant_responses(self.config, gains, self.points)
-        for sample in parameter_samples(self.config):  # the Monte-Carlo plants constrain Kp too (not in `estimates`)
-            self.plants += plant_responses(sample, gains, self.points)
-        # the windings of the PID that was measured stable there, the reference of every candidate's (kp_interval)
-        self.reference = [None if plants is None else
-                          [pl.winding(self.controller(gains, list(self.tf), i)) for i, pl in enumerate(plants)]
-                          for plants in self.plants]
+    def prepare(self, gains: tuple, measured: dict | None = None) -> None:
+        """Measure the plant responses with `gains` in the loop (or take them from another design's `measured()`
+        with the same gains) and open one load-experiment core per point, the load signed away from the actuator
+        limit nearer to u at the point (as `gains` hold it)."""
+        if measured is not None:
+            self.plants, self.reference = measured["plants"], measured["reference"]
+        else:
+            self.plants = plant_responses(self.config, gains, self.points)
+            for sample in parameter_samples(self.config):  # the Monte-Carlo plants constrain Kp too (not `estimates`)
+                self.plants += plant_responses(sample, gains, self.points)
+            # the windings of the PID that was measured stable there, the reference of every candidate's (kp_interval)
+            self.reference = [None if plants is None else
+                              [pl.winding(self.controller(gains, list(self.tf), i)) for i, pl in enumerate(plants)]
+                              for plants in self.plants]
         self.relax_increment_limit(gains)
         self.start = start = start_measurement(self.config)
         for p in self.points:  # per point: the unloaded run (kept open: every candidate's reference) and the loaded
             quiet = _load_config(self.config, p, [0.0] * self.config.n_loops, start)
-            core = _open_core(quiet)
+            core = open_core(quiet)
             self.quiet_cores.append(core)
             probe = gains_rollout(lambda c: gains, quiet, seed=0, core=core)
             self.loads.append(signed_loads(self.config, probe, self.load_step))
-            self.cores.append(_open_core(_load_config(self.config, p, self.loads[-1], start)))
+            self.cores.append(open_core(_load_config(self.config, p, self.loads[-1], start)))
+
+    def measured(self) -> dict:
+        """The plant responses `prepare` measured and their reference windings (picklable), for another design's
+        `prepare` with the same stabilising PID."""
+        return {"plants": self.plants, "reference": self.reference}
 
     def prepared(self) -> dict:
         """What `prepare` measured and decided (picklable): a replica (`replica`) evaluates exactly as this design."""
@@ -470,9 +479,9 @@ class LoadDesign(OutcomeCache):
         for name, value in prepared.items():
             setattr(design, name, value)
         for p, loads in zip(design.points, design.loads):
-            design.quiet_cores.append(_open_core(_load_config(design.config, p, [0.0] * design.config.n_loops,
+            design.quiet_cores.append(open_core(_load_config(design.config, p, [0.0] * design.config.n_loops,
                                                               design.start)))
-            design.cores.append(_open_core(_load_config(design.config, p, loads, design.start)))
+            design.cores.append(open_core(_load_config(design.config, p, loads, design.start)))
         return design
 
     def pool_workers(self) -> int:
@@ -630,7 +639,7 @@ class SetpointDesign(OutcomeCache):
         self.seeds = seeds
         quiet = dataclasses.replace(design.config, measurement_noise_std=0.0, actuator_noise_std=0.0,
                                     load_disturbance=0.0)
-        self.core = _open_core(quiet)
+        self.core = open_core(quiet)
         self.n = design.n + 1
         self._seen: dict = {}
         self._owns_design = False  # a replica's design is its own (closed with it)
@@ -725,15 +734,15 @@ class SetpointDesign(OutcomeCache):
 
 
 def setpoint_weight(config: TuningConfig, gains: tuple, structure: tuple[list, list, list], seeds: list[int],
-                    max_overshoot: float) -> tuple[float, list[dict]]:
-    """The b of B_GRID (module docstring, step 3) and the table of what each b gave ({"b", "ISE", "Overshoot"},
-    Overshoot in percent of the step, worst over the episodes' setpoint steps)."""
+                    max_overshoot: float, grid: tuple = B_GRID) -> tuple[float, list[dict]]:
+    """The b of `grid` (B_GRID: tuning.design_rule, requirement 3) and the table of what each b gave ({"b", "ISE",
+    "Overshoot"}, Overshoot in percent of the step, worst over the episodes' setpoint steps)."""
     quiet = dataclasses.replace(config, measurement_noise_std=0.0, actuator_noise_std=0.0, forecast_horizon=0,
                                 load_disturbance=0.0)
-    core = _open_core(quiet)
+    core = open_core(quiet)
     rows = []
     try:
-        for b in B_GRID:
+        for b in grid:
             core.set_structure([b] * config.n_loops, structure[1], structure[2])
             ise, overshoot = setpoint_response(core, gains, seeds)
             rows.append({"b": b, "ISE": ise, "Overshoot": overshoot})
