@@ -11,7 +11,6 @@ import dataclasses
 import math
 
 import numpy as np
-import pytest
 from scipy.signal import cont2discrete
 
 from prlpid_fmi.config import BaselineConfig, DeployConfig

@@ -10,20 +10,21 @@ baseline.objective "load" (the default) keeps, in this order:
 2. Ms <= deploy.max_sensitivity at every operating point and parameter draw (the load search's Kp interval, then
    the check on the FMU, tuning.fixed_pid.detune_over);
 3. overshoot <= deploy.max_overshoot (the setpoint weight b, then, where no b meets it, gains traded for it);
-4. load IAE <= baseline.load_tolerance x the load optimum (tuning.load_design: the load experiment and its search);
+4. load IAE <= baseline.load_tolerance x the load optimum (tuning.load_experiment; tuning.load_design's search);
 5. among those, the least setpoint ISE (tuning.load_design.SetpointDesign);
 6. std(u) <= deploy.max_noise_gain and std(u_k - u_(k-1)) <= deploy.max_noise_increment from the measurement
    noise, fractions of the control span: preferences.
 
 `design_under` runs requirements 2-6 at given noise limits (`NoiseLimits`). Where its result does not meet 1 and
-the scenario has measurement noise, the noise limits are relaxed before they may cost following: first a measurement
-filter (the filter searched, where controller.measurement_filter is not "tuned"), then the limits the design held on
-(or both where none did) x RELAX_FACTORS in turn, up to none; the first design that meets 1 ends it. Where none
-does, the stabilising PID the plant was measured with (the setpoint search's, with its best b) is a candidate too.
-Of the candidates the rule keeps the one first in `priority` (no divergence, fewest unsettled steps, Ms met,
-overshoot met, load within tolerance, least setpoint ISE, least relaxed): a candidate that diverges or leaves a step
-unsettled is never kept over one that settles. The result is a `DesignResult`; fixed_pid.json is written from it by
-run.tune.
+a noise limit held it (its estimate within 1 % of the limit: LoadDesign.active_limits), the noise limits are relaxed
+before they may cost following: first a measurement filter (the filter searched, where controller.measurement_filter
+is not "tuned"), then the limits that held it x RELAX_FACTORS in turn, up to none; the first design that meets 1
+ends it. Where none does, the stabilising PID the plant was measured with (the setpoint search's, with its best b)
+is a candidate too. Of the candidates the rule keeps the one first in `priority` (no divergence, fewest unsettled
+steps, Ms met, overshoot met, load within tolerance, least setpoint ISE, least relaxed): a candidate that diverges or
+leaves a step unsettled is never kept over one that settles. The result is a `DesignResult`; fixed_pid.json is
+written from it by run.tune.
+
 
 baseline.objective "setpoint" is tuning.fixed_pid's setpoint search alone.
 """
@@ -44,8 +45,8 @@ from prlpid_fmi.progress import QUIET, Steps
 from prlpid_fmi.robustness.margins import margins_of, setpoint_range_points
 from prlpid_fmi.robustness.status import meets_limit
 from prlpid_fmi.tuning.fixed_pid import FixedPid, detune_over, setpoint_pid
-from prlpid_fmi.tuning.load_design import (LoadDesign, SetpointDesign, approach, open_core, parameter_samples,
-                                           setpoint_weight, start_measurement)
+from prlpid_fmi.tuning.load_design import LoadDesign, SetpointDesign, setpoint_weight
+from prlpid_fmi.tuning.load_experiment import approach, open_core, parameter_samples, start_measurement
 from prlpid_fmi.tuning.search_pool import search_workers
 
 RANGE_HOLD = 4  # the range episode holds each setpoint this many x training.setpoint_hold_steps samples
@@ -166,7 +167,7 @@ class Candidate:
 # -- requirement 1: the range episode -----------------------------------------------------------------------------
 def range_schedule(config: TuningConfig, start: list[float] | None) -> tuple[tuple, int]:
     """((step, setpoints), ...) of the range episode and its hold [samples]: a ramp from the FMU's start to the low
-    setpoint over the first hold (tuning.load_design.approach), then the setpoints of RANGE_ORDER, each held."""
+    setpoint over the first hold (tuning.load_experiment.approach), then the setpoints of RANGE_ORDER, each held."""
     hold = RANGE_HOLD * config.setpoint_hold_steps
     points = setpoint_range_points(config)
     points = [points[0], points[len(points) // 2], points[-1]]
@@ -337,8 +338,9 @@ class Designer:
                    "fell_back_to_setpoint_search": fallback is not None,
                    "noise_increment_limit_relaxed": design.increment_relaxed,
                    "noise": noise_shares(design, gains, tf)}
-        if design.increment_relaxed:
-            relaxed = relaxed + (Relaxation("max_noise_increment", self.deploy.max_noise_increment, math.inf),)
+        if design.increment_relaxed:  # no Kp met it with Ms for the stabilising PID's Ti, Td (LoadDesign.prepare)
+            relaxed = tuple(r for r in relaxed if r.limit != "max_noise_increment") + (
+                Relaxation("max_noise_increment", self.deploy.max_noise_increment, math.inf),)
         return Candidate(vector, gains, structure, details, limits, relaxed, ms_met, overshoot, ise, cost)
 
     def _setpoint_response(self, config: TuningConfig, gains: tuple, structure: tuple) -> tuple[float, float]:
@@ -381,7 +383,8 @@ def noise_shares(design: LoadDesign, gains: tuple, tf: list[float]) -> dict:
     for plants in design.plants[:len(design.points)]:
         for i, plant in enumerate(plants or ()):
             u, du = plant.noise_gains(design.controller(gains, tf, i))
-            std_u, std_du, seen = max(std_u, sigma * u / design.spans[i]), max(std_du, sigma * du / design.spans[i]), True
+            std_u, std_du = max(std_u, sigma * u / design.spans[i]), max(std_du, sigma * du / design.spans[i])
+            seen = True
     return {"std_u": std_u, "std_du": std_du} if seen else {"std_u": None, "std_du": None}
 
 
@@ -455,8 +458,8 @@ def design_load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int
     candidates = [designer.design_under(requested)]
     progress.step("setpoint steps across the setpoint range (requirement 1)")
     candidates[0].following = following(config, candidates[0].gains, candidates[0].structure)
-    if not candidates[0].following.settles and config.measurement_noise_std > 0:
-        held = {a["limit"] for a in candidates[0].details["active_limits"]}
+    held = {a["limit"] for a in candidates[0].details["active_limits"]} & {"max_noise_gain", "max_noise_increment"}
+    if not candidates[0].following.settles and config.measurement_noise_std > 0 and held:
         for limits, relaxed in relaxations(config, deploy, held):
             candidate = designer.design_under(limits, relaxed)
             candidate.following = following(config, candidate.gains, candidate.structure)

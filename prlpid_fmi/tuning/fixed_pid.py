@@ -18,7 +18,7 @@ Robustness: with `max_sensitivity` given, the result must have a peak sensitivit
 FMU, prlpid_fmi.robustness.margins) at most that limit at every operating point of the setpoint range: the
 low end, the middle and the high end (margins.setpoint_range_points; a fixed PID is used at every setpoint,
 and a nonlinear plant's Ms changes over the range), and with training.randomize on each Monte-Carlo parameter
-draw of tuning.load_design.parameter_samples too (the deliverable checks the same draws). The cheapest few members of the final DE population are
+draw of tuning.load_experiment.parameter_samples too (the deliverable checks the same draws). The cheapest few members of the final DE population are
 tried in order of cost; if none qualifies, the best one is detuned, at its worst failing point until every
 point meets the limit, by the smallest lambda there, in two ways: Kp / lambda with Ti and Td * lambda (the
 same controller on a time axis lambda times slower: the integral gain Kp/Ti falls by lambda^2, so the last part
@@ -28,7 +28,6 @@ uses the first, and the second only where the first cannot meet the limit.
 from __future__ import annotations
 
 import dataclasses
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -40,10 +39,11 @@ from prlpid_fmi.loop.core import LoopCore, pid_structure
 from prlpid_fmi.loop.evaluation import Trajectory, gains_rollout
 from prlpid_fmi.loop.gains import Gains, gains_from_values
 from prlpid_fmi.loop.isolated import make_core
-from prlpid_fmi.progress import QUIET, Steps, batch_counted
+from prlpid_fmi.progress import Steps, batch_counted
 from prlpid_fmi.robustness.margins import margins_of, predicted_ms, setpoint_range_points
 from prlpid_fmi.robustness.status import meets_limit
-from prlpid_fmi.tuning.load_design import columns, parameter_samples
+from prlpid_fmi.tuning.load_design import columns
+from prlpid_fmi.tuning.load_experiment import parameter_samples
 from prlpid_fmi.tuning.search_pool import SearchPool, search_fmus, search_workers
 
 DIVERGED_COST = 1e6
@@ -181,7 +181,7 @@ def _detune(config: TuningConfig, gains: tuple, point: list[float], limit: float
 def detune_over(config: TuningConfig, gains: tuple, points: list[list[float]], limit: float,
                 keep_ti: bool | None = None, draws: list[TuningConfig] = ()) -> tuple | None:
     """`gains` detuned (`detune`) until Ms <= limit at every operating point, on the nominal plant and on every
-    Monte-Carlo draw in `draws` (tuning.load_design.parameter_samples): each pass detunes at the worst failing
+    Monte-Carlo draw in `draws` (tuning.load_experiment.parameter_samples): each pass detunes at the worst failing
     check, which usually settles the others too. None when a check cannot be met. keep_ti None: the together rule
     (Ti and Td * lambda), else, where it cannot meet the limit, Kp / lambda alone (the together rule keeps
     Kp * Td, the sampled loop's gain near Nyquist, which is sometimes what breaks the limit)."""
