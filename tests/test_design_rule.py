@@ -28,7 +28,7 @@ RELAXED = ([4.0], [1.0], [0.0], None)  # what the relaxed limit allows
 
 def settles_by_recursion(Kp: float, Ti: float, hold: int, band: float = 0.02) -> bool:
     """Whether the PI u = Kp (r - y + I/Ti), I += (r - y) Ts on 1/(s - 1) sampled with a ZOH settles every step of
-    -1 -> 0 -> 1 -> -1 -> 1 -> 0 -> -1 (RANGE_ORDER over the range's low, middle, high) into band x the step by the
+    -1 -> 0 -> 1 -> 0 -> -1 (RANGE_ORDER over the range's low, middle, high) into band x the step by the
     end of each hold, starting at rest at -1 (the integral preset to hold it)."""
     A, B, _, _, _ = cont2discrete((np.array([[1.0]]), np.array([[1.0]]), np.array([[1.0]]), np.array([[0.0]])), TS,
                                   "zoh")
@@ -70,7 +70,7 @@ def _candidate(gains, relaxed=(), *, unsettled=0, diverged=False, ms_met=True, o
                "active_limits": [{"limit": a} for a in active], "noise": {"std_u": 0.0, "std_du": 0.0}}
     c = Candidate(np.zeros(3), gains, ([1.0], [0.0], [0.0]), details, NoiseLimits(0.02, 0.005, True), relaxed,
                   ms_met, overshoot, ise, load)
-    c.following = Following(6, unsettled, 0, diverged, overshoot, ise)
+    c.following = Following(4, unsettled, 0, diverged, overshoot, ise)
     return c
 
 
