@@ -351,18 +351,24 @@ class Designer:
                                        self.deploy.max_overshoot, grid=(float(b[0]),))
         return rows[0]["ISE"], rows[0]["Overshoot"]
 
-    def stabilising(self, limits: NoiseLimits, load_cost) -> Candidate:
+    def stabilising(self, limits: NoiseLimits) -> Candidate:
         """The stabilising PID with its best b (setpoint_weight) as a candidate."""
         config, first = self.config, self.first
         gains = first.gains.values()
         _, c, tf = first.structure
+        loader = LoadDesign(config, self.baseline.load_step, self.limit, math.inf, self.baseline.widen_ranges)
+        try:
+            loader.prepare(gains, measured=self.measured)
+            load = loader.load_cost(gains, list(tf))
+        finally:
+            loader.close()
         weight, rows = setpoint_weight(config, gains, first.structure, self.seeds, self.deploy.max_overshoot)
         best = next(r for r in rows if r["b"] == weight)
         structure = ([weight] * config.n_loops, list(c), list(tf))
-        details = {"objective": "load", "load_cost": load_cost(gains, list(tf)), "load_optimum": self.load_optimum,
+        details = {"objective": "load", "load_cost": load, "load_optimum": self.load_optimum,
                    "load_step": self.baseline.load_step, "traded_for_overshoot": None,
                    "followed_setpoints": {"source": "stabilising PID", "load_optimal_diverged": True,
-                                          "load_cost": load_cost(gains, list(tf)), "ISE": best["ISE"],
+                                          "load_cost": load, "ISE": best["ISE"],
                                           "Overshoot": best["Overshoot"],
                                           "feasible": best["Overshoot"] <= 100.0 * self.deploy.max_overshoot,
                                           "evaluations": 0},
@@ -469,12 +475,7 @@ def design_load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int
                 break
     load_limit = baseline.load_tolerance * designer.load_optimum
     if not any(c.following.settles for c in candidates):
-        loader = LoadDesign(config, baseline.load_step, max_sensitivity, math.inf, baseline.widen_ranges)
-        try:
-            loader.prepare(designer.first.gains.values(), measured=designer.measured)
-            candidate = designer.stabilising(requested, loader.load_cost)
-        finally:
-            loader.close()
+        candidate = designer.stabilising(requested)
         candidate.following = following(config, candidate.gains, candidate.structure)
         candidates.append(candidate)
     kept = min(candidates, key=lambda c: priority(c, deploy, load_limit))
