@@ -189,3 +189,14 @@ def test_where_no_relaxation_settles_the_stabilising_pid_that_settles_is_kept(mo
     assert result.gains.as_dict()["Kp"] == [RELAXED[0][0]] and result.report.following.settles
     assert [c["kept"] for c in result.report.as_json()["candidates"]] == [False] * (1 + len(RELAX_FACTORS)) + [True]
     assert result.report.bound == "overshoot [%]"  # the first requirement it misses: 20 % against 5 %
+
+
+def test_the_design_report_is_json():
+    import json
+
+    from prlpid_fmi.tuning.design_rule import DesignReport, requirements
+
+    c = _candidate(RELAXED, overshoot=np.float64(4.0))
+    reqs = requirements(c, DeployConfig(), 2.0, 1.15)
+    text = json.dumps(DesignReport("Ms", (), reqs, c.following, c.details).as_json())
+    assert [r["rank"] for r in json.loads(text)["requirements"]] == [1, 2, 3, 4, 5, 6, 6]

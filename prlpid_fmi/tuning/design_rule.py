@@ -421,18 +421,18 @@ def requirements(candidate: Candidate, deploy: DeployConfig, max_sensitivity: fl
     ms = [e["Ms"] for e in d.get("estimates") or [] if e.get("Ms") is not None]
     ratio = d["load_cost"] / d["load_optimum"] if d.get("load_optimum") else math.nan
     noise = d.get("noise") or {}
-    out = [Requirement(1, "follows and settles the setpoint steps", float(f.unsettled), 0.0, f.settles),
-           Requirement(2, "Ms", max(ms) if ms else math.nan, max_sensitivity, candidate.ms_met),
-           Requirement(3, "overshoot [%]", candidate.overshoot, 100.0 * deploy.max_overshoot,
-                       candidate.overshoot <= 100.0 * deploy.max_overshoot),
-           Requirement(4, "load IAE / load optimum", ratio, load_tolerance,
-                       not ratio > load_tolerance * (1.0 + 1e-9)),
-           Requirement(5, "setpoint ISE", candidate.ise, None, math.isfinite(candidate.ise))]
+    out = [Requirement(1, "follows and settles the setpoint steps", float(f.unsettled), 0.0, bool(f.settles)),
+           Requirement(2, "Ms", float(max(ms)) if ms else math.nan, max_sensitivity, bool(candidate.ms_met)),
+           Requirement(3, "overshoot [%]", float(candidate.overshoot), 100.0 * deploy.max_overshoot,
+                       bool(candidate.overshoot <= 100.0 * deploy.max_overshoot)),
+           Requirement(4, "load IAE / load optimum", float(ratio), load_tolerance,
+                       bool(not ratio > load_tolerance * (1.0 + 1e-9))),
+           Requirement(5, "setpoint ISE", float(candidate.ise), None, bool(math.isfinite(candidate.ise)))]
     for name, key, limit in (("std(u) / span", "std_u", deploy.max_noise_gain),
                              ("std(u_k - u_(k-1)) / span", "std_du", deploy.max_noise_increment)):
         value = noise.get(key)
         value = math.nan if value is None else float(value)
-        out.append(Requirement(6, name, value, limit, not value > limit * (1.0 + 1e-9)))
+        out.append(Requirement(6, name, value, limit, bool(not value > limit * (1.0 + 1e-9))))
     return tuple(out)
 
 
@@ -482,7 +482,8 @@ def design_load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int
     reqs = requirements(kept, deploy, max_sensitivity, baseline.load_tolerance)
     details = {**kept.details, "candidates": [
         {"relaxed": [dataclasses.asdict(r) for r in c.relaxed], "following": dataclasses.asdict(c.following),
-         "load_cost": c.load_cost, "ISE": c.ise, "Overshoot": c.overshoot, "ms_met": c.ms_met,
+         "load_cost": float(c.load_cost), "ISE": float(c.ise), "Overshoot": float(c.overshoot),
+         "ms_met": bool(c.ms_met),
          "gains": gains_from_values(*c.gains).as_dict(), "kept": c is kept} for c in candidates]}
     report = DesignReport(bound_by(kept, reqs), tuple(kept.relaxed), reqs, kept.following, details)
     return DesignResult(kept.vector, gains_from_values(*kept.gains), kept.load_cost, designer.evaluations,
