@@ -484,7 +484,8 @@ def design_load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int
         {"relaxed": [dataclasses.asdict(r) for r in c.relaxed], "following": dataclasses.asdict(c.following),
          "load_cost": float(c.load_cost), "ISE": float(c.ise), "Overshoot": float(c.overshoot),
          "ms_met": bool(c.ms_met),
-         "gains": gains_from_values(*c.gains).as_dict(), "kept": c is kept} for c in candidates]}
+         "gains": {k: np.asarray(v).tolist() for k, v in gains_from_values(*c.gains).as_dict().items()},
+         "kept": c is kept} for c in candidates]}
     report = DesignReport(bound_by(kept, reqs), tuple(kept.relaxed), reqs, kept.following, details)
     return DesignResult(kept.vector, gains_from_values(*kept.gains), kept.load_cost, designer.evaluations,
                         kept.structure, report)
