@@ -381,7 +381,8 @@ def test_tune_progress_goes_to_stderr_and_never_passes_the_target(tmp_path, caps
     steps = [line.split(" ...")[0] for line in search if line.endswith(" ...")]
     assert steps[0].startswith("Ms check on the FMU of the stabilising PID")
     assert steps[1] == "frequency response of the plant at 3 operating points"
-    assert steps[-1].startswith("Ms check on the FMU (3 operating points")
+    assert steps[-2].startswith("Ms check on the FMU (3 operating points")
+    assert steps[-1] == "setpoint steps across the setpoint range (requirement 1)"  # tuning.design_rule
     assert search[-1].startswith("done in ")
     assert "prlpid-fmi: training" not in out and "fixed-PID search:" not in out
     after = [line for line in err.splitlines() if line.startswith(("prlpid-fmi: gain schedule", "prlpid-fmi: evaluation",
