@@ -225,7 +225,7 @@ def design_section(fixed: dict, loop_names) -> str:
              "Kp, Ti, Td (and the measurement filter Tf) minimise the IAE of a load step at the plant input "
              f"({design['load_step']:.0%} of the control span) at the low end, middle and high end of the setpoint "
              "range, subject to the Ms and noise limits; then the setpoint weight b shapes the setpoint response "
-             "(tuning.load_design; docs/architecture.md).", "",
+             "(tuning.design_rule; docs/architecture.md).", "",
              "| loop | Kp | Ti [s] | Td [s] | b | c | Tf [s] |", "|---|---|---|---|---|---|---|"]
     g = fixed["gains"]
     for i, name in enumerate(loop_names):
@@ -298,7 +298,7 @@ def _rule_sentences(design: dict) -> list[str]:
 
 
 def _followed_sentence(followed: dict, load_optimum: float) -> str:
-    """fixed_pid.json design.followed_setpoints in words (tuning.load_design step 5)."""
+    """fixed_pid.json design.followed_setpoints in words (tuning.design_rule.follow_setpoints)."""
     result = (f"load IAE {number(followed['load_cost'] / load_optimum, 3)}x the optimum, worst overshoot "
               f"{number(followed['Overshoot'], 3)} % on those episodes")
     diverged = followed.get("load_optimal_diverged", True)
