@@ -14,7 +14,7 @@ import json
 import time
 from pathlib import Path
 
-from prlpid_fmi.tuning.fixed_pid import tune_fixed_pid
+from prlpid_fmi.tuning.design_rule import tune_fixed_pid
 from prlpid_fmi.config import AgentConfig
 from prlpid_fmi.loop.evaluation import constant_gains, evaluate, evaluate_gains, model_policy
 from prlpid_fmi.scenario.presets import preset

@@ -27,7 +27,7 @@ Run rows: training steps/s of prlpid_fmi.tuning.agent.train with the AgentConfig
 the optional full run (wall time, peak RSS of the child), and the peak RSS of this process.
 Targets (issue 7) are printed beside the ratios they apply to.
 
-Search rows (--search, issue 24): tuning.fixed_pid.tune_fixed_pid of the scenario's file with its own budget and
+Search rows (--search, issue 24): tuning.design_rule.tune_fixed_pid of the scenario's file with its own budget and
 limits, baseline.workers 1 and then one per core, each in a fresh subprocess, one after another: wall seconds,
 the ratio, and whether the two controllers (Kp, Ti, Td, b, c, Tf, cost, evaluations) are the same bit for bit.
 
@@ -242,7 +242,7 @@ import json, sys, time, dataclasses
 from prlpid_fmi.deliver.evidence import max_sensitivity
 from prlpid_fmi.scenario.load import load_scenario
 from prlpid_fmi.scenario.presets import scenario_path
-from prlpid_fmi.tuning.fixed_pid import tune_fixed_pid
+from prlpid_fmi.tuning.design_rule import tune_fixed_pid
 
 def main():
     scenario = load_scenario(scenario_path(sys.argv[1]))

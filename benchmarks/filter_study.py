@@ -4,7 +4,7 @@ For issue 23's exothermic reactor: the load design chose a long Tf to meet deplo
 loop runs away on large setpoint steps. For each Tf this prints, from the FMU:
 
 - J_load, the load design's cost (noise-free load steps at the low end, middle and high end of the setpoint range,
-  tuning.load_design.load_experiment), and the worst chatter of those experiments;
+  tuning.load_experiment.load_experiment), and the worst chatter of those experiments;
 - Ms at NUMBER points evenly spaced over the setpoint range (robustness.margins.margins_of);
 - std(u) from the scenario's measurement noise as a fraction of the span, estimated as the design does
   (robustness.plant_response.MeasuredPlant.noise_gains on the response measured at each point), worst point;
@@ -28,7 +28,7 @@ from prlpid_fmi.metrics import chatter_fraction
 from prlpid_fmi.robustness.margins import margins_of, operating_point, pid_frequency_response
 from prlpid_fmi.robustness.plant_response import MeasuredPlant
 from prlpid_fmi.scenario.load import load_scenario
-from prlpid_fmi.tuning.load_design import load_experiment
+from prlpid_fmi.tuning.load_experiment import load_experiment
 from prlpid_fmi.tuning.schedule.csv_file import read_schedule_csv
 from prlpid_fmi.tuning.schedule.replay import replay_schedule
 

@@ -36,7 +36,7 @@ _API = {
     "export_schedule": "prlpid_fmi.run.export",
     "export_controller": "prlpid_fmi.run.export",
     # the pieces a control engineer may call directly
-    "tune_fixed_pid": "prlpid_fmi.tuning.fixed_pid",
+    "tune_fixed_pid": "prlpid_fmi.tuning.design_rule",
     "GainSchedule": "prlpid_fmi.tuning.schedule.table",
     "read_schedule_csv": "prlpid_fmi.tuning.schedule.csv_file",
     "write_schedule_csv": "prlpid_fmi.tuning.schedule.csv_file",

@@ -151,12 +151,12 @@ def test_out_naming_an_existing_file_is_one_line_and_the_file_is_kept(tmp_path, 
 
 def test_a_start_refused_after_the_directory_was_made_removes_it(tmp_path, monkeypatch, capsys):
     """A user error raised after prepare_run_dir, before any result, removes the folders it created."""
-    import prlpid_fmi.tuning.fixed_pid
+    import prlpid_fmi.tuning.design_rule
 
     def refuse(*args, **kwargs):
         raise PrlPidError("plant.fmu: FirstOrderUnstable: output y is NaN at t = 0.1 s")
 
-    monkeypatch.setattr(prlpid_fmi.tuning.fixed_pid, "tune_fixed_pid", refuse)
+    monkeypatch.setattr(prlpid_fmi.tuning.design_rule, "tune_fixed_pid", refuse)
     scenario = _small_copy(scenario_path("first_order"), tmp_path / "s.yaml")
     assert main(["-q", "tune", str(scenario), "--out", str(tmp_path / "a" / "b" / "run"), "--timesteps", "8"]) == 2
     assert "NaN" in _one_error_line(capsys)
@@ -360,7 +360,7 @@ def test_tune_progress_goes_to_stderr_and_never_passes_the_target(tmp_path, caps
     assert training[0] == "prlpid-fmi: training: 0/200 steps (0 %)"  # ... the progress does not
     assert training[-1].startswith("prlpid-fmi: training: 200 steps in ")
     assert all(int(line.split(": ")[2].split("/")[0].replace(",", "")) <= 200 for line in training[:-1])
-    from prlpid_fmi.tuning.fixed_pid import STABILISING_GENERATIONS
+    from prlpid_fmi.tuning.design_rule import STABILISING_GENERATIONS
     from prlpid_fmi.tuning.load_design import POLISH_PER_GENERATION
 
     # the fixed-PID search step by step, each count against its own budget with the small baseline (maxiter 1,
@@ -381,7 +381,8 @@ def test_tune_progress_goes_to_stderr_and_never_passes_the_target(tmp_path, caps
     steps = [line.split(" ...")[0] for line in search if line.endswith(" ...")]
     assert steps[0].startswith("Ms check on the FMU of the stabilising PID")
     assert steps[1] == "frequency response of the plant at 3 operating points"
-    assert steps[-1].startswith("Ms check on the FMU (3 operating points")
+    assert steps[-2].startswith("Ms check on the FMU (3 operating points")
+    assert steps[-1] == "setpoint steps across the setpoint range (requirement 1)"  # tuning.design_rule
     assert search[-1].startswith("done in ")
     assert "prlpid-fmi: training" not in out and "fixed-PID search:" not in out
     after = [line for line in err.splitlines() if line.startswith(("prlpid-fmi: gain schedule", "prlpid-fmi: evaluation",

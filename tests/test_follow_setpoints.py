@@ -1,4 +1,4 @@
-"""Step 5 of the fixed PID's load design (tuning.load_design): where nothing within the load tolerance meets the
+"""The fixed PID's search without the load limit (tuning.design_rule.follow_setpoints): where nothing within the load tolerance meets the
 overshoot limit, the setpoint ISE is minimised within the Ms, noise and overshoot limits without a load limit, and
 kept where it meets them all. A fixed PID must follow the setpoint episodes it is chosen on: where the load-optimal
 gains diverge on all of them whatever b, the search's best is kept where it follows them; where it does not, the
@@ -20,8 +20,9 @@ from prlpid_fmi.config import DeployConfig
 from prlpid_fmi.loop.gains import gains_from_values
 from prlpid_fmi.progress import QUIET
 from prlpid_fmi.scenario.presets import preset
-from prlpid_fmi.tuning import fixed_pid
-from prlpid_fmi.tuning.fixed_pid import FixedPid, follow_setpoints, follows_setpoints
+from prlpid_fmi.tuning import design_rule
+from prlpid_fmi.tuning.design_rule import follow_setpoints, follows_setpoints
+from prlpid_fmi.tuning.fixed_pid import FixedPid
 from prlpid_fmi.tuning.load_design import LoadDesign, SetpointDesign, setpoint_response, setpoint_weight
 
 TS = 0.1  # first_order's sample time [s]
@@ -98,6 +99,6 @@ def test_where_the_search_diverges_the_stabilising_pid_is_kept_and_where_it_dive
     assert found["source"] is None and keep is None and not found["load_optimal_diverged"]
 
     inf = math.inf
-    monkeypatch.setattr(fixed_pid, "setpoint_weight", lambda *a: (0.0, [{"b": 0.0, "ISE": inf, "Overshoot": inf}]))
+    monkeypatch.setattr(design_rule, "setpoint_weight", lambda *a: (0.0, [{"b": 0.0, "ISE": inf, "Overshoot": inf}]))
     found, keep = follow_setpoints(config, load_design, _first(), 0.0252, DeployConfig(), SEEDS, 0, 1, 3, QUIET)
     assert found["source"] is None and keep is None

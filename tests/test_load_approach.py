@@ -1,13 +1,13 @@
-"""The load experiment's approach to its operating point (tuning.load_design.approach), hand-computed."""
+"""The load experiment's approach to its operating point (tuning.load_experiment.approach), hand-computed."""
 from __future__ import annotations
 
 import pytest
 
 
 def test_the_load_experiment_approaches_its_operating_point_by_a_ramp():
-    """tuning.load_design.approach: from the start state to the point over the first half of the hold in
+    """tuning.load_experiment.approach: from the start state to the point over the first half of the hold in
     APPROACH_STEPS equal steps (hand-computed), a step when there is no start or the hold is too short."""
-    from prlpid_fmi.tuning.load_design import APPROACH_STEPS, approach
+    from prlpid_fmi.tuning.load_experiment import APPROACH_STEPS, approach
 
     schedule = approach([0.0, 5.0], [10.0, 5.0], 200)
     assert len(schedule) == APPROACH_STEPS == 25

@@ -152,7 +152,7 @@ def test_randomized_parameters_constrain_the_kp_interval_too():
     Ti, Td lies inside the nominal plant's, and a draw with a faster unstable pole (a up to 1.3) needs more gain."""
     import dataclasses as dc
 
-    from prlpid_fmi.tuning.load_design import MC_SAMPLES, parameter_samples
+    from prlpid_fmi.tuning.load_experiment import MC_SAMPLES, parameter_samples
 
     nominal = preset("first_order")
     uncertain = dc.replace(nominal, randomize={"a": (0.8, 1.3)})
@@ -186,7 +186,7 @@ def test_the_deliverable_checks_the_fixed_pid_on_the_monte_carlo_draws_of_the_de
     from prlpid_fmi.loop.gains import gains_from_values
     from prlpid_fmi.robustness.margins import setpoint_range_points
     from prlpid_fmi.scenario.load import load_scenario
-    from prlpid_fmi.tuning.load_design import MC_SAMPLES, parameter_samples
+    from prlpid_fmi.tuning.load_experiment import MC_SAMPLES, parameter_samples
 
     scenario = load_scenario(data_dir("scenarios") / "first_order.yaml")
     scenario = dc.replace(scenario, tuning=dc.replace(scenario.tuning, randomize={"a": (0.8, 1.3)}))

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 import yaml
 
-from prlpid_fmi.tuning.fixed_pid import tune_fixed_pid
+from prlpid_fmi.tuning.design_rule import tune_fixed_pid
 from prlpid_fmi.cli import main
 from prlpid_fmi.loop.evaluation import evaluate_gains
 from prlpid_fmi.fmu import build_fmu

@@ -16,7 +16,7 @@ import pytest
 from prlpid_fmi.config import BaselineConfig
 from prlpid_fmi.fmu.watchdog import in_worker
 from prlpid_fmi.scenario.presets import preset
-from prlpid_fmi.tuning.fixed_pid import tune_fixed_pid
+from prlpid_fmi.tuning.design_rule import tune_fixed_pid
 from prlpid_fmi.tuning.load_design import LoadDesign
 from prlpid_fmi.tuning.search_pool import WORKERS_ENV, SearchPool, search_fmus, search_workers
 

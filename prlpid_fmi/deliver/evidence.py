@@ -9,7 +9,7 @@ breakpoint of a setpoint schedule; for every row of an error schedule (and its g
 the low end, middle and high end of the setpoint range (range_points); at the low end, middle and high end
 for the fixed PID; and at the middle of the setpoint range for any other table. With training.randomize set,
 every candidate's margins are also measured on the fixed-PID design's Monte-Carlo parameter draws
-(tuning.load_design.parameter_samples): the fixed PID at the same three points, a setpoint schedule at its
+(tuning.load_experiment.parameter_samples): the fixed PID at the same three points, a setpoint schedule at its
 breakpoints, every row of an error table and any other table at the middle of the range. Those estimates are
 labelled "<point>, draw <n>" and count in the rule like the nominal ones.
 """
@@ -25,7 +25,7 @@ from prlpid_fmi.loop.evaluation import constant_gains, evaluate_gains, gains_rol
 from prlpid_fmi.loop.gains import Gains
 from prlpid_fmi.robustness.margins import margins_of, operating_point, setpoint_range_points
 from prlpid_fmi.robustness.status import status
-from prlpid_fmi.tuning.load_design import load_experiment, parameter_samples
+from prlpid_fmi.tuning.load_experiment import load_experiment, parameter_samples
 from prlpid_fmi.tuning.margin_experiments import measure_ahead
 from prlpid_fmi.metrics import overall_metric
 from prlpid_fmi.tuning.schedule.replay import replay_schedule

@@ -249,7 +249,7 @@ def design_section(fixed: dict, loop_names) -> str:
              "Kp, Ti, Td (and the measurement filter Tf) minimise the IAE of a load step at the plant input "
              f"({design['load_step']:.0%} of the control span) at the low end, middle and high end of the setpoint "
              "range, subject to the Ms and noise limits; then the setpoint weight b shapes the setpoint response "
-             "(tuning.load_design; docs/architecture.md).", "",
+             "(tuning.design_rule; docs/architecture.md).", "",
              "| loop | Kp | Ti [s] | Td [s] | b | c | Tf [s] |", "|---|---|---|---|---|---|---|"]
     g = fixed["gains"]
     for i, name in enumerate(loop_names):
@@ -286,11 +286,43 @@ def design_section(fixed: dict, loop_names) -> str:
                         "response (the first b of the grid is kept)." if not followed else "."))
     if followed:
         lines.append(_followed_sentence(followed, design["load_optimum"]))
+    lines += _rule_sentences(design)
     return "\n".join(lines) + "\n"
 
 
+RELAXED_WORDS = {"measurement_filter": "a measurement filter was searched (controller.measurement_filter was not "
+                                       "tuned)",
+                 "max_noise_gain": "deploy.max_noise_gain", "max_noise_increment": "deploy.max_noise_increment"}
+
+
+def _rule_sentences(design: dict) -> list[str]:
+    """fixed_pid.json design "following", "relaxed" and "bound" (tuning.design_rule) in words; none in a file
+    written before them."""
+    following = design.get("following")
+    if not following:
+        return []
+    out = []
+    if following["diverged"]:
+        out.append("On setpoint steps between the low, middle and high setpoint the loop diverged.")
+    else:
+        out.append(f"On setpoint steps between the low, middle and high setpoint it settles "
+                   f"{following['steps'] - following['unsettled']} of {following['steps']}"
+                   + (f" ({following['slow']} slowly, after training.setpoint_hold_steps)" if following["slow"] else "")
+                   + f", worst overshoot {number(following['overshoot'], 3)} %.")
+    relaxed = design.get("relaxed") or []
+    if relaxed:
+        parts = [RELAXED_WORDS[r["limit"]] if r["limit"] == "measurement_filter" else
+                 f"{RELAXED_WORDS[r['limit']]} {r['requested']:.2%} raised to "
+                 + (f"{r['used']:.2%}" if math.isfinite(r["used"]) else "no limit") for r in relaxed]
+        out.append("The noise limits are preferences, relaxed before they may cost following or settling the "
+                   "setpoint steps: " + "; ".join(parts) + ".")
+    if design.get("bound"):
+        out.append(f"The requirement that bound this design: {design['bound']} (tuning.design_rule's order).")
+    return out
+
+
 def _followed_sentence(followed: dict, load_optimum: float) -> str:
-    """fixed_pid.json design.followed_setpoints in words (tuning.load_design step 5)."""
+    """fixed_pid.json design.followed_setpoints in words (tuning.design_rule.follow_setpoints)."""
     result = (f"load IAE {number(followed['load_cost'] / load_optimum, 3)}x the optimum, worst overshoot "
               f"{number(followed['Overshoot'], 3)} % on those episodes")
     diverged = followed.get("load_optimal_diverged", True)

@@ -214,12 +214,13 @@ NO_BASELINE_ANCHORED = ("--no-baseline: the fixed PID is searched anyway, becaus
 
 
 def fixed_pid_stage(scenario: Scenario, run_dir: Path, progress_bar: bool, baseline: bool) -> dict | None:
-    """The fixed PID first: the baseline, and the anchor the agent's gains move around. fixed_pid.json's
-    content ({"action", "gains", "cost", "evaluations"}); read back when the run has one (resume); None when
+    """The fixed PID first: the baseline, and the anchor the agent's gains move around (tuning.design_rule's
+    DesignResult). fixed_pid.json's content ({"action", "gains", "cost", "evaluations", "structure", "design": the
+    design report}); read back when the run has one (resume); None when
     `baseline` is off and the gain map is absolute (with the anchored map it is searched anyway, and a warning says so)."""
     from prlpid_fmi.deliver.evidence import max_sensitivity
     from prlpid_fmi.progress import Steps
-    from prlpid_fmi.tuning import fixed_pid as search_module
+    from prlpid_fmi.tuning import design_rule
     from prlpid_fmi.tuning.schedule.csv_file import write_schedule_csv
     from prlpid_fmi.tuning.schedule.table import fixed_schedule
 
@@ -231,13 +232,14 @@ def fixed_pid_stage(scenario: Scenario, run_dir: Path, progress_bar: bool, basel
         warnings.warn(NO_BASELINE_ANCHORED, stacklevel=2)
     b = scenario.baseline
     search = Steps("fixed-PID search", enabled=progress_bar)
-    result = search_module.tune_fixed_pid(scenario.tuning, seed=scenario.agent.seed, episodes=b.episodes,
+    result = design_rule.tune_fixed_pid(scenario.tuning, seed=scenario.agent.seed, episodes=b.episodes,
                                           maxiter=b.maxiter, popsize=b.popsize, progress=search,
                                           max_sensitivity=max_sensitivity(scenario), baseline=b,
                                           deploy=scenario.deploy)
     search.close()
     fixed = {"action": result.action.tolist(), "gains": result.gains.as_dict(), "cost": result.cost,
-             "evaluations": result.evaluations, "structure": result.structure_dict(), "design": result.info}
+             "evaluations": result.evaluations, "structure": result.structure_dict(),
+             "design": result.report.as_json() if result.report is not None else {}}
     write_json(run_dir / rd.FIXED_PID, fixed)
     write_schedule_csv(fixed_schedule(result.gains, with_structure(scenario, fixed).tuning), run_dir / rd.FIXED_PID_CSV)
     return fixed

@@ -747,8 +747,8 @@ class BaselineModel(Section):
         0.1, description="size of the load steps of the load objective, a fraction of the loop's control span "
                          "(u_max - u_min, or control_scale)")
     load_tolerance: number(ge=1) = Field(
-        1.3, description="when no setpoint weight keeps the overshoot within deploy.max_overshoot, the feedback gains "
-                         "may give up load rejection up to this factor on the load optimum's IAE to meet it")
+        1.15, description="when no setpoint weight keeps the overshoot within deploy.max_overshoot, the feedback gains "
+                          "may give up load rejection up to this factor on the load optimum's IAE to meet it")
     widen_ranges: number(ge=1) = Field(
         4.0, description="factor f >= 1 by which the search widens log gain ranges at both ends ([low/f, high*f]) "
                           "and Td's high end, so that the optimum of a plant lies inside; 1: the scenario's ranges "

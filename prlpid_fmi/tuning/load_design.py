@@ -1,51 +1,26 @@
-"""The fixed PID's feedback gains for load rejection, and its setpoint weight for the setpoint response.
+"""The fixed PID's searches: the load search (Kp, Ti, Td, Tf under the Ms and noise limits), the setpoint weight b,
+and the setpoint search within a load limit. tuning.design_rule orders them; tuning.load_experiment is the cost.
 
-Astrom & Hagglund's design, on the FMU (baseline.objective "load"):
-
-1. Feedback gains Kp, Ti, Td (and the measurement filter Tf, when tuned and the scenario has measurement
-   noise) minimise the load cost, by differential evolution inside the scenario's gain ranges widened by
-   baseline.widen_ranges (log ranges [low/f, high*f], Td's high end * f)::
-
-       J_load = mean over operating points p and loops i of  sum_k Ts |y0_k - y_k| / |d_i|   [output units * s / input unit]
-
-   the IAE per unit load of a step d_i at loop i's plant input (baseline.load_step x the loop's control span,
-   signed away from the nearer actuator limit), after the loop held setpoint p for setpoint_hold_steps samples (the
-   setpoint ramped to p from the FMU's start state over the first half of them, `approach`: a step from 350 to
-   370 K sends the exothermic reactor to 443 K with a PI that holds it at 370 K);
-   loops are loaded one after another, setpoint_hold_steps apart. y0 is the same controller's run without the
-   load (the load response by superposition): the FMU starts where its start values put it, not at p, and a
-   loop still settling onto p when the load comes would otherwise have the tail of that transient counted as
-   load response (the two-tank at 5 cm, starting at 10 cm: y 4.68 cm at the load with a slow PID). Where the loop
-   has settled, y0 = r and this is the IAE of r - y. Points: the low end, the middle and the high end
-   of the setpoint range (robustness.margins.setpoint_range_points). No noise, no randomisation: the cost is
-   deterministic. A diverging episode costs DIVERGED_COST.
-2. Subject to, at every point, Ms <= deploy.max_sensitivity, a stable closed loop and std(u) from the scenario's
-   measurement noise <= deploy.max_noise_gain x the control span, std(u_k - u_{k-1}) from it <=
-   deploy.max_noise_increment x the span (the moves the chatter metric counts), all from the plant's frequency response
-   measured at that point (robustness.plant_response; measured once, with a stabilising PID, `plant_responses`;
-   stability by Nyquist: the same winding as that PID's). The search keeps every candidate inside them by
-   construction: Ti, Td (Tf) are searched, and Kp as a position inside the interval of Kp that meets the limits
-   for them (`LoadDesign.kp_interval`, a vectorised scan: Kp scales C as a whole). A loop whose u reverses on more
-   than MAX_CHATTER of the load experiment's samples (a saturating limit cycle, which the linear Ms cannot see)
-   has its cost raised (CHATTER_PENALTY). With training.randomize set, the limits hold on MC_SAMPLES parameter
-   draws too (`parameter_samples`, their responses measured at the same points). A point without a verified
-   estimate (robustness.status) gives no constraint; the final Ms check on the FMU (tuning.fixed_pid) covers it.
-3. Then b (controller.setpoint_weight "tuned"): on noise-free training episodes (setpoint steps), the b in
-   B_GRID with the lowest ISE among those with overshoot <= deploy.max_overshoot. b changes neither Ms nor the
-   load response (robustness.margins.pid_transfer_function), so it comes second.
-4. When no b meets the overshoot limit with those gains (an unstable plant: the fastest load rejection needs a
-   short Ti, whose setpoint response overshoots even with b = 0), the gains give up some load rejection:
-   (Kp, Ti, Td[, Tf], b) minimise the setpoint ISE of those episodes subject to step 2's limits,
-   J_load <= baseline.load_tolerance x step 2's optimum, and overshoot <= deploy.max_overshoot (SetpointDesign).
-   If nothing meets them all, the least violation is kept and the report says so.
-5. deploy.max_overshoot is a limit of the deployed controller, baseline.load_tolerance a preference: where step 4
-   finds nothing within every limit, the same search without the load limit, its population spread over the whole
-   box (`SetpointDesign.search` with start None), is kept where it meets every limit. A fixed PID must above all
-   follow the setpoint steps it is chosen on: where the gains of steps 2-4 diverge on every one of those episodes
-   whatever b (the exothermic reactor: the load optimum, Ti 5 s with a 72 s measurement filter, runs away on the
-   setpoint steps across its unstable branch, while its small-signal Ms is 2 at worst), that search's best is kept
-   wherever it follows them, and where it does not either, the stabilising PID of the setpoint search with its best
-   b (tuning.fixed_pid.follow_setpoints).
+1. The load search (`LoadDesign`): feedback gains Kp, Ti, Td (and the measurement filter Tf, when tuned and the
+   scenario has measurement noise) minimise J_load (tuning.load_experiment) by differential evolution inside the
+   scenario's gain ranges widened by baseline.widen_ranges (log ranges [low/f, high*f], Td's high end * f), then a
+   Nelder-Mead polish, subject to, at every point, Ms <= deploy.max_sensitivity, a stable closed loop and std(u)
+   from the scenario's measurement noise <= deploy.max_noise_gain x the control span, std(u_k - u_{k-1}) from it
+   <= deploy.max_noise_increment x the span, all from the plant's frequency response measured at that point
+   (robustness.plant_response; measured once, with a stabilising PID; stability by Nyquist: the same winding as
+   that PID's). Every candidate meets them by construction: Ti, Td (Tf) are searched, and Kp as a position inside
+   the interval of Kp that meets the limits for them (`LoadDesign.kp_interval`, a vectorised scan: Kp scales C as
+   a whole). A loop whose u reverses on more than MAX_CHATTER of the load experiment's samples (a saturating limit
+   cycle, which the linear Ms cannot see) has its cost raised (CHATTER_PENALTY). With training.randomize set, the
+   limits hold on the Monte-Carlo parameter draws too. A point without a verified estimate (robustness.status)
+   gives no constraint; the Ms check on the FMU (tuning.fixed_pid.detune_over) covers it. Where no Kp meets the
+   noise-increment limit with Ms for the stabilising PID's Ti, Td and any filter, the limit is dropped
+   (`relax_increment_limit`).
+2. b (`setpoint_weight`): on noise-free training episodes (setpoint steps), the b in B_GRID with the lowest ISE
+   among those with overshoot <= deploy.max_overshoot. b changes neither Ms nor the load response.
+3. The setpoint search (`SetpointDesign`): (Kp, Ti, Td[, Tf], b) minimise the setpoint ISE of those episodes
+   subject to the limits of 1, J_load <= a load limit (baseline.load_tolerance x the load optimum, or none) and
+   overshoot <= deploy.max_overshoot.
 """
 from __future__ import annotations
 
@@ -55,19 +30,17 @@ import math
 import numpy as np
 from scipy.optimize import NonlinearConstraint, differential_evolution, minimize
 
-from prlpid_fmi.config import Disturbance, GainRange, TuningConfig
+from prlpid_fmi.config import GainRange, TuningConfig
 from prlpid_fmi.loop.actions import ActionMap
-from prlpid_fmi.loop.core import LoopCore, control_scales, pid_structure, randomized_parameters
+from prlpid_fmi.loop.core import LoopCore, control_scales, pid_structure
 from prlpid_fmi.loop.evaluation import gains_rollout
-from prlpid_fmi.loop.isolated import make_core
 from prlpid_fmi.metrics import chatter_fraction
 from prlpid_fmi.progress import QUIET, Steps, batch_counted, counted
-from prlpid_fmi.robustness.margins import margins_of, pid_frequency_response, setpoint_range_points
-from prlpid_fmi.robustness.plant_response import MeasuredPlant
-from prlpid_fmi.robustness.status import Robustness, status
+from prlpid_fmi.robustness.margins import pid_frequency_response, setpoint_range_points
+from prlpid_fmi.tuning.load_experiment import (DIVERGED_COST, load_config, load_iae, open_core, parameter_samples,
+                                               plant_responses, signed_loads, start_measurement)
 from prlpid_fmi.tuning.search_pool import SearchPool, search_fmus, search_workers
 
-DIVERGED_COST = 1e6
 B_GRID = tuple(i / 20 for i in range(21))  # setpoint weights tried
 TF_RANGE = (0.1, 100.0)  # measurement filter search range [sample times], log
 FILTER_PROBES = 13  # Tf values over TF_RANGE the noise-increment relaxation test tries (relax_increment_limit)
@@ -105,129 +78,6 @@ def widened(config: TuningConfig, factor: float) -> TuningConfig:
     loops = tuple(dataclasses.replace(l, Kp=wider(l.Kp, "Kp"), Ti=wider(l.Ti, "Ti"), Td=wider(l.Td, "Td"))
                   for l in config.loops)
     return dataclasses.replace(config, loops=loops)
-
-
-def plant_responses(config: TuningConfig, gains: tuple, points: list[list[float]]) -> list[list[MeasuredPlant] | None]:
-    """Per point, each loop's measured plant response (with `gains` in the loop; the others closed), or None where
-    the estimate is not verified (robustness.status: the loop diverged or sat at a limit, or the plant varies
-    faster than the experiment): no constraint comes from that point, the final check on the FMU still applies."""
-    out = []
-    for p in points:
-        m = margins_of(config, gains, p)
-        loops = m.per_loop or (m,)
-        if any(len(x.frequencies_rad_s) < 2 or not np.all(np.isfinite(x.plant_response)) or
-               status(x) != Robustness.VERIFIED for x in loops):  # no linear response to design on
-            out.append(None)
-            continue
-        out.append([MeasuredPlant(x.frequencies_rad_s, x.plant_response, config.sample_time_s, tuple(p), ())
-                    for x in loops])
-    return out
-
-
-MC_SAMPLES = 4  # parameter draws of training.randomize whose responses the design also meets the limits on
-MC_SEED = 20_000  # their seed (used for nothing else)
-
-
-def parameter_samples(config: TuningConfig) -> list[TuningConfig]:
-    """With training.randomize set, MC_SAMPLES configs of the plant with parameters drawn uniformly from its ranges
-    (seeded: the same draws every run), their other randomisation off; else none."""
-    ranges = randomized_parameters(config)
-    if not ranges:
-        return []
-    rng = np.random.default_rng(MC_SEED)
-    return [dataclasses.replace(config, randomize={}, plant_parameters={
-        **config.plant_parameters, **{name: float(rng.uniform(lo, hi)) for name, lo, hi in ranges}})
-        for _ in range(MC_SAMPLES)]
-
-
-APPROACH_STEPS = 25  # setpoint values of the ramp from the FMU's start state to the operating point
-
-
-def start_measurement(config: TuningConfig) -> list[float]:
-    """The measurement per loop of the FMU's start state (a reset loop core, no noise, nothing stepped)."""
-    core = _open_core(dataclasses.replace(config, forecast_horizon=0, measurement_noise_std=0.0,
-                                          actuator_noise_std=0.0, randomize={}))
-    try:
-        core.reset(np.random.default_rng(0))
-        return [float(y) for y in core.measurement]
-    finally:
-        core.close()
-
-
-def approach(start: list[float] | None, point: list[float], hold: int) -> tuple:
-    """The setpoint schedule ((step, setpoints), ...) that ramps from `start` to `point` over the first half of the
-    hold in APPROACH_STEPS steps, as the margin experiment approaches its operating point (a step through an
-    unstable region can run a reactor away that the PID holds at the point); ((0, point),) from no start."""
-    if start is None or hold < 2 * APPROACH_STEPS:
-        return ((0, tuple(point)),)
-    length = hold // 2
-    schedule = []
-    for j in range(APPROACH_STEPS):
-        f = (j + 1) / APPROACH_STEPS
-        schedule.append((j * length // APPROACH_STEPS, tuple(float(a + f * (b - a)) for a, b in zip(start, point))))
-    return tuple(schedule)
-
-
-def _load_config(config: TuningConfig, point: list[float], loads: list[float],
-                 start: list[float] | None = None) -> TuningConfig:
-    """The load experiment at `point`: the setpoint ramped there from `start` (approach) and held, loop i loaded with
-    loads[i] [input units] from setpoint_hold_steps * (i + 1) samples on; no noise, no randomisation."""
-    hold = config.setpoint_hold_steps
-    disturbances = tuple(Disturbance("actuator", l.output, hold * (i + 1), float(loads[i]))
-                         for i, l in enumerate(config.loops))
-    return dataclasses.replace(config, setpoint_schedule=approach(start, point, hold), disturbances=disturbances,
-                               episode_steps=hold * (config.n_loops + 1), measurement_noise_std=0.0,
-                               actuator_noise_std=0.0, randomize={}, forecast_horizon=0, load_disturbance=0.0)
-
-
-def _open_core(config: TuningConfig):
-    """A loop core for `config`, in a worker process when the FMU may be instantiated only once per process (the
-    design holds several cores open at once: one per operating point)."""
-    from prlpid_fmi.fmu import describe_fmu
-    from prlpid_fmi.fmu.resolve import resolve_fmu
-
-    if config.isolation != "process" and describe_fmu(resolve_fmu(config.fmu, config.fmi_version)).once_per_process:
-        config = dataclasses.replace(config, isolation="process")
-    return make_core(config)
-
-
-def signed_loads(config: TuningConfig, probe, load_step: float) -> list[float]:
-    """Per loop, the load [input units]: load_step x the control span, signed away from the actuator limit nearer
-    to u at the end of the probe's hold (a Trajectory of the unloaded experiment; u = 0 if it ended early)."""
-    hold = config.setpoint_hold_steps
-    u_held = probe.control_signal[min(hold, probe.steps) - 1] if not probe.terminated else None
-    loads = []
-    for i, (l, span) in enumerate(zip(config.loops, control_scales(config))):
-        u = float(u_held[i]) if u_held is not None else 0.0
-        mid = 0.5 * (l.u_min + l.u_max) if math.isfinite(l.u_min + l.u_max) else 0.0
-        # u in the lower half: a negative load, which the PID meets by raising u (away from u_min)
-        loads.append((-1.0 if u <= mid else 1.0) * load_step * span)
-    return loads
-
-
-def load_iae(traj, config: TuningConfig, unloaded=None) -> float:
-    """sum over loops of Ts * sum_k |y0_k - y_k| / |d_i| from the first load on (one experiment, module docstring),
-    y0 the measurement of `unloaded` (the same controller's run without the load; None: the setpoint);
-    DIVERGED_COST (more for an earlier end) when either episode ended early."""
-    for t in (traj, unloaded):
-        if t is not None and t.terminated:
-            return DIVERGED_COST * (1.0 + (config.episode_steps - t.steps) / config.episode_steps)
-    reference = traj.setpoint if unloaded is None else unloaded.measurement
-    e = np.abs(reference - traj.measurement)[config.setpoint_hold_steps:]
-    loads = np.array([abs(d.value) for d in config.disturbances])
-    return float(np.sum(e / loads) * config.sample_time_s) / len(loads)
-
-
-def load_experiment(config: TuningConfig, load_step: float, run) -> float:
-    """J_load of any controller: run(config) -> Trajectory runs it on a config (a fixed PID, a schedule replay).
-    Each point: an unloaded probe (for the load's sign), then the loaded experiment."""
-    config = dataclasses.replace(config, forecast_horizon=0)
-    total, points, start = 0.0, setpoint_range_points(config), start_measurement(config)
-    for p in points:
-        probe = run(_load_config(config, p, [0.0] * config.n_loops, start))
-        loaded = _load_config(config, p, signed_loads(config, probe, load_step), start)
-        total += load_iae(run(loaded), loaded, probe)
-    return total / len(points)
 
 
 class OutcomeCache:
@@ -437,25 +287,34 @@ class LoadDesign(OutcomeCache):
         return out
 
     # -- the load cost -----------------------------------------------------------------------------------------
-    def prepare(self, gains: tuple) -> None:
-        """Measure the plant responses with `gains` in the loop and open one load-experiment core per point, the
-        load signed away from the actuator limit nearer to u at the point (as `gains` hold it)."""
-        self.plants = plant_responses(self.config, gains, self.points)
-        for sample in parameter_samples(self.config):  # the Monte-Carlo plants constrain Kp too (not in `estimates`)
-            self.plants += plant_responses(sample, gains, self.points)
-        # the windings of the PID that was measured stable there, the reference of every candidate's (kp_interval)
-        self.reference = [None if plants is None else
-                          [pl.winding(self.controller(gains, list(self.tf), i)) for i, pl in enumerate(plants)]
-                          for plants in self.plants]
+    def prepare(self, gains: tuple, measured: dict | None = None) -> None:
+        """Measure the plant responses with `gains` in the loop (or take them from another design's `measured()`
+        with the same gains) and open one load-experiment core per point, the load signed away from the actuator
+        limit nearer to u at the point (as `gains` hold it)."""
+        if measured is not None:
+            self.plants, self.reference = measured["plants"], measured["reference"]
+        else:
+            self.plants = plant_responses(self.config, gains, self.points)
+            for sample in parameter_samples(self.config):  # the Monte-Carlo plants constrain Kp too (not `estimates`)
+                self.plants += plant_responses(sample, gains, self.points)
+            # the windings of the PID that was measured stable there, the reference of every candidate's (kp_interval)
+            self.reference = [None if plants is None else
+                              [pl.winding(self.controller(gains, list(self.tf), i)) for i, pl in enumerate(plants)]
+                              for plants in self.plants]
         self.relax_increment_limit(gains)
         self.start = start = start_measurement(self.config)
         for p in self.points:  # per point: the unloaded run (kept open: every candidate's reference) and the loaded
-            quiet = _load_config(self.config, p, [0.0] * self.config.n_loops, start)
-            core = _open_core(quiet)
+            quiet = load_config(self.config, p, [0.0] * self.config.n_loops, start)
+            core = open_core(quiet)
             self.quiet_cores.append(core)
             probe = gains_rollout(lambda c: gains, quiet, seed=0, core=core)
             self.loads.append(signed_loads(self.config, probe, self.load_step))
-            self.cores.append(_open_core(_load_config(self.config, p, self.loads[-1], start)))
+            self.cores.append(open_core(load_config(self.config, p, self.loads[-1], start)))
+
+    def measured(self) -> dict:
+        """The plant responses `prepare` measured and their reference windings (picklable), for another design's
+        `prepare` with the same stabilising PID."""
+        return {"plants": self.plants, "reference": self.reference}
 
     def prepared(self) -> dict:
         """What `prepare` measured and decided (picklable): a replica (`replica`) evaluates exactly as this design."""
@@ -470,9 +329,9 @@ class LoadDesign(OutcomeCache):
         for name, value in prepared.items():
             setattr(design, name, value)
         for p, loads in zip(design.points, design.loads):
-            design.quiet_cores.append(_open_core(_load_config(design.config, p, [0.0] * design.config.n_loops,
+            design.quiet_cores.append(open_core(load_config(design.config, p, [0.0] * design.config.n_loops,
                                                               design.start)))
-            design.cores.append(_open_core(_load_config(design.config, p, loads, design.start)))
+            design.cores.append(open_core(load_config(design.config, p, loads, design.start)))
         return design
 
     def pool_workers(self) -> int:
@@ -630,7 +489,7 @@ class SetpointDesign(OutcomeCache):
         self.seeds = seeds
         quiet = dataclasses.replace(design.config, measurement_noise_std=0.0, actuator_noise_std=0.0,
                                     load_disturbance=0.0)
-        self.core = _open_core(quiet)
+        self.core = open_core(quiet)
         self.n = design.n + 1
         self._seen: dict = {}
         self._owns_design = False  # a replica's design is its own (closed with it)
@@ -725,15 +584,15 @@ class SetpointDesign(OutcomeCache):
 
 
 def setpoint_weight(config: TuningConfig, gains: tuple, structure: tuple[list, list, list], seeds: list[int],
-                    max_overshoot: float) -> tuple[float, list[dict]]:
-    """The b of B_GRID (module docstring, step 3) and the table of what each b gave ({"b", "ISE", "Overshoot"},
-    Overshoot in percent of the step, worst over the episodes' setpoint steps)."""
+                    max_overshoot: float, grid: tuple = B_GRID) -> tuple[float, list[dict]]:
+    """The b of `grid` (B_GRID: tuning.design_rule, requirement 3) and the table of what each b gave ({"b", "ISE",
+    "Overshoot"}, Overshoot in percent of the step, worst over the episodes' setpoint steps)."""
     quiet = dataclasses.replace(config, measurement_noise_std=0.0, actuator_noise_std=0.0, forecast_horizon=0,
                                 load_disturbance=0.0)
-    core = _open_core(quiet)
+    core = open_core(quiet)
     rows = []
     try:
-        for b in B_GRID:
+        for b in grid:
             core.set_structure([b] * config.n_loops, structure[1], structure[2])
             ise, overshoot = setpoint_response(core, gains, seeds)
             rows.append({"b": b, "ISE": ise, "Overshoot": overshoot})

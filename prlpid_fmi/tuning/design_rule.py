@@ -1,0 +1,555 @@
+"""The fixed PID's design rule: its requirements in order of priority, in one place.
+
+baseline.objective "load" (the default) keeps, in this order:
+
+1. a stabilising loop that follows and settles the setpoint steps: on the range episode (`range_schedule`: noise
+   free, the low, middle and high setpoint of robustness.margins.setpoint_range_points visited by every step between
+   them, low -> middle -> high and back, each held RANGE_HOLD x training.setpoint_hold_steps samples), no
+   divergence and every step inside the 2 % band to the end of its hold (metrics.compute_metrics' SettlingTime);
+   a step that settles only after setpoint_hold_steps is *slow*, not unsettled;
+2. Ms <= deploy.max_sensitivity at every operating point and parameter draw (the load search's Kp interval, then
+   the check on the FMU, tuning.fixed_pid.detune_over);
+3. overshoot <= deploy.max_overshoot (the setpoint weight b, then, where no b meets it, gains traded for it);
+4. load IAE <= baseline.load_tolerance x the load optimum (tuning.load_experiment; tuning.load_design's search);
+5. among those, the least setpoint ISE (tuning.load_design.SetpointDesign);
+6. std(u) <= deploy.max_noise_gain and std(u_k - u_(k-1)) <= deploy.max_noise_increment from the measurement
+   noise, fractions of the control span: preferences.
+
+`design_under` runs requirements 2-6 at given noise limits (`NoiseLimits`). Where its result does not meet 1 and
+a noise limit held it (its estimate within 1 % of the limit: LoadDesign.active_limits), the noise limits are relaxed
+before they may cost following: first a measurement filter (the filter searched, where controller.measurement_filter
+is not "tuned"), then the limits that held it x RELAX_FACTORS in turn, up to none; the first design that meets 1
+ends it. Where none does, the stabilising PID the plant was measured with (the setpoint search's, with its best b)
+is a candidate too. Of the candidates the rule keeps the one first in `priority` (no divergence, fewest unsettled
+steps, Ms met, overshoot met, load within tolerance, least setpoint ISE, least relaxed): a candidate that diverges or
+leaves a step unsettled is never kept over one that settles. The result is a `DesignResult`; fixed_pid.json is
+written from it by run.tune.
+
+
+baseline.objective "setpoint" is tuning.fixed_pid's setpoint search alone.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from prlpid_fmi.config import BaselineConfig, DeployConfig, TuningConfig
+from prlpid_fmi.loop.core import pid_structure
+from prlpid_fmi.loop.evaluation import gains_rollout
+from prlpid_fmi.loop.gains import Gains, gains_from_values
+from prlpid_fmi.metrics import compute_metrics
+from prlpid_fmi.progress import QUIET, Steps
+from prlpid_fmi.robustness.margins import margins_of, setpoint_range_points
+from prlpid_fmi.robustness.status import meets_limit
+from prlpid_fmi.tuning.fixed_pid import FixedPid, detune_over, setpoint_pid
+from prlpid_fmi.tuning.load_design import LoadDesign, SetpointDesign, setpoint_weight
+from prlpid_fmi.tuning.load_experiment import approach, open_core, parameter_samples, start_measurement
+from prlpid_fmi.tuning.search_pool import search_workers
+
+RANGE_HOLD = 4  # the range episode holds each setpoint this many x training.setpoint_hold_steps samples
+RANGE_ORDER = (0, 1, 2, 1, 0)  # indices into (low, middle, high): up and down the range between neighbours (a
+# low -> high jump saturates the reactor's jacket and ignites it with PIDs that hold its 10 K steps)
+SETTLING_BAND = 0.02  # a step is settled when |r - y| stays within this fraction of the step to the end of its hold
+RELAX_FACTORS = (2.0, 5.0, math.inf)  # factors on a noise limit the relaxation tries, in turn
+STABILISING_GENERATIONS = 6  # generations of the setpoint search that finds the PID the plant is measured with
+
+
+# -- typed results ------------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class NoiseLimits:
+    """std(u) and std(u_k - u_(k-1)) from the measurement noise, fractions of the control span (inf: none), and
+    whether the measurement filter Tf is searched."""
+
+    gain: float
+    increment: float
+    filter_tuned: bool
+
+
+@dataclass(frozen=True)
+class Relaxation:
+    """A noise preference given up for requirement 1: `limit` ("measurement_filter", "max_noise_gain",
+    "max_noise_increment") from `requested` to `used` (the filter: 0 / 1 for not searched / searched)."""
+
+    limit: str
+    requested: float
+    used: float
+
+
+@dataclass(frozen=True)
+class Following:
+    """Requirement 1 on the range episode: setpoint steps, those unsettled at the end of their hold, those settled
+    only after setpoint_hold_steps (slow), divergence, worst overshoot [% of the step], ISE [output units^2 s]."""
+
+    steps: int
+    unsettled: int
+    slow: int
+    diverged: bool
+    overshoot: float
+    ise: float
+
+    @property
+    def settles(self) -> bool:
+        return not self.diverged and self.unsettled == 0
+
+
+@dataclass(frozen=True)
+class Requirement:
+    """One requirement's measured value against its limit (limit None: a quantity minimised, no limit)."""
+
+    rank: int
+    name: str
+    value: float
+    limit: float | None
+    met: bool
+
+
+@dataclass(frozen=True)
+class DesignReport:
+    """Which requirement bound the design (`bound`, one of the `Requirement` names), what was relaxed, each
+    requirement's measured value, requirement 1 on the range episode, and the search's own record (`details`:
+    estimates per point, the setpoint weights tried, the trades; fixed_pid.json's "design" keys)."""
+
+    bound: str
+    relaxed: tuple[Relaxation, ...]
+    requirements: tuple[Requirement, ...]
+    following: Following
+    details: dict
+
+    def as_json(self) -> dict:
+        """fixed_pid.json's "design": the search's record plus "bound", "relaxed", "requirements", "following"."""
+        return {**self.details, "bound": self.bound,
+                "relaxed": [dataclasses.asdict(r) for r in self.relaxed],
+                "requirements": [dataclasses.asdict(r) for r in self.requirements],
+                "following": dataclasses.asdict(self.following)}
+
+
+@dataclass(frozen=True)
+class DesignResult:
+    """The fixed PID: gains, structure (b, c, Tf lists per loop), its search vector, load cost (objective "load") or
+    setpoint cost, the cost evaluations spent, and the design report (None for baseline.objective "setpoint")."""
+
+    action: np.ndarray
+    gains: Gains
+    cost: float
+    evaluations: int
+    structure: tuple
+    report: DesignReport | None = None
+
+    def structure_dict(self) -> dict:
+        """{"setpoint_weight", "derivative_weight", "measurement_filter_s"}: lists per loop (fixed_pid.json)."""
+        b, c, tf = self.structure
+        return {"setpoint_weight": list(b), "derivative_weight": list(c), "measurement_filter_s": list(tf)}
+
+    def gains_values(self) -> tuple:
+        """(Kp, Ti, Td, coupling) lists, what LoopCore.step takes."""
+        return self.gains.values()
+
+
+@dataclass
+class Candidate:
+    """A design under one set of noise limits (or the stabilising PID): what `priority` orders."""
+
+    vector: np.ndarray
+    gains: tuple
+    structure: tuple
+    details: dict
+    limits: NoiseLimits
+    relaxed: tuple
+    ms_met: bool
+    overshoot: float  # worst on the training episodes b was chosen on [%]
+    ise: float  # setpoint ISE of those episodes
+    load_cost: float
+    following: Following | None = None
+
+
+# -- requirement 1: the range episode -----------------------------------------------------------------------------
+def range_schedule(config: TuningConfig, start: list[float] | None) -> tuple[tuple, int]:
+    """((step, setpoints), ...) of the range episode and its hold [samples]: a ramp from the FMU's start to the low
+    setpoint over the first hold (tuning.load_experiment.approach), then the setpoints of RANGE_ORDER, each held."""
+    hold = RANGE_HOLD * config.setpoint_hold_steps
+    points = setpoint_range_points(config)
+    points = [points[0], points[len(points) // 2], points[-1]]
+    schedule = list(approach(start, points[0], hold))
+    for j, index in enumerate(RANGE_ORDER[1:]):
+        schedule.append(((j + 1) * hold, tuple(float(v) for v in points[index])))
+    return tuple(schedule), hold
+
+
+def following(config: TuningConfig, gains: tuple, structure: tuple) -> Following:
+    """Requirement 1 (module docstring) of constant gains with structure (b, c, Tf) on the range episode."""
+    start = start_measurement(config)
+    schedule, hold = range_schedule(config, start)
+    quiet = dataclasses.replace(config, measurement_noise_std=0.0, actuator_noise_std=0.0, forecast_horizon=0,
+                                load_disturbance=0.0, disturbances=(), randomize={}, setpoint_schedule=schedule,
+                                episode_steps=hold * len(RANGE_ORDER))
+    core = open_core(quiet)
+    try:
+        core.set_structure(*structure)
+        traj = gains_rollout(lambda c: gains, quiet, seed=0, core=core)
+    finally:
+        core.close()
+    steps = len(RANGE_ORDER) - 1
+    if traj.terminated:
+        return Following(steps, steps, 0, True, math.inf, math.inf)
+    m = compute_metrics(traj.time_s, traj.setpoint, traj.measurement, traj.control_signal, config.sample_time_s,
+                        noise_std=0.0, settling_threshold=SETTLING_BAND)
+    segments = [s for s in m["segments"] if s["start_step"] >= hold and math.isfinite(s.get("StepSize", math.nan))
+                and s["StepSize"] != 0 and not math.isnan(s["SettlingTime"])]
+    unsettled = sum(1 for s in segments if not math.isfinite(s["SettlingTime"]))
+    slow = sum(1 for s in segments if math.isfinite(s["SettlingTime"])
+               and s["SettlingTime"] > config.setpoint_hold_steps * config.sample_time_s)
+    overshoot = max((s["Overshoot"] for s in segments if not math.isnan(s["Overshoot"])), default=0.0)
+    r, y = traj.setpoint[hold:], traj.measurement[hold:]
+    ise = float(np.sum((r - y) ** 2) * config.sample_time_s)
+    return Following(len(segments), unsettled, slow, False, float(overshoot), ise)
+
+
+def priority(candidate: Candidate, deploy: DeployConfig, load_limit: float) -> tuple:
+    """The rule's order (module docstring) as a sort key: smaller is kept."""
+    f = candidate.following
+    over = max(0.0, candidate.overshoot - 100.0 * deploy.max_overshoot) if math.isfinite(candidate.overshoot) else \
+        math.inf
+    load = max(0.0, candidate.load_cost - load_limit)
+    return (f.diverged, f.unsettled, not candidate.ms_met, over, load,
+            candidate.ise if math.isfinite(candidate.ise) else math.inf, len(candidate.relaxed))
+
+
+# -- requirements 2-6 at given noise limits -----------------------------------------------------------------------
+class Designer:
+    """The load design's measurements, made once (the stabilising PID, the plant responses), and `design_under`
+    for any noise limits. Close with `close()`."""
+
+    def __init__(self, config: TuningConfig, seed: int, episodes: int, maxiter: int, popsize: int, progress: Steps,
+                 max_sensitivity: float | None, baseline: BaselineConfig, deploy: DeployConfig):
+        self.config, self.seed, self.maxiter, self.popsize = config, seed, maxiter, popsize
+        self.episodes, self.progress, self.limit = episodes, progress, max_sensitivity
+        self.baseline, self.deploy = baseline, deploy
+        self.seeds = [seed + i for i in range(episodes)]
+        # robust too (its Ms checked and detuned as the setpoint search does): a lightly damped loop does not settle
+        # in the frequency-response experiment, and an unverified response gives the design no constraint
+        self.first = setpoint_pid(config, seed, episodes, STABILISING_GENERATIONS, popsize, progress, max_sensitivity,
+                                  name="stabilising PID (setpoint search)", workers=baseline.workers)
+        self.measured: dict | None = None
+        self.evaluations = self.first.evaluations
+        self.load_optimum: float | None = None
+
+    def design_under(self, limits: NoiseLimits, relaxed: tuple = ()) -> Candidate:
+        """Requirements 2-6 at these noise limits: the load search (Ms and noise by the Kp interval), b for the
+        overshoot, the trade within the load tolerance where no b meets it, the search without the load limit where
+        that fails too, and the Ms check on the FMU."""
+        config, deploy, baseline, progress = self.config, self.deploy, self.baseline, self.progress
+        if limits.filter_tuned != (config.measurement_filter == "tuned"):
+            config = dataclasses.replace(config, measurement_filter="tuned")
+        design = LoadDesign(config, baseline.load_step, self.limit, limits.gain, baseline.widen_ranges,
+                            limits.increment, search_workers(baseline.workers))
+        try:
+            progress.step(f"frequency response of the plant at {len(design.points)} operating points"
+                          + (f" and {len(parameter_samples(config))} parameter draws" if parameter_samples(config)
+                             else ""))
+            design.prepare(self.first.gains.values(), measured=self.measured)
+            self.measured = design.measured()
+            progress.step("load design (differential evolution, then Nelder-Mead)",
+                          design.budget(self.maxiter, self.popsize))
+            result = design.search(self.seed, self.maxiter, self.popsize, progress=progress)
+            self.evaluations += int(result.nfev)
+            return self._finish(config, design, result, limits, relaxed)
+        finally:
+            design.close()
+
+    def _finish(self, config, design: LoadDesign, result, limits: NoiseLimits, relaxed: tuple) -> Candidate:
+        """Requirements 3-5 and the Ms check after the load search (design_under)."""
+        deploy, baseline, progress, seeds = self.deploy, self.baseline, self.progress, self.seeds
+        maxiter, popsize, seed = self.maxiter, self.popsize, self.seed
+        vector = np.asarray(result.x)
+        gains, tf = design.gains(vector), design.filters(vector)
+        best_load = float(result.fun)
+        if self.load_optimum is None:
+            self.load_optimum = best_load  # the load optimum at the requested limits: what the tolerance is of
+        b, c, _ = pid_structure(config)
+        choices, traded, followed = [], None, None
+        if config.setpoint_weight == "tuned":
+            progress.step("setpoint weight b")
+            weight, choices = setpoint_weight(config, gains, (b, c, tf), seeds, deploy.max_overshoot)
+            b = [weight] * config.n_loops
+            if not any(r["Overshoot"] <= 100.0 * deploy.max_overshoot for r in choices):
+                trade = SetpointDesign(design, best_load, baseline.load_tolerance, deploy.max_overshoot, seeds)
+                progress.step("setpoint ISE within the overshoot limit (no b met it)", trade.budget(maxiter, popsize))
+                try:
+                    second = trade.search(np.append(vector, 2.0 * weight - 1.0), seed, maxiter, popsize,
+                                          progress=progress)
+                    feasible = bool(np.max(trade.constraint_values(second.x)) <= 0)
+                    load, ise, overshoot = trade.evaluate(second.x)
+                    traded = {"load_cost": load, "ISE": ise, "Overshoot": overshoot, "feasible": feasible,
+                              "evaluations": int(second.nfev)}
+                    self.evaluations += int(second.nfev)
+                    if feasible:  # else the load optimum stays, with the b of least overshoot
+                        vector = np.asarray(second.x)
+                        gains, tf = design.gains(vector[:-1]), design.filters(vector[:-1])
+                        b = [trade.weight(vector)] * config.n_loops
+                finally:
+                    trade.close()
+            if traded is not None and not traded["feasible"]:
+                followed, found = follow_setpoints(config, design, self.first, best_load, deploy, seeds, seed,
+                                                   maxiter, popsize, progress,
+                                                   diverged=not follows_setpoints(choices, traded))
+                if found is not None:
+                    vector, gains, (b, c, tf) = found
+        structure = (b, c, tf)
+        ms_met, fallback = True, None
+        if self.limit is not None:
+            tuned = dataclasses.replace(design.search_config, tuned_structure=tuple(zip(b, c, tf)))
+            points = setpoint_range_points(config)
+            progress.step(f"Ms check on the FMU ({len(points)} operating points"
+                          + (", parameter draws" if parameter_samples(config) else "") + "; detuned where one fails)")
+            repaired = detune_over(tuned, gains, points, self.limit, draws=parameter_samples(tuned))
+            if repaired is None:  # the design's estimate misled it (coupled loops, a nonlinear plant): the setpoint
+                # search's robust PID, as before the load design, rather than an undeployable one
+                fallback = setpoint_pid(config, seed, self.episodes, maxiter, popsize, progress, self.limit,
+                                        name="setpoint search (the load design could not meet the Ms limit)",
+                                        workers=baseline.workers)
+                gains, structure = fallback.gains.values(), fallback.structure
+                tf = list(structure[2])
+            else:
+                detuned, gains = repaired != gains, repaired
+                cost = design.load_cost(gains, tf)
+                if detuned and cost > baseline.load_tolerance * best_load:
+                    # the check on the FMU cost more load rejection than the design may give up: the setpoint
+                    # search's robust PID when it rejects loads better
+                    alternative = setpoint_pid(config, seed, self.episodes, maxiter, popsize, progress, self.limit,
+                                               name="setpoint search (the Ms check detuned the load design)",
+                                               workers=baseline.workers)
+                    if design.load_cost(alternative.gains.values(), list(alternative.structure[2])) < cost:
+                        fallback = alternative
+                        gains, structure = fallback.gains.values(), fallback.structure
+                        tf = list(structure[2])
+            if fallback is not None:  # the setpoint search keeps its best member even where nothing meets the limit
+                checked = dataclasses.replace(config, tuned_structure=tuple(zip(*structure)))
+                ms_met = all(meets_limit(margins_of(plant, gains, p), self.limit)
+                             for plant in (checked, *parameter_samples(checked)) for p in points)
+        cost = design.load_cost(gains, tf)
+        ise, overshoot = self._setpoint_response(config, gains, structure)
+        details = {"objective": "load", "load_cost": cost, "load_optimum": self.load_optimum,
+                   "load_step": baseline.load_step, "traded_for_overshoot": traded, "followed_setpoints": followed,
+                   "estimates": design.estimates(gains, tf), "active_limits": design.active_limits(gains, tf),
+                   "setpoint_weights": choices, "stabilising_gains": self.first.gains.as_dict(),
+                   "feasible": bool(getattr(result, "constr_violation", 0) <= 0),
+                   "fell_back_to_setpoint_search": fallback is not None,
+                   "noise_increment_limit_relaxed": design.increment_relaxed,
+                   "noise": noise_shares(design, gains, tf)}
+        if design.increment_relaxed:  # no Kp met it with Ms for the stabilising PID's Ti, Td (LoadDesign.prepare)
+            relaxed = tuple(r for r in relaxed if r.limit != "max_noise_increment") + (
+                Relaxation("max_noise_increment", self.deploy.max_noise_increment, math.inf),)
+        return Candidate(vector, gains, structure, details, limits, relaxed, ms_met, overshoot, ise, cost)
+
+    def _setpoint_response(self, config: TuningConfig, gains: tuple, structure: tuple) -> tuple[float, float]:
+        """(ISE, worst overshoot [%]) of the training episodes the design chose b on (noise free)."""
+        b, c, tf = structure
+        weight, rows = setpoint_weight(config, gains, ([b[0]] * config.n_loops, c, tf), self.seeds,
+                                       self.deploy.max_overshoot, grid=(float(b[0]),))
+        return rows[0]["ISE"], rows[0]["Overshoot"]
+
+    def stabilising(self, limits: NoiseLimits) -> Candidate:
+        """The stabilising PID with its best b (setpoint_weight) as a candidate."""
+        config, first = self.config, self.first
+        gains = first.gains.values()
+        _, c, tf = first.structure
+        loader = LoadDesign(config, self.baseline.load_step, self.limit, math.inf, self.baseline.widen_ranges)
+        try:
+            loader.prepare(gains, measured=self.measured)
+            load = loader.load_cost(gains, list(tf))
+        finally:
+            loader.close()
+        weight, rows = setpoint_weight(config, gains, first.structure, self.seeds, self.deploy.max_overshoot)
+        best = next(r for r in rows if r["b"] == weight)
+        structure = ([weight] * config.n_loops, list(c), list(tf))
+        details = {"objective": "load", "load_cost": load, "load_optimum": self.load_optimum,
+                   "load_step": self.baseline.load_step, "traded_for_overshoot": None,
+                   "followed_setpoints": {"source": "stabilising PID", "load_optimal_diverged": True,
+                                          "load_cost": load, "ISE": best["ISE"],
+                                          "Overshoot": best["Overshoot"],
+                                          "feasible": best["Overshoot"] <= 100.0 * self.deploy.max_overshoot,
+                                          "evaluations": 0},
+                   "estimates": [], "active_limits": [], "setpoint_weights": rows,
+                   "stabilising_gains": first.gains.as_dict(), "feasible": True,
+                   "fell_back_to_setpoint_search": False, "noise_increment_limit_relaxed": False}
+        return Candidate(np.asarray(first.action), gains, structure, details, limits, (), True, best["Overshoot"],
+                         best["ISE"], details["load_cost"])
+
+
+def noise_shares(design: LoadDesign, gains: tuple, tf: list[float]) -> dict:
+    """{"std_u", "std_du"}: the largest std(u) and std(u_k - u_(k-1)) from the measurement noise over the nominal
+    points and loops, fractions of the control span, estimated from the measured plant responses (0 without noise,
+    None where nothing was measured)."""
+    sigma = design.config.measurement_noise_std
+    if not sigma > 0:
+        return {"std_u": 0.0, "std_du": 0.0}
+    std_u, std_du, seen = 0.0, 0.0, False
+    for plants in design.plants[:len(design.points)]:
+        for i, plant in enumerate(plants or ()):
+            u, du = plant.noise_gains(design.controller(gains, tf, i))
+            std_u, std_du = max(std_u, sigma * u / design.spans[i]), max(std_du, sigma * du / design.spans[i])
+            seen = True
+    return {"std_u": std_u, "std_du": std_du} if seen else {"std_u": None, "std_du": None}
+
+
+def relaxations(config: TuningConfig, deploy: DeployConfig, held: set[str]) -> list[tuple[NoiseLimits, tuple]]:
+    """The relaxation ladder (module docstring): (limits, what they relax) in turn, the filter first."""
+    filter_tuned = config.measurement_filter == "tuned"
+    ladder, given = [], []
+    if not filter_tuned:
+        filter_tuned = True
+        given = [Relaxation("measurement_filter", 0.0, 1.0)]
+        ladder.append((NoiseLimits(deploy.max_noise_gain, deploy.max_noise_increment, True), tuple(given)))
+    names = [n for n in ("max_noise_gain", "max_noise_increment") if n in held] or \
+        ["max_noise_gain", "max_noise_increment"]
+    requested = {"max_noise_gain": deploy.max_noise_gain, "max_noise_increment": deploy.max_noise_increment}
+    names = [n for n in names if math.isfinite(requested[n])]
+    for factor in RELAX_FACTORS if names else ():
+        used = {n: requested[n] * factor if n in names else requested[n] for n in requested}
+        ladder.append((NoiseLimits(used["max_noise_gain"], used["max_noise_increment"], filter_tuned),
+                       tuple(given) + tuple(Relaxation(n, requested[n], used[n]) for n in names)))
+    return ladder
+
+
+def requirements(candidate: Candidate, deploy: DeployConfig, max_sensitivity: float | None,
+                 load_tolerance: float) -> tuple[Requirement, ...]:
+    """Each requirement's measured value (module docstring's numbering; noise against the limits requested)."""
+    f, d = candidate.following, candidate.details
+    ms = [e["Ms"] for e in d.get("estimates") or [] if e.get("Ms") is not None]
+    ratio = d["load_cost"] / d["load_optimum"] if d.get("load_optimum") else math.nan
+    noise = d.get("noise") or {}
+    out = [Requirement(1, "follows and settles the setpoint steps", float(f.unsettled), 0.0, bool(f.settles)),
+           Requirement(2, "Ms", float(max(ms)) if ms else math.nan, max_sensitivity, bool(candidate.ms_met)),
+           Requirement(3, "overshoot [%]", float(candidate.overshoot), 100.0 * deploy.max_overshoot,
+                       bool(candidate.overshoot <= 100.0 * deploy.max_overshoot)),
+           Requirement(4, "load IAE / load optimum", float(ratio), load_tolerance,
+                       bool(not ratio > load_tolerance * (1.0 + 1e-9))),
+           Requirement(5, "setpoint ISE", float(candidate.ise), None, bool(math.isfinite(candidate.ise)))]
+    for name, key, limit in (("std(u) / span", "std_u", deploy.max_noise_gain),
+                             ("std(u_k - u_(k-1)) / span", "std_du", deploy.max_noise_increment)):
+        value = noise.get(key)
+        value = math.nan if value is None else float(value)
+        out.append(Requirement(6, name, value, limit, bool(not value > limit * (1.0 + 1e-9))))
+    return tuple(out)
+
+
+def bound_by(candidate: Candidate, reqs: tuple[Requirement, ...]) -> str:
+    """The requirement that bound the design: the first one not met; else requirement 1 where a noise limit was
+    relaxed for it; else the first requirement whose limit is active (2: Ms at its limit, 3: gains traded for the
+    overshoot, 6: a noise limit held the design); else 4 (the load optimum)."""
+    failed = [r for r in reqs if not r.met and r.rank != 5]
+    if failed:
+        return failed[0].name
+    if candidate.relaxed:
+        return reqs[0].name
+    d = candidate.details
+    active = {a["limit"] for a in d.get("active_limits") or []}
+    if "max_sensitivity" in active:
+        return reqs[1].name
+    traded = d.get("traded_for_overshoot")
+    if (traded and traded.get("feasible")) or (d.get("followed_setpoints") or {}).get("source"):
+        return reqs[2].name
+    if active & {"max_noise_gain", "max_noise_increment"}:
+        return reqs[5].name if "max_noise_gain" in active else reqs[6].name
+    return reqs[3].name
+
+
+def design_load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, popsize: int, progress: Steps,
+                    max_sensitivity: float | None, baseline: BaselineConfig, deploy: DeployConfig) -> DesignResult:
+    """The rule of the module docstring."""
+    designer = Designer(config, seed, episodes, maxiter, popsize, progress, max_sensitivity, baseline, deploy)
+    requested = NoiseLimits(deploy.max_noise_gain, deploy.max_noise_increment, config.measurement_filter == "tuned")
+    candidates = [designer.design_under(requested)]
+    progress.step("setpoint steps across the setpoint range (requirement 1)")
+    candidates[0].following = following(config, candidates[0].gains, candidates[0].structure)
+    held = {a["limit"] for a in candidates[0].details["active_limits"]} & {"max_noise_gain", "max_noise_increment"}
+    if not candidates[0].following.settles and config.measurement_noise_std > 0 and held:
+        for limits, relaxed in relaxations(config, deploy, held):
+            candidate = designer.design_under(limits, relaxed)
+            candidate.following = following(config, candidate.gains, candidate.structure)
+            candidates.append(candidate)
+            if candidate.following.settles:
+                break
+    load_limit = baseline.load_tolerance * designer.load_optimum
+    if not any(c.following.settles for c in candidates):
+        candidate = designer.stabilising(requested)
+        candidate.following = following(config, candidate.gains, candidate.structure)
+        candidates.append(candidate)
+    kept = min(candidates, key=lambda c: priority(c, deploy, load_limit))
+    reqs = requirements(kept, deploy, max_sensitivity, baseline.load_tolerance)
+    details = {**kept.details, "candidates": [
+        {"relaxed": [dataclasses.asdict(r) for r in c.relaxed], "following": dataclasses.asdict(c.following),
+         "load_cost": float(c.load_cost), "ISE": float(c.ise), "Overshoot": float(c.overshoot),
+         "ms_met": bool(c.ms_met),
+         "gains": {k: np.asarray(v).tolist() for k, v in gains_from_values(*c.gains).as_dict().items()},
+         "kept": c is kept} for c in candidates]}
+    report = DesignReport(bound_by(kept, reqs), tuple(kept.relaxed), reqs, kept.following, details)
+    return DesignResult(kept.vector, gains_from_values(*kept.gains), kept.load_cost, designer.evaluations,
+                        kept.structure, report)
+
+
+def tune_fixed_pid(config: TuningConfig, seed: int = 0, episodes: int | None = None, maxiter: int | None = None,
+                   popsize: int | None = None, progress: Steps = QUIET, max_sensitivity: float | None = None,
+                   baseline: BaselineConfig = BaselineConfig(), deploy: DeployConfig = DeployConfig()) -> DesignResult:
+    """The fixed PID of baseline.objective: "load" (the rule of the module docstring) or "setpoint" (tuning.fixed_pid's
+    setpoint search over `episodes` seeded training episodes).
+
+    progress: a prlpid_fmi.progress.Steps the searches show their steps on. max_sensitivity: the Ms limit (None: no
+    robustness requirement). baseline: objective, load_step, load_tolerance, widen_ranges, and the budget (episodes,
+    maxiter, popsize) where those arguments are None; deploy: max_overshoot, max_noise_gain, max_noise_increment.
+    """
+    episodes = baseline.episodes if episodes is None else episodes
+    maxiter = baseline.maxiter if maxiter is None else maxiter
+    popsize = baseline.popsize if popsize is None else popsize
+    if baseline.objective == "load":
+        return design_load_pid(config, seed, episodes, maxiter, popsize, progress, max_sensitivity, baseline, deploy)
+    found = setpoint_pid(config, seed, episodes, maxiter, popsize, progress, max_sensitivity, workers=baseline.workers)
+    return DesignResult(found.action, found.gains, found.cost, found.evaluations, found.structure)
+
+
+def follows_setpoints(choices: list[dict], traded: dict | None) -> bool:
+    """Whether the gains of the load search follow the training episodes b is chosen on: with some b of
+    setpoint_weight's table they did not diverge, or the trade found gains within every limit."""
+    return any(math.isfinite(r["ISE"]) for r in choices) or bool(traded and traded["feasible"])
+
+
+def follow_setpoints(config: TuningConfig, design: LoadDesign, first: FixedPid, best_load: float, deploy: DeployConfig,
+                     seeds: list[int], seed: int, maxiter: int, popsize: int, progress: Steps,
+                     diverged: bool = True) -> tuple[dict, tuple | None]:
+    """Where no gains within the load tolerance met the overshoot limit: the setpoint ISE within the Ms, noise and
+    overshoot limits, without a load limit, searched over the whole box. Its best is kept where it meets every limit,
+    or where the gains of the load search diverged on the episodes (`diverged`) and it follows them; where they
+    diverged and it does not follow them either, the stabilising PID `first` with its best setpoint weight. Returns
+    (what was found: {"source": "search" | "stabilising PID" | None, "load_optimal_diverged", "load_cost", "ISE",
+    "Overshoot", "feasible", "evaluations"}, (vector, gains, (b, c, Tf)) to keep, or None: the gains stay)."""
+    follow = SetpointDesign(design, best_load, math.inf, deploy.max_overshoot, seeds)
+    progress.step("setpoint ISE within the overshoot limit without the load tolerance"
+                  + (" (the load-optimal gains diverge on the setpoint episodes)" if diverged else ""),
+                  follow.budget(maxiter, popsize, whole_box=True))
+    try:
+        result = follow.search(None, seed, maxiter, popsize, progress=progress)
+        load, ise, overshoot = follow.evaluate(result.x)
+        feasible = bool(np.max(follow.constraint_values(result.x)) <= 0)
+        found = {"source": "search", "load_optimal_diverged": diverged, "load_cost": load, "ISE": ise,
+                 "Overshoot": overshoot, "feasible": feasible, "evaluations": int(result.nfev)}
+    finally:
+        follow.close()
+    if feasible or (diverged and math.isfinite(ise)):
+        vector = np.asarray(result.x)
+        b = [follow.weight(vector)] * config.n_loops
+        tf = design.filters(vector[:-1])
+        return found, (vector, design.gains(vector[:-1]), (b, list(design.c), tf))
+    if not diverged:
+        return {**found, "source": None}, None
+    gains = first.gains.values()
+    _, c, tf = first.structure
+    weight, rows = setpoint_weight(config, gains, first.structure, seeds, deploy.max_overshoot)
+    best = next(r for r in rows if r["b"] == weight)
+    if not math.isfinite(best["ISE"]):
+        return {**found, "source": None}, None
+    found = {**found, "source": "stabilising PID", "load_cost": design.load_cost(gains, list(tf)), "ISE": best["ISE"],
+             "Overshoot": best["Overshoot"], "feasible": best["Overshoot"] <= 100.0 * deploy.max_overshoot}
+    return found, (np.asarray(first.action), gains, ([weight] * config.n_loops, list(c), list(tf)))
