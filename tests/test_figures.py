@@ -9,7 +9,7 @@ from prlpid_fmi.report.plots import load_step_figure
 from prlpid_fmi.run.figures import load_responses
 from prlpid_fmi.scenario.load import load_scenario
 from prlpid_fmi.scenario.presets import scenario_path
-from prlpid_fmi.tuning.load_design import load_experiment
+from prlpid_fmi.tuning.load_experiment import load_experiment
 
 
 def test_the_load_steps_drawn_are_the_load_experiments():

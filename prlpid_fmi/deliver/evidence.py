@@ -3,7 +3,7 @@
 The gain schedule is replayed as a plain PID (no neural network) and the fixed PID runs with exactly
 the gains the search returned, both on the evaluation schedule and on the Monte-Carlo set
 (evaluation.randomize_samples episodes with parameters drawn from evaluation.randomize, seeds
-evaluation.seed + 1, + 2, ...), and on the load experiment of the fixed PID's design (tuning.load_design:
+evaluation.seed + 1, + 2, ...), and on the load experiment of the fixed PID's design (tuning.load_experiment:
 load steps at the plant input at the low end, middle and high end of the setpoint range). Robustness margins (prlpid_fmi.robustness.margins) are measured at every
 breakpoint of a setpoint schedule; for every row of an error schedule (and its gains at error 0) at
 the low end, middle and high end of the setpoint range (range_points); at the low end, middle and high end

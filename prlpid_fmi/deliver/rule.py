@@ -78,7 +78,7 @@ class Candidate:
     holdout_ise: float = math.nan  # ISE over held-out training-distribution episodes (NaN: not measured)
     holdout_tv: float = math.nan  # total variation of u over the same episodes (NaN: not measured)
     holdout_unsettled: int | None = None  # how many of them leave a setpoint step unsettled (None: not measured)
-    load_iae: float = math.nan  # load IAE per unit load of tuning.load_design's experiment (NaN: not measured)
+    load_iae: float = math.nan  # load IAE per unit load of tuning.load_experiment's experiment (NaN: not measured)
     draws: int = 0  # Monte-Carlo parameter draws the margins were also measured on (labelled in words; deliver.evidence)
     evaluation: Episode | None = None  # the evaluation replay (metrics and trajectory) the acceptance check reads
     acceptance: Acceptance | None = None  # deliver.acceptance.check (None: not checked)

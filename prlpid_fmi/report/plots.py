@@ -544,7 +544,7 @@ def step_response_figure(pairs, config: TuningConfig, title: str = "Transients",
 
 # -- load steps -------------------------------------------------------------------------------------------------
 class LoadResponse:
-    """One operating point of the load experiment (tuning.load_design.load_experiment) with one controller:
+    """One operating point of the load experiment (tuning.load_experiment.load_experiment) with one controller:
     point: setpoints per loop; loads: the load per loop [input units], loop i's from hold_steps x (i + 1) samples on;
     loaded: the Trajectory with the loads, unloaded: the same controller's run without them."""
 

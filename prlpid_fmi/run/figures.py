@@ -3,7 +3,7 @@
 - step_response.png: the evaluation zoomed to its transients (report.plots.step_response_figure), from the
   evaluation's trajectories (adaptive policy, fixed PID, adaptive schedule) and a replay of the classical schedule
   on the same evaluation where one was built (one episode).
-- load_steps.png: the fixed-PID design's load experiment (tuning.load_design.load_experiment: a load step at the
+- load_steps.png: the fixed-PID design's load experiment (tuning.load_experiment.load_experiment: a load step at the
   plant input at the low end, middle and high end of the setpoint range) replayed with every plain PID (fixed PID,
   classical and adaptive schedules where they exist): two short episodes per point and controller.
 - schedule_gains.png: Kp, Ti, Td of the gain tables over their scheduling variable, beside the fixed PID.
@@ -22,7 +22,7 @@ from prlpid_fmi.fmu.resolve import loop_units
 from prlpid_fmi.loop.evaluation import constant_gains, gains_rollout
 from prlpid_fmi.report import frequency, plots
 from prlpid_fmi.robustness.margins import setpoint_range_points
-from prlpid_fmi.tuning.load_design import load_experiment
+from prlpid_fmi.tuning.load_experiment import load_experiment
 from prlpid_fmi.tuning.schedule.replay import replay_schedule
 
 
@@ -47,7 +47,7 @@ def _runner(gains=None, table=None):
 
 
 def load_responses(scenario, controllers: dict) -> dict:
-    """{name: [report.plots.LoadResponse per operating point]}: tuning.load_design.load_experiment of each controller
+    """{name: [report.plots.LoadResponse per operating point]}: tuning.load_experiment.load_experiment of each controller
     in controllers {name: run(config) -> Trajectory}, every episode it runs kept (per point: the unloaded run,
     then the loaded one)."""
     config = scenario.tuning
