@@ -18,9 +18,12 @@ held-out episodes of the training distribution (deliver.evidence). On every one 
    measured on episodes without random load steps (`random_loads`: deliver.evidence adds load-free replays of
    the held-out episodes where the training distribution has them); between deploy.max_overshoot and that it passes, and the
    verdict says by how much it is above the user's limit;
-4. its command does not chatter by itself: the Chatter metric (metrics.chatter_fraction) at most deploy.max_chatter
-   on the noise-free replays (`noise_free`: a limit cycle, a ringing derivative). What the measurement noise adds on
-   the noisy replays is a preference, like the noise limits of the design: reported (`noisy_chatter`), not failed.
+4. its command does not chatter by itself: on the noise-free replays (`noise_free`), the fraction of samples at which
+   the command oscillates at the sample rate (`fast_reversals`: three moves in a row of alternating sign, each above
+   CHATTER_THRESHOLD of the span: a limit cycle, a ringing derivative, a command toggling at a limit) is at most
+   deploy.max_chatter. A swing at the loop's own bandwidth (damping an oscillatory plant) is not chatter. On the
+   noisy replays the Chatter metric (metrics.chatter_fraction) is a preference, like the noise limits of the design:
+   reported (`noisy_chatter`), not failed.
 
 The Ms limit is the rule's own check (deliver.rule.Candidate.problems). `check` returns an Acceptance: the failures,
 each with what failed, by how much and what would change it, and the slow and excused steps.
@@ -35,7 +38,7 @@ from typing import Callable
 import numpy as np
 
 from prlpid_fmi.config import Disturbance, TuningConfig
-from prlpid_fmi.metrics import NOISE_BAND, overall_metric
+from prlpid_fmi.metrics import CHATTER_THRESHOLD, NOISE_BAND, overall_metric
 
 LONG_HOLD = 4  # an unsettled step is replayed with holds this many times as long
 OVERSHOOT_FLOOR = 25.0  # [%] the overshoot limit is max(this, deploy.max_overshoot)
@@ -144,8 +147,8 @@ def check(episodes: list[Episode], replay: Replay, max_overshoot: float, max_cha
                                   "a smaller setpoint weight b (controller.setpoint_weight: tuned), a lower Ms limit "
                                   "(deploy.max_sensitivity), or smaller setpoint steps"))
     if math.isfinite(t.chatter) and t.chatter > max_chatter:
-        t.failures.append(Failure("chatter", f"reverses its command's direction on {t.chatter:.0%} of the samples "
-                                             f"({t.chatter_where}, without noise), above deploy.max_chatter "
+        t.failures.append(Failure("chatter", f"oscillates its command at the sample rate on {t.chatter:.0%} of the "
+                                             f"samples ({t.chatter_where}, without noise), above deploy.max_chatter "
                                              f"{max_chatter:g}",
                                   "a smaller Td or Kp (a loop that rings or limit-cycles at its sample time), a "
                                   "shorter sample time, or a larger deploy.max_chatter if the actuator tolerates it"))
@@ -178,12 +181,15 @@ def _check_episode(ep: Episode, replay: Replay, t: _Tally) -> None:
                                   "a gain range that contains stabilising gains, a shorter sample time for a fast "
                                   "or unstable plant, or a setpoint range the actuator can hold", ep.label))
         return
-    c = overall_metric(m["overall"], "Chatter")
     if noise_free(config):
+        c = max((fast_reversals(np.asarray(traj.pid_output)[:, i], loop.u_max - loop.u_min)
+                 for i, loop in enumerate(config.loops)), default=math.nan)
         if math.isfinite(c) and not c <= t.chatter:
             t.chatter, t.chatter_where = c, ep.label
-    elif math.isfinite(c) and not c <= t.noisy:
-        t.noisy, t.noisy_where = c, ep.label
+    else:
+        c = overall_metric(m["overall"], "Chatter")
+        if math.isfinite(c) and not c <= t.noisy:
+            t.noisy, t.noisy_where = c, ep.label
     index = {l.output: i for i, l in enumerate(config.loops)}
     unsettled = []
     for seg in m["segments"]:
@@ -206,6 +212,19 @@ def _check_episode(ep: Episode, replay: Replay, t: _Tally) -> None:
 
 def _is_step(seg: dict) -> bool:
     return not math.isnan(seg["SettlingTime"])
+
+
+def fast_reversals(u, span: float) -> float:
+    """The fraction of the samples k = 3 .. n-1 of a command u (n,) at which its moves du_k, du_(k-1), du_(k-2)
+    alternate in sign and each exceeds CHATTER_THRESHOLD x span (an oscillation at the sample rate); NaN for fewer
+    than 4 samples or a span that is not finite and positive."""
+    u = np.asarray(u, float)
+    if u.size < 4 or not (math.isfinite(span) and span > 0) or not np.all(np.isfinite(u)):
+        return math.nan
+    du = np.diff(u)
+    big = np.abs(du) > CHATTER_THRESHOLD * span
+    turn = (du[1:] * du[:-1] < 0) & big[1:] & big[:-1]
+    return float(np.count_nonzero(turn[1:] & turn[:-1])) / (u.size - 3)
 
 
 def noise_free(config: TuningConfig) -> bool:

@@ -783,9 +783,10 @@ class DeployModel(Section):
                            "1 % threshold, so noise alone reverses u by more than that on a few % of samples at most")
     max_chatter: Fraction = Field(
         0.05, description="acceptance check: the largest fraction of samples at which a deployed controller's command "
-                          "may reverse direction by more than 1 % of the control span (the Chatter metric) on "
-                          "noise-free held-out episodes (a limit cycle, a ringing derivative): a controller above it "
-                          "is never deployed; above it with the scenario's measurement noise it is reported")
+                          "may oscillate at the sample rate (three moves in a row of alternating sign, each above 1 % "
+                          "of the control span: a limit cycle, a ringing derivative, a command toggling at a limit) "
+                          "on noise-free held-out episodes: a controller above it is never deployed; the Chatter "
+                          "metric with the scenario's measurement noise above it is reported, not refused")
     allow_unverified: Flag = Field(False, description="deploy a gain schedule whose robustness could not be verified "
                                                       "(an Ms estimate impossible to make: the plant varies faster "
                                                       "than the margin experiment); default false: such a schedule "
