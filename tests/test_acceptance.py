@@ -114,6 +114,22 @@ def test_overshoot_above_the_floor_fails_and_within_it_is_reported(tmp_path):
     assert run_check(sc, pi(4.0, 0.1)).overshoot_pct > 25 > run_check(sc, pi(1.0, 0.3)).overshoot_pct > 5
 
 
+def test_the_worst_overshoot_is_kept_over_replays_that_cannot_measure_it(tmp_path):
+    """An episode with random load steps measures no overshoot (NaN): it must not erase the worst one found before."""
+    import dataclasses
+    sc = scenario(tmp_path, [0.0, 1.0])
+    table = fixed_schedule(pi(4.0, 0.1), sc.tuning)
+
+    def replay(cfg, seed):
+        return replay_schedule(table, cfg, seed=seed)
+    plain = sc.evaluation_config()
+    loaded = dataclasses.replace(sc.tuning, load_disturbance=0.05)
+    alone = check([Episode("the evaluation", plain, 0, *replay(plain, 0))], replay, 0.05, 0.05)
+    both = check([Episode("the evaluation", plain, 0, *replay(plain, 0)),
+                  Episode("loaded", loaded, 1, *replay(loaded, 1))], replay, 0.05, 0.05)
+    assert alone.overshoot_pct > 25 and both.overshoot_pct == alone.overshoot_pct
+
+
 def test_the_long_hold_keeps_the_setpoints_in_order_and_scales_the_episode(tmp_path):
     sc = scenario(tmp_path, [0.0, 1.0, -0.5])
     config = sc.evaluation_config()

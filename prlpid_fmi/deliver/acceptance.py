@@ -182,8 +182,11 @@ def _check_episode(ep: Episode, replay: Replay, t: _Tally) -> None:
                                   "or unstable plant, or a setpoint range the actuator can hold", ep.label))
         return
     if noise_free(config):
-        c = max((fast_reversals(np.asarray(traj.pid_output)[:, i], loop.u_max - loop.u_min)
-                 for i, loop in enumerate(config.loops)), default=math.nan)
+        u = np.asarray(traj.pid_output)
+        spans = [loop.u_max - loop.u_min if math.isfinite(loop.u_max - loop.u_min) else float(np.max(np.abs(u[:, i])))
+                 for i, loop in enumerate(config.loops)]  # the Chatter metric's span where the limits are not finite
+        found = [x for x in (fast_reversals(u[:, i], span) for i, span in enumerate(spans)) if math.isfinite(x)]
+        c = max(found, default=math.nan)
         if math.isfinite(c) and not c <= t.chatter:
             t.chatter, t.chatter_where = c, ep.label
     else:
@@ -198,7 +201,7 @@ def _check_episode(ep: Episode, replay: Replay, t: _Tally) -> None:
         if step:
             t.steps += 1
             os = _overshoot(traj, seg, i, config) if not random_loads(config) else math.nan
-            if not os <= t.overshoot:
+            if math.isfinite(os) and not os <= t.overshoot:
                 t.overshoot, t.overshoot_where = os, f"{ep.label}, the step to {traj.setpoint[seg['start_step'], i]:.4g} " \
                                                       f"at t = {seg['start_time_s']:g} s"
         late = seg["SettlingTime"] if step else seg["RecoveryTime"]
