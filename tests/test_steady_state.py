@@ -27,7 +27,7 @@ def plants(tmp_path_factory):
     return {name: build_fmu(name, out_dir=out, source_dir=PLANTS / name) for name in ("HumpLag", "Bistable")}
 
 
-def config(fmu, u_limits, parameters=None, setpoint_range=(0.0, 1.0)) -> TuningConfig:
+def config(fmu, u_limits, parameters=None, setpoint_range=(0.0, 2.5)) -> TuningConfig:
     return TuningConfig(fmu=str(fmu), plant_parameters=parameters or {},
                         loops=(LoopConfig(input="u", output="y", u_min=u_limits[0], u_max=u_limits[1],
                                           setpoint_range=setpoint_range),))
@@ -40,6 +40,7 @@ def test_extremum_of_hand_made_maps():
     assert e.kind == "maximum" and e.u == pytest.approx(0.3) and (e.u_before, e.u_after) == pytest.approx((0.2, 0.4))
     assert extremum_of(u, (u - 0.7) ** 2).kind == "minimum"
     assert extremum_of(u, np.where(u < 0.95, u, 0.95 - 1e-6)) is None  # a flat top within 1 % of the spread
+    assert extremum_of(u, np.where(u < 0.95, u, 0.5)) is None  # a map that drops at its last level only saturates
 
 
 @pytest.mark.parametrize("ymax", [1.0, 2.5])
@@ -49,8 +50,9 @@ def test_the_maximum_of_a_humped_stable_map_is_named_where_it_is(plants, ymax):
     assert e.kind == "maximum" and abs(e.u - 0.5) <= step / 2
     assert e.y == pytest.approx(4 * ymax * e.u * (1 - e.u), rel=1e-3)  # the analytic map at the level found
     assert f"maximum of {e.y:.4g} at u = {e.u:.4g}" in e.sentence()
-    # u_limits on one side of the maximum: a monotone map, nothing to say
+    # u_limits on one side of the maximum: a monotone map, nothing to say; setpoints far below the maximum neither
     assert loop_extrema(config(plants["HumpLag"], (0.0, 0.45), {"ymax": ymax})) == []
+    assert loop_extrema(config(plants["HumpLag"], (0.0, 1.0), {"ymax": ymax}, (0.0, 0.5 * ymax))) == []
 
 
 def test_an_unstable_branch_with_a_flipped_static_gain_is_neither_flagged_nor_refused(plants):
@@ -64,7 +66,7 @@ def test_a_tune_on_a_humped_plant_names_the_extremum_in_its_report(plants, tmp_p
     doc = {
         "name": "hump",
         "plant": {"fmu": str(plants["HumpLag"]), "sample_time": 0.1,
-                  "loops": [{"input": "u", "output": "y", "u_limits": [0.0, 1.0], "setpoint_range": [0.2, 0.9],
+                  "loops": [{"input": "u", "output": "y", "u_limits": [0.0, 1.0], "setpoint_range": [0.2, 0.98],
                              "measurement_scale": 1.0, "divergence_bound": 5.0,
                              "gains": {"Kp": [0.05, 5, "log"], "Ti": [0.2, 20, "log"], "Td": [0.0, 0.2, "linear"]}}]},
         "agent": {"algorithm": "ppo", "total_timesteps": 128, "seed": 0, "n_envs": 1, "n_steps": 128,

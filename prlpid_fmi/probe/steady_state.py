@@ -2,8 +2,9 @@
 
 Per loop, at the scenario's operating point (plant.parameters; every other input at its start value), the input
 is held at LEVELS levels evenly spaced over u_limits until the output settles (probe.step_test.sweep_input). When
-every level settles and the values rise then fall (or fall then rise) by more than SIGNIFICANT of their spread,
-the map has an interior extremum: past it the loop's gain has the other sign, so a PID that works on one side
+every level settles and the values rise then fall (or fall then rise) by more than SIGNIFICANT of their spread, with
+at least two levels on each side, and the extremum's output lies within NEAR_RANGE of the setpoint range, the map
+has an interior extremum the loop meets: past it the loop's gain has the other sign, so a PID that works on one side
 drives the measurement away on the other, and setpoints beyond the extremum's value cannot be held at all.
 
 Only a loop the probe reads as stable or static is swept. An open-loop-unstable plant (a multi-steady-state
@@ -19,6 +20,7 @@ import numpy as np
 
 LEVELS = 21
 SIGNIFICANT = 0.01  # a rise or fall counts when larger than this part of the map's spread
+NEAR_RANGE = 0.1  # an extremum counts when its output lies within this part of the setpoint range beyond it
 
 
 @dataclass(frozen=True)
@@ -55,7 +57,7 @@ def extremum_of(levels, values, loop: str = "y", name: str = "u") -> Extremum | 
         return None
     j_max, j_min = int(np.argmax(y)), int(np.argmin(y))
     for j, kind in ((j_max, "maximum"), (j_min, "minimum")):
-        if 0 < j < u.size - 1:
+        if 1 < j < u.size - 2:  # two levels on each side: a map that only bends at its last level saturates there
             rise = abs(y[j] - y[0]) > SIGNIFICANT * spread
             fall = abs(y[j] - y[-1]) > SIGNIFICANT * spread
             if rise and fall:
@@ -81,7 +83,9 @@ def loop_extrema(tuning) -> list[Extremum]:
         if not all(sweep.settled):
             continue
         found = extremum_of(sweep.levels, sweep.values, loop.output, loop.input)
-        if found is not None:
+        lo, hi = loop.setpoint_range
+        margin = NEAR_RANGE * (hi - lo)
+        if found is not None and lo - margin <= found.y <= hi + margin:  # where the loop's setpoints reach it
             out.append(found)
     return out
 
