@@ -138,13 +138,17 @@ class Candidate:
                 out.append(f"its peak sensitivity Ms = {self.worst_Ms:.2f} exceeds the limit {max_sensitivity:g}")
         return out + self.check_failures()
 
-    def check_failures(self) -> list[str]:
-        """The acceptance check's failures (deliver.acceptance), one sentence each; a divergence of the evaluation
-        that `diverged` reports already is not repeated."""
+    def failed_checks(self) -> list:
+        """The acceptance check's failures (deliver.acceptance.Failure); a divergence of the evaluation that
+        `diverged` reports already is left out."""
         if self.acceptance is None:
             return []
-        return [f"it fails the acceptance check ({f.check}): it {f.text}" for f in self.acceptance.failures
+        return [f for f in self.acceptance.failures
                 if not (self.diverged and f.check == "follows" and f.episode == "the evaluation")]
+
+    def check_failures(self) -> list[str]:
+        """failed_checks, one sentence each."""
+        return [f"it fails the acceptance check ({f.check}): it {f.text}" for f in self.failed_checks()]
 
 
 def _point(b) -> str:

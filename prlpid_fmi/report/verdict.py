@@ -116,9 +116,8 @@ def _failed(c: Candidate, max_sensitivity: float) -> list[str]:
     change it."""
     checks = c.check_failures()
     out = [p for p in c.problems(max_sensitivity) if p not in checks]
-    shown = [f for f in c.acceptance.failures if f"it {f.text}" in " ".join(checks)] if c.acceptance else []
-    return out + [f"it fails the acceptance check ({f.check}): it {f.text}" + (f". To change it: {f.remedy}"
-                                                                              if f.remedy else "") for f in shown]
+    return out + [sentence + (f". To change it: {f.remedy}" if f.remedy else "")
+                  for sentence, f in zip(checks, c.failed_checks())]
 
 
 def _acceptance_lines(a) -> list[str]:
