@@ -306,7 +306,7 @@ class Designer:
                           + (", parameter draws" if parameter_samples(config) else "") + "; detuned where one fails)")
             repaired = detune_over(tuned, gains, points, self.limit, draws=parameter_samples(tuned))
             if repaired is None:  # the design's estimate misled it (coupled loops, a nonlinear plant): the setpoint
-                # search's robust PID, as before the load design, rather than an undeployable one
+                # search's robust PID rather than an undeployable one
                 fallback = setpoint_pid(config, seed, self.episodes, maxiter, popsize, progress, self.limit,
                                         name="setpoint search (the load design could not meet the Ms limit)",
                                         workers=baseline.workers)

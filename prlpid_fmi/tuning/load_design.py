@@ -63,7 +63,7 @@ def columns(population) -> np.ndarray:
 def polish_evaluations(maxiter: int) -> int:
     """Nelder-Mead evaluations per searched parameter after a DE of maxiter generations: POLISH_PER_GENERATION x
     (maxiter + 1), at most POLISH_EVALUATIONS (reached at the default 20 generations, so the polish costs at most 3 /
-    popsize of the DE's evaluations; a one-generation search once spent 900 polish evaluations on the quadrotor)."""
+    popsize of the DE's evaluations; a short search does not spend most of its evaluations polishing)."""
     return min(POLISH_EVALUATIONS, POLISH_PER_GENERATION * (int(maxiter) + 1))
 
 
@@ -548,7 +548,7 @@ class SetpointDesign(OutcomeCache):
     @staticmethod
     def generations(maxiter: int, whole_box: bool) -> int:
         """DE generations of `search`: maxiter halved around a start (the feasible set lies near it), all of them over
-        the whole box (measured on the reactor's seed 1: ISE 40440 and load IAE 51 with half, 32213 and 7.3 with all)."""
+        the whole box (with no start, the feasible set may lie anywhere in it)."""
         return maxiter if whole_box else max(1, maxiter // 2)
 
     def search(self, start, seed: int, maxiter: int, popsize: int, progress: Steps = QUIET):
