@@ -18,6 +18,7 @@ from prlpid_fmi.loop.actions import ScheduledActionMap
 from prlpid_fmi.loop.env import PidTuningEnv
 from prlpid_fmi.loop.evaluation import rollout
 from prlpid_fmi.loop.gains import Gains
+from prlpid_fmi.tuning.design_rule import DesignResult
 from prlpid_fmi.run.trained import anchor_name, run_anchor, training_anchor
 from prlpid_fmi.scenario.load import load_scenario
 from prlpid_fmi.scenario.presets import preset, scenario_path
@@ -78,7 +79,7 @@ def test_tune_anchors_on_the_classical_schedule_unless_the_scenario_says_fixed_p
     scenario = load_scenario(scenario_path("two_tank"))
     assert scenario.tuning.anchor_on == "auto"
     table = _table(scenario.tuning)
-    fixed = {"gains": {"Kp": [7.0], "Ti": [40.0], "Td": [0.1]}}
+    fixed = DesignResult.from_json({"gains": {"Kp": [7.0], "Ti": [40.0], "Td": [0.1]}})
     assert training_anchor(scenario, fixed, table) is table
     assert anchor_name(table) == "classical gain schedule"
     on_fixed = dataclasses.replace(scenario, tuning=dataclasses.replace(scenario.tuning, anchor_on="fixed_pid"))

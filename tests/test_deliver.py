@@ -194,10 +194,12 @@ def test_classical_schedule_setting_is_auto_or_a_boolean_with_one_message(tmp_pa
                               "expected auto, true or false)")
 
 
-def _design(**extra) -> dict:
-    return {"gains": {"Kp": [8.3], "Ti": [5.8], "Td": [62.0]},
+def _design(**extra):
+    from prlpid_fmi.tuning.design_rule import DesignResult
+
+    return DesignResult.from_json({"gains": {"Kp": [8.3], "Ti": [5.8], "Td": [62.0]},
             "structure": {"setpoint_weight": [0.0], "derivative_weight": [0.0], "measurement_filter_s": [72.3]},
-            "design": {"objective": "load", "load_step": 0.02, "load_cost": 1.02, "load_optimum": 1.02, **extra}}
+            "design": {"objective": "load", "load_step": 0.02, "load_cost": 1.02, "load_optimum": 1.02, **extra}})
 
 
 def test_the_design_section_names_the_limits_that_hold_the_design_and_what_was_kept():

@@ -155,13 +155,14 @@ def test_the_report_says_how_the_steps_settled_what_was_relaxed_and_what_bound_t
                                     {"limit": "max_noise_increment", "requested": 0.005, "used": 0.01},
                                     {"limit": "max_noise_gain", "requested": 0.02, "used": math.inf}],
                         "bound": "follows and settles the setpoint steps"}}
-    text = design_section(fixed, ["y"])
+    text = design_section(design_rule.DesignResult.from_json(fixed), ["y"])
     assert "it settles 3 of 4 (2 slowly, after training.setpoint_hold_steps), worst overshoot 3 %." in text
     assert ("a measurement filter was searched (controller.measurement_filter was not tuned); "
             "deploy.max_noise_increment 0.50% raised to 1.00%; deploy.max_noise_gain 2.00% raised to no limit.") in text
     assert "The requirement that bound this design: follows and settles the setpoint steps" in text
-    older = design_section({**fixed, "design": {k: v for k, v in fixed["design"].items()
-                                                 if k not in ("following", "relaxed", "bound")}}, ["y"])
+    older = design_section(design_rule.DesignResult.from_json(
+        {**fixed, "design": {k: v for k, v in fixed["design"].items() if k not in ("following", "relaxed", "bound")}}),
+        ["y"])
     assert "settles" not in older and "relaxed" not in older  # a fixed_pid.json written before the rule
 
 

@@ -198,16 +198,16 @@ def test_scenario_option_schedule_by_loads_resolves_and_drives_the_candidates(tm
     assert scenario.deploy.schedule_by == "error"
     assert "schedule_by: error" in scenario_to_yaml(scenario)
     scenario = dataclasses.replace(scenario, tuning=TRAINING)
-    schedule, note, info = deliverable_schedule(error_policy, scenario, seed=0)
-    assert schedule.variable == "error[y]" and info["schedule_by"] == "error[y]"
+    choice = deliverable_schedule(error_policy, scenario, seed=0)
+    assert choice.table.variable == "error[y]" and choice.training_ise is None  # one kind asked for: no comparison
 
 
 def test_auto_keeps_the_candidate_with_the_lower_training_ise():
     scenario = load_scenario(scenario_path("first_order"))
     scenario = dataclasses.replace(scenario, tuning=TRAINING, deploy=dataclasses.replace(
         scenario.deploy, schedule_points=3, max_sensitivity=1e3))  # no projection: compare the raw tables
-    schedule, note, info = deliverable_schedule(error_policy, scenario, seed=0)
-    scores = info["schedule_candidates_training_ise"]
+    choice = deliverable_schedule(error_policy, scenario, seed=0)
+    schedule, note, scores = choice.table, choice.note, choice.training_ise
     assert set(scores) == {"setpoint", "error"}
     assert schedule.variable == ("error[y]" if scores["error"] < scores["setpoint"] else "setpoint[y]")
     assert "deploy.schedule_by: auto" in note

@@ -10,6 +10,7 @@ schedule is never used for the choice.
 from __future__ import annotations
 
 import dataclasses
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -78,9 +79,20 @@ def robust_schedule(schedule: GainSchedule, config, limit: float, workers: int |
     return schedule, notes
 
 
-def deliverable_schedule(policy: Policy, scenario, seed: int, anchor: Gains | None = None
-                         ) -> tuple[GainSchedule, str, dict]:
-    """The table `tune` assesses against the fixed PID: (schedule, report note, info for run.json).
+@dataclass
+class ScheduleChoice:
+    """The policy's table `tune` assesses against the fixed PID (its variable: what it is scheduled on), the report's
+    note on it, its rows detuned to meet the Ms limit (one line each), and the training ISE of each candidate kind
+    when several were built ({kind: ISE}; None with one)."""
+
+    table: GainSchedule
+    note: str
+    detuned_rows: list[str]
+    training_ise: dict[str, float] | None = None
+
+
+def deliverable_schedule(policy: Policy, scenario, seed: int, anchor: Gains | None = None) -> ScheduleChoice:
+    """The table `tune` assesses against the fixed PID, as a ScheduleChoice.
 
     Candidates per scenario.deploy.schedule_by (auto: AUTO_CANDIDATES), each projected onto the Ms
     limit (robust_schedule); with several, the lowest training_ise wins. Raises PrlPidError
@@ -107,18 +119,17 @@ def deliverable_schedule(policy: Policy, scenario, seed: int, anchor: Gains | No
         if detuned:
             note += (f"Rows of the gain schedule ({schedule.variable}) detuned (Kp / lambda, Ti and Td * lambda) to meet "
                      f"Ms <= {limit:g}: " + "; ".join(detuned) + ".\n")
-        built.append((kind, schedule, note, {"schedule_detuned_rows": detuned} if detuned else {}))
+        built.append((kind, schedule, note, detuned))
     if not built:
         raise PrlPidError("; ".join(errors))
     if len(built) == 1:
-        kind, schedule, note, info = built[0]
-        return schedule, note, {**info, "schedule_by": schedule.variable}
+        kind, schedule, note, detuned = built[0]
+        return ScheduleChoice(schedule, note, detuned)
     scores = {kind: training_ise(s, config, seed) for kind, s, _, _ in built}
-    kind, schedule, note, info = min(built, key=lambda b: scores[b[0]])
-    info = {**info, "schedule_candidates_training_ise": scores, "schedule_by": schedule.variable}
+    kind, schedule, note, detuned = min(built, key=lambda b: scores[b[0]])
     words = ", ".join(f"{k} {v:.4g}" for k, v in scores.items())
     note += (f"Gain schedule over {schedule.variable} chosen (deploy.schedule_by: auto): lowest ISE over "
              f"{SELECTION_EPISODES} seeded training episodes replayed as plain PIDs ({words}).\n")
     if errors:
         note += "Candidate(s) not built: " + "; ".join(errors) + ".\n"
-    return schedule, note, info
+    return ScheduleChoice(schedule, note, detuned, scores)

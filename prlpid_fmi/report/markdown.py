@@ -19,6 +19,7 @@ from prlpid_fmi.fmu.resolve import loop_units as units_of_loops
 from prlpid_fmi.loop.core import pid_structure
 from prlpid_fmi.metrics import overall_metric
 from prlpid_fmi.robustness.status import INFINITE_MS, ms_text, why
+from prlpid_fmi.tuning.design_rule import DesignReport, DesignResult
 from prlpid_fmi.tuning.load_design import ACTIVE_TOLERANCE
 
 METRIC_COLUMNS = ("ISE", "IAE", "ITAE", "Overshoot", "SettlingTime", "RiseTime", "SteadyStateError",
@@ -240,22 +241,23 @@ def _margin(value: float) -> str:
     return number(value, 3)
 
 
-def design_section(fixed: dict, loop_names) -> str:
-    """How the fixed PID was designed (fixed_pid.json's "design" and "structure"), in words and one table."""
-    design, structure = fixed.get("design") or {}, fixed.get("structure") or {}
+def design_section(fixed: DesignResult, loop_names) -> str:
+    """How the fixed PID was designed (its design report and structure), in words and one table."""
+    report = fixed.report
+    design = report.details if report is not None else {}
     if design.get("objective") != "load":
         return ""
+    b, c, tf = fixed.structure
     lines = ["## How the fixed PID was designed", "",
              "Kp, Ti, Td (and the measurement filter Tf) minimise the IAE of a load step at the plant input "
              f"({design['load_step']:.0%} of the control span) at the low end, middle and high end of the setpoint "
              "range, subject to the Ms and noise limits; then the setpoint weight b shapes the setpoint response "
              "(tuning.design_rule; docs/architecture.md).", "",
              "| loop | Kp | Ti [s] | Td [s] | b | c | Tf [s] |", "|---|---|---|---|---|---|---|"]
-    g = fixed["gains"]
+    g = fixed.gains
     for i, name in enumerate(loop_names):
-        lines.append(f"| {name} | {number(g['Kp'][i], 4)} | {number(g['Ti'][i], 4)} | {number(g['Td'][i], 4)} | "
-                     f"{number(structure['setpoint_weight'][i], 3)} | {number(structure['derivative_weight'][i], 3)} | "
-                     f"{number(structure['measurement_filter_s'][i], 4)} |")
+        lines.append(f"| {name} | {number(g.Kp[i], 4)} | {number(g.Ti[i], 4)} | {number(g.Td[i], 4)} | "
+                     f"{number(b[i], 3)} | {number(c[i], 3)} | {number(tf[i], 4)} |")
     lines += ["", f"Load IAE per unit load (mean over the points) [output units·s per input unit]: "
                   f"{number(design['load_cost'], 4)}; the search's optimum without the overshoot limit: "
                   f"{number(design['load_optimum'], 4)}."]
@@ -277,7 +279,7 @@ def design_section(fixed: dict, loop_names) -> str:
         lines.append("No setpoint weight kept the overshoot within the limit with the load-optimal gains, and the search "
                      f"for gains that would, within the load tolerance, found none ({best})"
                      + ("." if replaced else ": the load-optimal gains are kept, with the setpoint weight of least "
-                        f"overshoot (b = {number(structure['setpoint_weight'][0], 3)})."))
+                        f"overshoot (b = {number(b[0], 3)})."))
     weights = design.get("setpoint_weights") or []
     if weights and not any(math.isfinite(w["ISE"]) for w in weights):
         lines.append(("With the load-optimal gains" if followed else "With these gains") + " the loop diverged on every "
@@ -286,7 +288,7 @@ def design_section(fixed: dict, loop_names) -> str:
                         "response (the first b of the grid is kept)." if not followed else "."))
     if followed:
         lines.append(_followed_sentence(followed, design["load_optimum"]))
-    lines += _rule_sentences(design)
+    lines += _rule_sentences(report)
     return "\n".join(lines) + "\n"
 
 
@@ -295,29 +297,28 @@ RELAXED_WORDS = {"measurement_filter": "a measurement filter was searched (contr
                  "max_noise_gain": "deploy.max_noise_gain", "max_noise_increment": "deploy.max_noise_increment"}
 
 
-def _rule_sentences(design: dict) -> list[str]:
-    """fixed_pid.json design "following", "relaxed" and "bound" (tuning.design_rule) in words; none in a file
-    written before them."""
-    following = design.get("following")
-    if not following:
+def _rule_sentences(report: DesignReport) -> list[str]:
+    """The design report's following, relaxations and bound (tuning.design_rule) in words; none for a design
+    written before the rule by priority."""
+    following = report.following
+    if following is None:
         return []
     out = []
-    if following["diverged"]:
+    if following.diverged:
         out.append("On setpoint steps between the low, middle and high setpoint the loop diverged.")
     else:
         out.append(f"On setpoint steps between the low, middle and high setpoint it settles "
-                   f"{following['steps'] - following['unsettled']} of {following['steps']}"
-                   + (f" ({following['slow']} slowly, after training.setpoint_hold_steps)" if following["slow"] else "")
-                   + f", worst overshoot {number(following['overshoot'], 3)} %.")
-    relaxed = design.get("relaxed") or []
-    if relaxed:
-        parts = [RELAXED_WORDS[r["limit"]] if r["limit"] == "measurement_filter" else
-                 f"{RELAXED_WORDS[r['limit']]} {r['requested']:.2%} raised to "
-                 + (f"{r['used']:.2%}" if math.isfinite(r["used"]) else "no limit") for r in relaxed]
+                   f"{following.steps - following.unsettled} of {following.steps}"
+                   + (f" ({following.slow} slowly, after training.setpoint_hold_steps)" if following.slow else "")
+                   + f", worst overshoot {number(following.overshoot, 3)} %.")
+    if report.relaxed:
+        parts = [RELAXED_WORDS[r.limit] if r.limit == "measurement_filter" else
+                 f"{RELAXED_WORDS[r.limit]} {r.requested:.2%} raised to "
+                 + (f"{r.used:.2%}" if math.isfinite(r.used) else "no limit") for r in report.relaxed]
         out.append("The noise limits are preferences, relaxed before they may cost following or settling the "
                    "setpoint steps: " + "; ".join(parts) + ".")
-    if design.get("bound"):
-        out.append(f"The requirement that bound this design: {design['bound']} (tuning.design_rule's order).")
+    if report.bound:
+        out.append(f"The requirement that bound this design: {report.bound} (tuning.design_rule's order).")
     return out
 
 

@@ -3,7 +3,6 @@ plots and the evaluation part of report.md; `evaluate RUN` writes them into a ne
 from __future__ import annotations
 
 import dataclasses
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -13,9 +12,11 @@ from prlpid_fmi.deliver.rule import Deployed
 from prlpid_fmi.report.markdown import deployed_section, loop_units, render_report
 from prlpid_fmi.report.verdict import acceptance_section
 from prlpid_fmi.run.gains_csv import trajectory_csv
-from prlpid_fmi.run.trained import deployed_controller, load_policy, load_trained, on_other_evaluation, run_anchor
+from prlpid_fmi.run.trained import (deployed_controller, load_policy, load_trained, on_other_evaluation, read_fixed_pid,
+                                    run_anchor)
 from prlpid_fmi.rundir import write_atomic, write_json
 from prlpid_fmi.scenario.load import Scenario, scenario_to_yaml
+from prlpid_fmi.tuning.design_rule import DesignResult
 
 
 @dataclass
@@ -28,13 +29,13 @@ class Evaluation:
     config: TuningConfig
     policy: dict
     policy_traj: object
-    fixed: dict | None = None
+    fixed: DesignResult | None = None
     fixed_traj: object = None
     schedule: dict | None = None
     schedule_traj: object = None
 
 
-def evaluate_controllers(scenario: Scenario, policy, fixed: dict | None, anchor=None, schedule=None) -> Evaluation:
+def evaluate_controllers(scenario: Scenario, policy, fixed: DesignResult | None, anchor=None, schedule=None) -> Evaluation:
     """Run the policy, the fixed PID (fixed_pid.json's content) and the gain table (a GainSchedule, replayed as a
     plain PID) on the scenario's evaluation, with its seed and intervals."""
     from prlpid_fmi.loop.evaluation import constant_gains, evaluate, evaluate_gains
@@ -46,15 +47,14 @@ def evaluate_controllers(scenario: Scenario, policy, fixed: dict | None, anchor=
     policy_m, traj = evaluate(policy, config, seed=seed, intervals=intervals, anchor=anchor)
     result = Evaluation(config, policy_m, traj)
     if fixed is not None:
-        g = fixed["gains"]
-        result.fixed, result.fixed_traj = evaluate_gains(constant_gains(g["Kp"], g["Ti"], g["Td"], g.get("coupling")),
-                                                         config, seed=seed, intervals=intervals)
+        result.fixed, result.fixed_traj = evaluate_gains(constant_gains(*fixed.gains.values()), config, seed=seed,
+                                                         intervals=intervals)
     if schedule is not None:
         result.schedule, result.schedule_traj = replay_schedule(schedule, config, seed=seed, intervals=intervals)
     return result
 
 
-def write_evaluation_files(out_dir: Path, scenario: Scenario, ev: Evaluation, fixed: dict | None) -> None:
+def write_evaluation_files(out_dir: Path, scenario: Scenario, ev: Evaluation, fixed: DesignResult | None) -> None:
     """gains.csv (the policy's trajectory) and the response (whole and zoomed to its transients), control-signal and
     gains plots."""
     from prlpid_fmi.report import plots
@@ -70,20 +70,20 @@ def write_evaluation_files(out_dir: Path, scenario: Scenario, ev: Evaluation, fi
                                        (plots.SCHEDULE, ev.schedule_traj)) if t is not None]
     plots.save_figure(plots.step_response_figure(pairs, config, f"{scenario.name}: transients"),
                       out_dir / rd.STEP_RESPONSE_PLOT)
-    plots.plot_gains(ev.policy_traj, config, out_dir / rd.GAINS_PLOT, baseline_gains=fixed["gains"] if fixed else None,
+    plots.plot_gains(ev.policy_traj, config, out_dir / rd.GAINS_PLOT, baseline_gains=fixed.gains.as_dict() if fixed else None,
                      schedule_traj=ev.schedule_traj, title=f"{scenario.name}: PID gains set by the adaptive policy")
 
 
-def evaluation_metrics(ev: Evaluation, fixed: dict | None) -> dict:
+def evaluation_metrics(ev: Evaluation, fixed: DesignResult | None) -> dict:
     """metrics.json's evaluation part: the policy's metrics and the fixed PID's gains and metrics."""
-    return {"policy": ev.policy, "fixed_pid": {"gains": fixed["gains"], "metrics": ev.fixed} if fixed else None}
+    return {"policy": ev.policy, "fixed_pid": {"gains": fixed.gains.as_dict(), "metrics": ev.fixed} if fixed else None}
 
 
-def evaluation_report(scenario: Scenario, ev: Evaluation, fixed: dict | None, source: Path | None,
+def evaluation_report(scenario: Scenario, ev: Evaluation, fixed: DesignResult | None, source: Path | None,
                       learning_curve: bool, opening: tuple[str, ...] = (), headline: str = "") -> str:
     """report.md of this evaluation, with `opening` sections between its title and the metric table; headline: the
     title's words after the scenario's name (report.markdown.render_report)."""
-    return render_report(scenario, ev.policy, ev.fixed, fixed["gains"] if fixed else None, source,
+    return render_report(scenario, ev.policy, ev.fixed, fixed.gains.as_dict() if fixed else None, source,
                          loop_units(ev.config), learning_curve=learning_curve, opening=opening, headline=headline)
 
 
@@ -99,7 +99,7 @@ def evaluate_run(run_dir: str | Path, scenario_path: str | Path | None = None) -
     n = 1 + max((int(p.name) for p in base.iterdir() if p.name.isdigit()), default=0)
     out_dir = base / str(n)
     out_dir.mkdir()
-    fixed = json.loads((run_dir / rd.FIXED_PID).read_text()) if (run_dir / rd.FIXED_PID).is_file() else None
+    fixed = read_fixed_pid(run_dir)
     deployed, schedule = deployed_controller(run_dir)
     write_atomic(out_dir / rd.SCENARIO, scenario_to_yaml(scenario))
     source = Path(scenario_path) if scenario_path is not None else run_dir / rd.SCENARIO

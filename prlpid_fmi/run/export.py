@@ -2,14 +2,13 @@
 XML, C)."""
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 from prlpid_fmi import rundir as rd
 from prlpid_fmi.errors import ArgumentError, RunError
 from prlpid_fmi.export.controller import controller_name, from_schedule
 from prlpid_fmi.export.formats import CODE_FORMATS, output_paths, render
-from prlpid_fmi.run.trained import load_policy, load_trained, on_other_evaluation, run_anchor
+from prlpid_fmi.run.trained import load_policy, load_trained, on_other_evaluation, read_fixed_pid, run_anchor
 from prlpid_fmi.rundir import write_atomic
 from prlpid_fmi.scenario.load import Scenario
 
@@ -78,8 +77,7 @@ def export_schedule(run_dir: str | Path, output: str | Path, schedule_by: str = 
                             "{{scenario_path}})")
     scenario = trained if scenario_path is None else on_other_evaluation(trained, scenario_path)
     policy = load_policy(run_dir, trained.agent.algorithm)
-    fixed = json.loads((run_dir / rd.FIXED_PID).read_text()) if (run_dir / rd.FIXED_PID).is_file() else None
-    anchor = run_anchor(run_dir, trained, fixed)
+    anchor = run_anchor(run_dir, trained, read_fixed_pid(run_dir))
     schedule = extract(policy, trained.tuning, schedule_by, points, trained.agent.seed, anchor)
     path = write_schedule_csv(schedule, output)
     if not replay:

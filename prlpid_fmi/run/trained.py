@@ -8,8 +8,9 @@ from pathlib import Path
 from prlpid_fmi import rundir as rd
 from prlpid_fmi.deliver.rule import Deployed
 from prlpid_fmi.errors import RunError
-from prlpid_fmi.loop.gains import gains_from_dict
+from prlpid_fmi.run.record import RunRecord
 from prlpid_fmi.scenario.load import Scenario, load_scenario
+from prlpid_fmi.tuning.design_rule import DesignResult
 
 
 def one_line(exc: BaseException) -> str:
@@ -73,14 +74,20 @@ def with_prior_fallback(scenario: Scenario, fallback: str | None) -> Scenario:
     return dataclasses.replace(scenario, tuning=tuning)
 
 
-def training_anchor(scenario: Scenario, fixed: dict | None, classical=None):
+def read_fixed_pid(run_dir: Path) -> DesignResult | None:
+    """The run's fixed PID design (fixed_pid.json), or None where the run has none."""
+    path = Path(run_dir) / rd.FIXED_PID
+    return DesignResult.from_json(json.loads(path.read_text())) if path.is_file() else None
+
+
+def training_anchor(scenario: Scenario, fixed: DesignResult | None, classical=None):
     """What action 0 of the anchored gain map gives (loop.env): the classical gain table when one was built and
     controller.anchor_on is auto, else the fixed PID's Gains; None for the absolute map or without a fixed PID."""
     if fixed is None or scenario.tuning.gain_mapping != "anchored":
         return None
     if classical is not None and scenario.tuning.anchor_on == "auto":
         return classical
-    return gains_from_dict(fixed["gains"])
+    return fixed.gains
 
 
 def anchor_name(anchor) -> str | None:
@@ -92,27 +99,23 @@ def anchor_name(anchor) -> str | None:
     return str(Deployed.CLASSICAL if is_table(anchor) else Deployed.FIXED_PID)
 
 
-def run_anchor(run_dir: Path, scenario: Scenario, fixed: dict | None):
+def run_anchor(run_dir: Path, scenario: Scenario, fixed: DesignResult | None):
     """The anchor a finished run trained around, read back (run.json's "anchor"; classical_schedule.csv)."""
     from prlpid_fmi.tuning.schedule.csv_file import read_schedule_csv
 
-    try:
-        named = json.loads((run_dir / rd.RUN_INFO).read_text()).get("anchor")
-    except (OSError, ValueError, AttributeError):
-        named = None
+    record = RunRecord.read(run_dir)
+    named = record.anchor if record is not None else None
     path = run_dir / rd.CLASSICAL_SCHEDULE
     classical = read_schedule_csv(path) if named == str(Deployed.CLASSICAL) and path.is_file() else None
     return training_anchor(scenario, fixed, classical)
 
 
-def with_structure(scenario: Scenario, fixed: dict | None) -> Scenario:
-    """The scenario with the PID structure (b, c, Tf per loop) fixed_pid.json records in force (unchanged for a
-    run without one, or one written before the 2-DOF law: those ran with the controller's settings)."""
-    s = (fixed or {}).get("structure")
-    if not s:
+def with_structure(scenario: Scenario, fixed: DesignResult | None) -> Scenario:
+    """The scenario with the fixed PID's structure (b, c, Tf per loop) in force (unchanged for a run without one,
+    or one written before the 2-DOF law: those ran with the controller's settings)."""
+    if fixed is None or not fixed.structure:
         return scenario
-    structure = tuple(zip(map(float, s["setpoint_weight"]), map(float, s["derivative_weight"]),
-                          map(float, s["measurement_filter_s"])))
+    structure = tuple(zip(*(map(float, part) for part in fixed.structure)))
     return dataclasses.replace(scenario, tuning=dataclasses.replace(scenario.tuning, tuned_structure=structure))
 
 
@@ -121,13 +124,10 @@ def load_trained(run_dir: Path) -> Scenario:
     if not (run_dir / rd.SCENARIO).is_file() or not (run_dir / rd.MODEL).is_file():
         raise RunError(f"{run_dir}: not a finished run directory (expected {rd.SCENARIO} and {rd.MODEL} from `tune`)")
     scenario = load_scenario(run_dir / rd.SCENARIO)
-    try:  # a run whose plant crashed the tool once keeps its plant in a worker process
-        info = json.loads((run_dir / rd.RUN_INFO).read_text())
-        isolation, fallback = info.get("isolation", "auto"), info.get("prior_fallback")
-    except (OSError, ValueError, AttributeError):
-        isolation, fallback = "auto", None
-    fixed = json.loads((run_dir / rd.FIXED_PID).read_text()) if (run_dir / rd.FIXED_PID).is_file() else None
-    return with_structure(with_prior_fallback(with_isolation(scenario, isolation), fallback), fixed)
+    record = RunRecord.read(run_dir) or RunRecord()  # a run whose plant crashed the tool once keeps it in a worker
+    isolation, fallback = record.isolation, record.prior_fallback
+    return with_structure(with_prior_fallback(with_isolation(scenario, isolation), fallback),
+                          read_fixed_pid(run_dir))
 
 
 def on_other_evaluation(trained: Scenario, scenario_path: str | Path) -> Scenario:

@@ -17,16 +17,15 @@ starts (the evaluation's metrics.json and report.md are rewritten, whole, once t
 from __future__ import annotations
 
 import dataclasses
-import json
 import sys
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from prlpid_fmi import rundir as rd
 from prlpid_fmi.deliver.rule import Decision, Deployed
 from prlpid_fmi.errors import ArgumentError, Interrupted, PrlPidError
-from prlpid_fmi.loop.gains import gains_from_dict
 from prlpid_fmi.report.markdown import (
     candidates_table,
     design_section,
@@ -42,11 +41,16 @@ from prlpid_fmi.run.evaluate import (
     evaluation_report,
     write_evaluation_files,
 )
-from prlpid_fmi.run.trained import (anchor_name, load_policy, prior_fallback_for, training_anchor, with_isolation,
-                                   with_prior_fallback, with_structure)
+from prlpid_fmi.run.record import RunRecord, TrainingStopped
+from prlpid_fmi.run.trained import (anchor_name, load_policy, prior_fallback_for, read_fixed_pid, training_anchor,
+                                   with_isolation, with_prior_fallback, with_structure)
 from prlpid_fmi.rundir import write_atomic, write_json
 from prlpid_fmi.scenario.load import Scenario, load_scenario, scenario_to_yaml
 from prlpid_fmi.schema.types import MAX_SEED
+
+if TYPE_CHECKING:
+    from prlpid_fmi.deliver.candidates import ScheduleChoice
+    from prlpid_fmi.tuning.design_rule import DesignResult
 
 
 def tune(scenario_path: str | Path, timesteps: int | None = None, seed: int | None = None,
@@ -97,11 +101,11 @@ def tune(scenario_path: str | Path, timesteps: int | None = None, seed: int | No
 @dataclass
 class Started:
     """What the start stage settled: the scenario as run (seed and budget applied), the file it came from,
-    and run.json's content."""
+    and the run's record (run.json)."""
 
     scenario: Scenario
     source: Path
-    info: dict
+    record: RunRecord
 
 
 @dataclass
@@ -117,11 +121,20 @@ class Choice:
 @dataclass
 class ScheduleResult:
     """The schedule stage's result: the candidate table (None when none could be built), the report's note
-    on it, and what run.json records of it."""
+    on it, how it was chosen (None without a table) and why none could be built."""
 
     table: object | None
     note: str = ""
-    info: dict = field(default_factory=dict)
+    choice: ScheduleChoice | None = None
+    error: str | None = None
+
+    def record_in(self, record: RunRecord) -> None:
+        """Set run.json's schedule_* fields from this result."""
+        if self.choice is not None:
+            record.schedule_by = self.choice.table.variable
+            record.schedule_detuned_rows = self.choice.detuned_rows or None
+            record.schedule_candidates_training_ise = self.choice.training_ise
+        record.schedule_error = self.error
 
 
 def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None, seed: int | None, resume: bool,
@@ -132,22 +145,22 @@ def _tune(scenario: Scenario, source: Path, run_dir: Path, timesteps: int | None
     started = start_stage(scenario, source, run_dir, timesteps, seed, resume, crashed)
     if started is None:
         return run_dir
-    scenario, info = started.scenario, started.info
-    scenario = isolation_stage(scenario, run_dir, info)
+    scenario, record = started.scenario, started.record
+    scenario = isolation_stage(scenario, run_dir, record)
     fixed = fixed_pid_stage(scenario, run_dir, progress_bar, baseline)
-    scenario = isolation_stage(with_structure(scenario, fixed), run_dir, info)  # the tuned b, c, Tf from here on
-    classical = classical_stage(scenario, run_dir, fixed, info, progress_bar) if fixed is not None else None
-    scenario = isolation_stage(scenario, run_dir, info)
+    scenario = isolation_stage(with_structure(scenario, fixed), run_dir, record)  # the tuned b, c, Tf from here on
+    classical = classical_stage(scenario, run_dir, fixed, record, progress_bar) if fixed is not None else None
+    scenario = isolation_stage(scenario, run_dir, record)
     anchor = training_anchor(scenario, fixed, classical)
-    info["anchor"] = anchor_name(anchor)
-    write_json(run_dir / rd.RUN_INFO, info)
+    record.anchor = anchor_name(anchor)
+    record.write(run_dir)
     with stage("training", False):
-        scenario = training_stage(scenario, run_dir, info, resume, anchor, progress_bar)
-    scenario = isolation_stage(scenario, run_dir, info)
+        scenario = training_stage(scenario, run_dir, record, resume, anchor, progress_bar)
+    scenario = isolation_stage(scenario, run_dir, record)
     started = dataclasses.replace(started, scenario=scenario)
     policy = load_policy(run_dir, scenario.agent.algorithm)
     table = schedule_stage(policy, scenario, anchor, progress_bar)
-    info.update(table.info)
+    table.record_in(record)
     ev = evaluation_stage(run_dir, scenario, started.source, policy, fixed, anchor, table.table, progress_bar)
     choice = choice_stage(scenario, table.table, fixed, progress_bar, classical) if fixed is not None else None
     files_stage(run_dir, started, ev, fixed, table, choice, classical)
@@ -159,20 +172,20 @@ def start_stage(scenario: Scenario, source: Path, run_dir: Path, timesteps: int 
     """The scenario as this run trains it, scenario.yaml (a new run) and run.json; None when a resumed run has
     finished already with this budget (nothing to do; said in a warning). crashed: the previous run ended abruptly
     (a string: the line of the crash that ended it)."""
-    info = {"command": sys.argv, "started": rd.now(), "versions": rd.package_versions()}
+    record = RunRecord(command=list(sys.argv), started=rd.now(), versions=rd.package_versions())
     if resume:
         scenario = load_scenario(run_dir / rd.SCENARIO)
         source = run_dir / rd.SCENARIO
-        info = {**json.loads((run_dir / rd.RUN_INFO).read_text()), "resumed": rd.now()}
+        record = RunRecord.read(run_dir) or record
+        record.resumed = rd.now()
         if crashed and scenario.tuning.isolation == "auto":
             why = crashed if isinstance(crashed, str) else "the previous run ended abruptly (did the FMU crash it?)"
             warnings.warn(f"{run_dir}: {why}; the run continues from its last checkpoint with the plant in a worker "
                           "process (plant.isolation: process)", stacklevel=3)
-            info["isolation"] = "process"
+            record.isolation = "process"
             if isinstance(crashed, str):
-                info["isolation_reason"] = crashed
-        scenario = with_prior_fallback(with_isolation(scenario, info.get("isolation", "auto")),
-                                       info.get("prior_fallback"))
+                record.isolation_reason = crashed
+        scenario = with_prior_fallback(with_isolation(scenario, record.isolation), record.prior_fallback)
     agent = scenario.agent
     if seed is not None:
         agent = dataclasses.replace(agent, seed=seed)
@@ -180,19 +193,20 @@ def start_stage(scenario: Scenario, source: Path, run_dir: Path, timesteps: int 
         agent = dataclasses.replace(agent, total_timesteps=timesteps)
     if timesteps is not None or seed is not None:
         scenario = dataclasses.replace(scenario, agent=agent)
-    if resume and info.pop("finished", None) and info.get("trained_timesteps", 0) >= agent.total_timesteps \
+    finished, record.finished = record.finished, None
+    if resume and finished and (record.trained_timesteps or 0) >= agent.total_timesteps \
             and (run_dir / rd.REPORT).is_file():
-        warnings.warn(f"{run_dir}: finished already ({info['trained_timesteps']} training steps; {rd.REPORT} "
+        warnings.warn(f"{run_dir}: finished already ({record.trained_timesteps} training steps; {rd.REPORT} "
                       "holds its result); nothing to do (a larger --timesteps trains on)", stacklevel=3)
         return None
     if not resume:
         write_atomic(run_dir / rd.SCENARIO, scenario_to_yaml(scenario))
-    info.update(seed=agent.seed, total_timesteps=agent.total_timesteps, algorithm=agent.algorithm)
-    write_json(run_dir / rd.RUN_INFO, info)
-    return Started(scenario, source, info)
+    record.seed, record.total_timesteps, record.algorithm = agent.seed, agent.total_timesteps, agent.algorithm
+    record.write(run_dir)
+    return Started(scenario, source, record)
 
 
-def isolation_stage(scenario: Scenario, run_dir: Path, info: dict) -> Scenario:
+def isolation_stage(scenario: Scenario, run_dir: Path, record: RunRecord) -> Scenario:
     """The scenario with plant.isolation "process" once a worker crash in this process put its "auto" plant in a
     worker process (loop.isolated.crash_isolation; the warning is said there, once); run.json records it (isolation,
     and isolation_reason: the crash's line), so later stages' processes, `--resume`, `evaluate` and `export` follow."""
@@ -203,8 +217,8 @@ def isolation_stage(scenario: Scenario, run_dir: Path, info: dict) -> Scenario:
     line = crash_isolation(scenario.tuning)
     if line is None:
         return scenario
-    info.update(isolation="process", isolation_reason=line)
-    write_json(run_dir / rd.RUN_INFO, info)
+    record.isolation, record.isolation_reason = "process", line
+    record.write(run_dir)
     return with_isolation(scenario, "process")
 
 
@@ -213,10 +227,9 @@ NO_BASELINE_ANCHORED = ("--no-baseline: the fixed PID is searched anyway, becaus
                         "absolute to skip the search")
 
 
-def fixed_pid_stage(scenario: Scenario, run_dir: Path, progress_bar: bool, baseline: bool) -> dict | None:
+def fixed_pid_stage(scenario: Scenario, run_dir: Path, progress_bar: bool, baseline: bool) -> DesignResult | None:
     """The fixed PID first: the baseline, and the anchor the agent's gains move around (tuning.design_rule's
-    DesignResult). fixed_pid.json's content ({"action", "gains", "cost", "evaluations", "structure", "design": the
-    design report}); read back when the run has one (resume); None when
+    DesignResult, written to fixed_pid.json and fixed_pid.csv); read back when the run has one (resume); None when
     `baseline` is off and the gain map is absolute (with the anchored map it is searched anyway, and a warning says so)."""
     from prlpid_fmi.deliver.evidence import max_sensitivity
     from prlpid_fmi.progress import Steps
@@ -225,7 +238,7 @@ def fixed_pid_stage(scenario: Scenario, run_dir: Path, progress_bar: bool, basel
     from prlpid_fmi.tuning.schedule.table import fixed_schedule
 
     if (run_dir / rd.FIXED_PID).is_file():
-        return json.loads((run_dir / rd.FIXED_PID).read_text())
+        return read_fixed_pid(run_dir)
     if not baseline:
         if scenario.tuning.gain_mapping != "anchored":
             return None
@@ -237,19 +250,15 @@ def fixed_pid_stage(scenario: Scenario, run_dir: Path, progress_bar: bool, basel
                                           max_sensitivity=max_sensitivity(scenario), baseline=b,
                                           deploy=scenario.deploy)
     search.close()
-    fixed = {"action": result.action.tolist(), "gains": result.gains.as_dict(), "cost": result.cost,
-             "evaluations": result.evaluations, "structure": result.structure_dict(),
-             "design": result.report.as_json() if result.report is not None else {}}
-    write_json(run_dir / rd.FIXED_PID, fixed)
-    write_schedule_csv(fixed_schedule(result.gains, with_structure(scenario, fixed).tuning), run_dir / rd.FIXED_PID_CSV)
-    return fixed
+    write_json(run_dir / rd.FIXED_PID, result.as_json())
+    write_schedule_csv(fixed_schedule(result.gains, with_structure(scenario, result).tuning), run_dir / rd.FIXED_PID_CSV)
+    return result
 
 
-def classical_stage(scenario: Scenario, run_dir: Path, fixed: dict, info: dict, progress_bar: bool):
+def classical_stage(scenario: Scenario, run_dir: Path, fixed: DesignResult, record: RunRecord, progress_bar: bool):
     """The classical gain schedule (tuning.schedule.classical) where deploy.classical_schedule asks for it (auto: a
     plant nonlinear over the setpoint range), written to classical_schedule.csv; run.json records why it was or
     was not built (resume: read back). None when not built or when it could not be (said in run.json)."""
-    from prlpid_fmi.loop.gains import gains_from_dict
     from prlpid_fmi.progress import Steps
     from prlpid_fmi.tuning.schedule.classical import classical_schedule, wanted
     from prlpid_fmi.tuning.schedule.csv_file import read_schedule_csv, write_schedule_csv
@@ -257,33 +266,33 @@ def classical_stage(scenario: Scenario, run_dir: Path, fixed: dict, info: dict, 
     path = run_dir / rd.CLASSICAL_SCHEDULE
     if path.is_file():
         return read_schedule_csv(path)
-    if "classical_schedule" in info:  # decided before (resume): not built
+    if record.classical_schedule is not None:  # decided before (resume): not built
         return None
-    build, variation = wanted(scenario.deploy.classical_schedule, scenario.tuning,
-                              gains_from_dict(fixed["gains"]).values())
-    record = {"built": build, "gain_variation": variation if variation == variation else None}
+    build, variation = wanted(scenario.deploy.classical_schedule, scenario.tuning, fixed.gains.values())
+    why = {"built": build, "gain_variation": variation if variation == variation else None}
     table = None
     if build and scenario.tuning.coupled:
-        record.update(built=False, why="the classical schedule is built for independent loops (controller.coupled)")
+        why.update(built=False, why="the classical schedule is built for independent loops (controller.coupled)")
         build = False
     if build:
         steps = Steps("classical gain schedule", enabled=progress_bar)
         try:
             table, details = classical_schedule(scenario, fixed, steps)
-            record.update(details)
+            why.update(details)
             write_schedule_csv(table, path)
             table = read_schedule_csv(path)  # the file is the table: training's anchor, resume and evaluate read it
         except PrlPidError as exc:
-            record.update(built=False, why=str(exc))
+            why.update(built=False, why=str(exc))
             table = None
         finally:
             steps.close()
-    info["classical_schedule"] = record
-    write_json(run_dir / rd.RUN_INFO, info)
+    record.classical_schedule = why
+    record.write(run_dir)
     return table
 
 
-def training_stage(scenario: Scenario, run_dir: Path, info: dict, resume: bool, anchor, progress_bar: bool) -> Scenario:
+def training_stage(scenario: Scenario, run_dir: Path, record: RunRecord, resume: bool, anchor, progress_bar: bool
+                   ) -> Scenario:
     """Train the agent around the anchor (resume: from the latest checkpoint) up to agent.total_timesteps;
     run.json records the steps trained. Returns the scenario as trained on (with a prior fallback, below).
 
@@ -301,25 +310,24 @@ def training_stage(scenario: Scenario, run_dir: Path, info: dict, resume: bool, 
     agent = scenario.agent
     resumed = resume
     while True:
-        resume_from, done = rd.latest_checkpoint(run_dir, info.get("trained_timesteps", 0)) if resumed else (None, 0)
+        resume_from, done = rd.latest_checkpoint(run_dir, record.trained_timesteps or 0) if resumed else (None, 0)
         remaining = max(agent.total_timesteps - done, 0)
         if remaining <= 0:
             return scenario
         faults = agent_module.FaultWatch()
         model = agent_module.train(scenario.tuning, agent, run_dir, progress_bar=progress_bar,
                                    resume_from=resume_from, total_timesteps=remaining, anchor=anchor, faults=faults)
-        info["trained_timesteps"] = int(model.num_timesteps)
+        record.trained_timesteps = int(model.num_timesteps)
         stopped = faults.stopped
         if stopped is None:
-            write_json(run_dir / rd.RUN_INFO, info)
+            record.write(run_dir)
             return scenario
         where = f"{faults.episodes} training episodes in a row ended at the same fault ({stopped.message})"
-        if stopped.instance == "prior" and scenario.tuning.forecast_horizon and "prior_fallback" not in info \
+        if stopped.instance == "prior" and scenario.tuning.forecast_horizon and record.prior_fallback is None \
                 and plant_alone_survives(scenario.tuning, stopped.time_s):
             fallback = prior_fallback_for(scenario)
-            info["prior_fallback"] = fallback
-            info["prior_fallback_reason"] = where
-            write_json(run_dir / rd.RUN_INFO, info)
+            record.prior_fallback, record.prior_fallback_reason = fallback, where
+            record.write(run_dir)
             warnings.warn(f"{where}: the forecast's prior (the FMU's second instance) crashes; the forecast now "
                           + ("rolls the plant's own instance ahead and back (the rollback prior)" if fallback == "rollback"
                              else "is off (strategies.forecast_horizon: 0)")
@@ -327,9 +335,8 @@ def training_stage(scenario: Scenario, run_dir: Path, info: dict, resume: bool, 
             scenario = with_prior_fallback(scenario, fallback)
             resumed = True
             continue
-        info["training_stopped"] = {"steps": int(model.num_timesteps), "episodes": faults.episodes,
-                                    "termination": stopped.as_dict()}
-        write_json(run_dir / rd.RUN_INFO, info)
+        record.training_stopped = TrainingStopped(int(model.num_timesteps), faults.episodes, stopped.as_dict())
+        record.write(run_dir)
         warnings.warn(f"training stopped early at step {int(model.num_timesteps)} of {agent.total_timesteps}: {where}; "
                       "nothing is learnt from such episodes; the run goes on with the policy trained so far",
                       stacklevel=2)
@@ -344,13 +351,13 @@ def schedule_stage(policy, scenario: Scenario, anchor, progress_bar: bool) -> Sc
 
     try:
         with stage("gain schedule (tables from the policy, rows checked against the Ms limit)", progress_bar):
-            table, note, chosen = deliverable_schedule(policy, scenario, scenario.agent.seed, anchor)
-        return ScheduleResult(table, note, chosen)
+            choice = deliverable_schedule(policy, scenario, scenario.agent.seed, anchor)
+        return ScheduleResult(choice.table, choice.note, choice)
     except PrlPidError as exc:
-        return ScheduleResult(None, f"No gain schedule: {exc}\n", {"schedule_error": str(exc)})
+        return ScheduleResult(None, f"No gain schedule: {exc}\n", error=str(exc))
 
 
-def evaluation_stage(run_dir: Path, scenario: Scenario, source: Path, policy, fixed: dict | None, anchor, table,
+def evaluation_stage(run_dir: Path, scenario: Scenario, source: Path, policy, fixed: DesignResult | None, anchor, table,
                      progress_bar: bool) -> Evaluation:
     """Policy, fixed PID and table on the evaluation: gains.csv, the plots, and the evaluation's metrics.json
     and report.md (kept if a later stage fails)."""
@@ -364,14 +371,13 @@ def evaluation_stage(run_dir: Path, scenario: Scenario, source: Path, policy, fi
     return ev
 
 
-def choice_stage(scenario: Scenario, table, fixed: dict, progress_bar: bool, classical=None) -> Choice:
+def choice_stage(scenario: Scenario, table, fixed: DesignResult, progress_bar: bool, classical=None) -> Choice:
     """The evidence for every plain PID (replays, Monte-Carlo set, held-out episodes, margins) and the decision."""
     from prlpid_fmi.deliver.evidence import assess
     from prlpid_fmi.progress import stage
 
     with stage("choice of the deployed controller (replays, Monte-Carlo set, margins)", progress_bar):
-        decision, sched_c, fixed_c, classical_c = assess(scenario, table, gains_from_dict(fixed["gains"]),
-                                                         classical=classical)
+        decision, sched_c, fixed_c, classical_c = assess(scenario, table, fixed.gains, classical=classical)
     return Choice(decision, sched_c, fixed_c, classical_c)
 
 
@@ -385,21 +391,21 @@ def refusals(choice: Choice, limit: float) -> dict:
     return out
 
 
-def training_note(info: dict) -> str:
+def training_note(record: RunRecord) -> str:
     """The report's lines on a training stopped early, or a prior replaced, for repeated FMU faults ("" if neither)."""
     note = ""
-    if "prior_fallback" in info:
-        note += (f"\nThe forecast's prior was replaced ({'the rollback prior' if info['prior_fallback'] == 'rollback' else 'no forecast'}): "
-                 f"{info.get('prior_fallback_reason', '')}.\n")
-    stopped = info.get("training_stopped")
+    if record.prior_fallback is not None:
+        note += (f"\nThe forecast's prior was replaced ({'the rollback prior' if record.prior_fallback == 'rollback' else 'no forecast'}): "
+                 f"{record.prior_fallback_reason or ''}.\n")
+    stopped = record.training_stopped
     if stopped:
-        note += (f"\n**Training stopped early** at step {stopped['steps']}: {stopped['episodes']} episodes in a row "
-                 f"ended at the same fault ({stopped['termination']['message']}); the policy is what was learnt "
+        note += (f"\n**Training stopped early** at step {stopped.steps}: {stopped.episodes} episodes in a row "
+                 f"ended at the same fault ({stopped.termination['message']}); the policy is what was learnt "
                  "until then.\n")
     return note
 
 
-def files_stage(run_dir: Path, started: Started, ev: Evaluation, fixed: dict | None, table: ScheduleResult,
+def files_stage(run_dir: Path, started: Started, ev: Evaluation, fixed: DesignResult | None, table: ScheduleResult,
                 choice: Choice | None, classical=None) -> None:
     """schedule.csv (the deployed controller), metrics.json and report.md built once from the stages' results,
     the learning curve, and run.json marked finished."""
@@ -410,7 +416,7 @@ def files_stage(run_dir: Path, started: Started, ev: Evaluation, fixed: dict | N
     from prlpid_fmi.tuning.schedule.csv_file import write_schedule_csv
     from prlpid_fmi.tuning.schedule.table import fixed_schedule
 
-    scenario, info = started.scenario, started.info
+    scenario, record = started.scenario, started.record
     metrics, opening, title = evaluation_metrics(ev, fixed), (), ""
     figures = None
     if fixed is not None:
@@ -419,19 +425,18 @@ def files_stage(run_dir: Path, started: Started, ev: Evaluation, fixed: dict | N
 
         with stage("figures", False):  # run.json stage_seconds: what the figures cost
             try:
-                figures = write_run_figures(run_dir, scenario, ev, choice, gains_from_dict(fixed["gains"]),
-                                            table.table, classical)
+                figures = write_run_figures(run_dir, scenario, ev, choice, fixed.gains, table.table, classical)
             except PrlPidError as exc:  # a replay the FMU failed: the run's results are written all the same
                 warnings.warn(f"{run_dir}: figures not drawn: {exc}", stacklevel=2)
     if choice is not None:
         deployed = {Deployed.SCHEDULE: table.table, Deployed.CLASSICAL: classical,
-                    Deployed.FIXED_PID: fixed_schedule(gains_from_dict(fixed["gains"]), scenario.tuning)
+                    Deployed.FIXED_PID: fixed_schedule(fixed.gains, scenario.tuning)
                     }.get(choice.decision.deploy)
         if deployed is not None:
             write_schedule_csv(deployed, run_dir / rd.SCHEDULE)
         refused = refusals(choice, max_sensitivity(scenario))
         if Deployed.FIXED_PID in refused:  # the tables of refused candidates say so in their header
-            write_schedule_csv(fixed_schedule(gains_from_dict(fixed["gains"]), scenario.tuning),
+            write_schedule_csv(fixed_schedule(fixed.gains, scenario.tuning),
                                run_dir / rd.FIXED_PID_CSV, not_deployable=refused[Deployed.FIXED_PID])
         if Deployed.CLASSICAL in refused and classical is not None:
             write_schedule_csv(classical, run_dir / rd.CLASSICAL_SCHEDULE, not_deployable=refused[Deployed.CLASSICAL])
@@ -446,13 +451,13 @@ def files_stage(run_dir: Path, started: Started, ev: Evaluation, fixed: dict | N
         metrics["steady_state_extrema"] = extrema
         findings = tuple(extrema)
         if choice.decision.deploy == Deployed.NONE:
-            findings += tuple(range_notes(gains_from_dict(fixed["gains"]), scenario.tuning.loops,
+            findings += tuple(range_notes(fixed.gains, scenario.tuning.loops,
                                           scenario.baseline.widen_ranges))
         units = loop_units(scenario.tuning)
         title = headline(choice.decision)
         opening = (verdict(choice.decision, choice.schedule, choice.fixed, max_sensitivity(scenario),
                            scenario.tuning.gain_mapping, choice.classical, findings).rstrip(), "",
-                   *((note, "") if (note := classical_note(info.get("classical_schedule"))) else ()),
+                   *((note, "") if (note := classical_note(record.classical_schedule)) else ()),
                    candidates_table(choice.schedule, choice.fixed, units, classical=choice.classical),
                    *((figure(figures.load_steps, "load steps at the plant input, the design's load experiment (the "
                                                  "load IAE row)"),) if figures else ()),
@@ -473,12 +478,12 @@ def files_stage(run_dir: Path, started: Started, ev: Evaluation, fixed: dict | N
                                headline=title)
     if table.note:
         report += "\n" + table.note
-    report += training_note(info)
+    report += training_note(record)
     report += "\n" + deployable_files(run_dir)
     write_atomic(run_dir / rd.REPORT, report)
     plots.plot_learning_curve(run_dir / rd.MONITOR, run_dir / rd.LEARNING_CURVE_PLOT)
     from prlpid_fmi.progress import stage_seconds
 
-    info["stage_seconds"] = stage_seconds()  # seconds per stage this process ran (progress.stage_seconds)
-    info["finished"] = rd.now()
-    write_json(run_dir / rd.RUN_INFO, info)
+    record.stage_seconds = stage_seconds()  # seconds per stage this process ran (progress.stage_seconds)
+    record.finished = rd.now()
+    record.write(run_dir)

@@ -31,6 +31,7 @@ from typing import Callable, Iterator, Optional
 
 from prlpid_fmi import rundir as rd
 from prlpid_fmi.errors import ArgumentError, Interrupted, PrlPidError
+from prlpid_fmi.run.record import RunRecord
 from prlpid_fmi.rundir import write_atomic, write_json
 from prlpid_fmi.sweep.spec import Sweep
 
@@ -78,13 +79,12 @@ def trial_status(run_dir: str | Path) -> str:
     d = Path(run_dir)
     if not d.is_dir() or not any(d.iterdir()):
         return NEW
-    info = d / rd.RUN_INFO
-    if not info.is_file():
+    if not (d / rd.RUN_INFO).is_file():
         return STALE
-    try:
-        return FINISHED if "finished" in json.loads(info.read_text()) else UNFINISHED
-    except (json.JSONDecodeError, UnicodeDecodeError):
+    record = RunRecord.read(d)
+    if record is None:
         return STALE
+    return FINISHED if record.finished else UNFINISHED
 
 
 def _first_difference(a, b, path: str = "") -> Optional[tuple[str, object, object]]:

@@ -34,6 +34,7 @@ import numpy as np
 from prlpid_fmi import rundir as rd
 from prlpid_fmi.deliver.rule import Deployed
 from prlpid_fmi.metrics import overall_metric
+from prlpid_fmi.run.record import RunRecord
 from prlpid_fmi.rundir import write_atomic
 
 CONTROLLERS = {"policy": "adaptive policy", "schedule": "replayed schedule", "fixed_pid": "fixed PID",
@@ -323,20 +324,20 @@ def write_summary(sweep, out: Path, trials, failed: list[str] = ()) -> list[Path
     rows, finished, deployed, wall = [], {}, {}, {}
     for t in trials:
         d = Path(t.run_dir)
+        record = RunRecord.read(d)
         try:
-            info = json.loads((d / rd.RUN_INFO).read_text())
             metrics = json.loads((d / rd.METRICS).read_text())
         except (OSError, json.JSONDecodeError):
             continue
-        if "finished" not in info:
+        if record is None or not record.finished:
             continue
         finished.setdefault(t.variant, []).append(t.seed)
         deployed.setdefault(t.variant, []).append(metrics.get("deployed") or "none")
         rows += trial_rows(t.variant, t.seed, metrics)
-        if "started" in info and "resumed" not in info:
+        if record.started and not record.resumed:
             from datetime import datetime
 
-            seconds = (datetime.fromisoformat(info["finished"]) - datetime.fromisoformat(info["started"])).total_seconds()
+            seconds = (datetime.fromisoformat(record.finished) - datetime.fromisoformat(record.started)).total_seconds()
             wall.setdefault(t.variant, []).append(seconds)
     stats = aggregate(rows, [v.name for v in sweep.variants])
     files = [write_atomic(out / "trials.csv", _csv(rows, ("variant", "seed", "controller", "interval", "metric", "value",

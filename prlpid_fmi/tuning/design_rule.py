@@ -39,7 +39,7 @@ import numpy as np
 from prlpid_fmi.config import BaselineConfig, DeployConfig, TuningConfig
 from prlpid_fmi.loop.core import pid_structure
 from prlpid_fmi.loop.evaluation import gains_rollout
-from prlpid_fmi.loop.gains import Gains, gains_from_values
+from prlpid_fmi.loop.gains import Gains, gains_from_dict, gains_from_values
 from prlpid_fmi.metrics import compute_metrics
 from prlpid_fmi.progress import QUIET, Steps
 from prlpid_fmi.robustness.margins import margins_of, setpoint_range_points
@@ -115,7 +115,7 @@ class DesignReport:
     bound: str
     relaxed: tuple[Relaxation, ...]
     requirements: tuple[Requirement, ...]
-    following: Following
+    following: Following | None  # None only in a fixed_pid.json written before the rule by priority
     details: dict
 
     def as_json(self) -> dict:
@@ -123,7 +123,19 @@ class DesignReport:
         return {**self.details, "bound": self.bound,
                 "relaxed": [dataclasses.asdict(r) for r in self.relaxed],
                 "requirements": [dataclasses.asdict(r) for r in self.requirements],
-                "following": dataclasses.asdict(self.following)}
+                "following": dataclasses.asdict(self.following) if self.following is not None else None}
+
+    @classmethod
+    def from_json(cls, design: dict) -> "DesignReport":
+        """The report of fixed_pid.json's "design" (as_json's form; a file written before the rule has only the
+        search's record: no bound, relaxations, requirements or following)."""
+        rule = ("bound", "relaxed", "requirements", "following")
+        following = design.get("following")
+        return cls(bound=design.get("bound") or "",
+                   relaxed=tuple(Relaxation(**r) for r in design.get("relaxed") or ()),
+                   requirements=tuple(Requirement(**r) for r in design.get("requirements") or ()),
+                   following=Following(**following) if following else None,
+                   details={k: v for k, v in design.items() if k not in rule})
 
 
 @dataclass(frozen=True)
@@ -142,6 +154,24 @@ class DesignResult:
         """{"setpoint_weight", "derivative_weight", "measurement_filter_s"}: lists per loop (fixed_pid.json)."""
         b, c, tf = self.structure
         return {"setpoint_weight": list(b), "derivative_weight": list(c), "measurement_filter_s": list(tf)}
+
+    def as_json(self) -> dict:
+        """fixed_pid.json: {"action", "gains", "cost", "evaluations", "structure", "design": the design report}."""
+        return {"action": np.asarray(self.action).tolist(), "gains": self.gains.as_dict(), "cost": self.cost,
+                "evaluations": self.evaluations, "structure": self.structure_dict() if self.structure else None,
+                "design": self.report.as_json() if self.report is not None else {}}
+
+    @classmethod
+    def from_json(cls, data: dict) -> "DesignResult":
+        """The design of a fixed_pid.json (as_json's form). A file without "structure" (written before the 2-DOF law)
+        gives structure None: the controller's settings apply."""
+        s = data.get("structure")
+        structure = (tuple(map(float, s["setpoint_weight"])), tuple(map(float, s["derivative_weight"])),
+                     tuple(map(float, s["measurement_filter_s"]))) if s else None
+        design = data.get("design") or {}
+        return cls(action=np.asarray(data.get("action", ()), float), gains=gains_from_dict(data["gains"]),
+                   cost=float(data.get("cost", math.nan)), evaluations=int(data.get("evaluations", 0)),
+                   structure=structure, report=DesignReport.from_json(design) if design else None)
 
     def gains_values(self) -> tuple:
         """(Kp, Ti, Td, coupling) lists, what LoopCore.step takes."""

@@ -30,12 +30,12 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from prlpid_fmi.config import TuningConfig
 from prlpid_fmi.errors import PrlPidError
-from prlpid_fmi.loop.gains import gains_from_dict
 from prlpid_fmi.progress import QUIET, Steps
 from prlpid_fmi.robustness.margins import margins_of, operating_point, setpoint_range_points
 from prlpid_fmi.robustness.status import Robustness, meets_limit, status
@@ -44,6 +44,9 @@ from prlpid_fmi.tuning.margin_experiments import measure_ahead
 from prlpid_fmi.tuning.search_pool import search_workers
 from prlpid_fmi.tuning.schedule.extraction import operating_setpoints
 from prlpid_fmi.tuning.schedule.table import GainSchedule, schedule_from_rows
+
+if TYPE_CHECKING:
+    from prlpid_fmi.tuning.design_rule import DesignResult
 
 CLASSICAL_POINTS = 5  # breakpoints of the classical schedule before refinement
 NONLINEAR_GAIN_RATIO = 1.25  # |P| at the ends of the range vs the middle, beyond which "auto" builds the schedule
@@ -183,7 +186,7 @@ def robust_between(schedule: GainSchedule, config, limit: float, workers: int | 
     return dataclasses.replace(schedule, Kp=Kp, Ti=Ti, Td=Td), notes
 
 
-def classical_schedule(scenario, fixed: dict, progress: Steps = QUIET,
+def classical_schedule(scenario, fixed: DesignResult, progress: Steps = QUIET,
                        points: int = CLASSICAL_POINTS) -> tuple[GainSchedule, dict]:
     """The classical gain schedule of the module docstring over loop 0's setpoint, and what run.json records of it
     ({"rows": local_design infos, "refined": halfway points added, "failing_between": those still failing}).
@@ -194,7 +197,7 @@ def classical_schedule(scenario, fixed: dict, progress: Steps = QUIET,
     if config.coupled:
         raise ValueError("the classical schedule is built for independent loops (controller.coupled is set)")
     limit = float(scenario.deploy.max_sensitivity)
-    start = gains_from_dict(fixed["gains"]).values()
+    start = fixed.gains.values()
     seed = scenario.agent.seed
     infos, rows = [], []
     for s in operating_setpoints(config.loops[0].setpoint_range, points):
