@@ -19,19 +19,16 @@ sign of the error carries information (docs/results.md "Error-scheduled gains").
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import sys
 import time
 import warnings
 from pathlib import Path
 
-from prlpid_fmi import rundir as rd
 from prlpid_fmi.loop.gains import gains_from_values
 from prlpid_fmi.deliver.evidence import assess_fixed, assess_schedule, max_sensitivity
 from prlpid_fmi.deliver.candidates import robust_schedule
-from prlpid_fmi.run.trained import _anchor, _load_run, _policy
-from prlpid_fmi.loop.gains import gains_from_dict
+from prlpid_fmi.run.state import load_policy, load_trained, read_fixed_pid, run_anchor
 from prlpid_fmi.tuning.schedule.table import schedule_from_rows
 from prlpid_fmi.tuning.schedule.trajectories import TRAJECTORY_EPISODES, bin_rows, trajectory_samples
 from prlpid_fmi.tuning.schedule.extraction import extract
@@ -66,14 +63,14 @@ def main(argv=None) -> int:
           "training-episode ISE | wall s |")
     print("|---|---|---|---|---|---|---|---|---|")
     for run in args.runs:
-        scenario = _load_run(run)
-        fixed_json = json.loads((run / rd.FIXED_PID).read_text())
-        policy = _policy(run, scenario.agent.algorithm)
-        anchor, seed = _anchor(scenario, fixed_json), scenario.agent.seed
+        scenario = load_trained(run)
+        design = read_fixed_pid(run)
+        policy = load_policy(run, scenario.agent.algorithm)
+        anchor, seed = run_anchor(run, scenario, design), scenario.agent.seed
         points = args.points or scenario.deploy.schedule_points
         limit = max_sensitivity(scenario)
         t0 = time.time()
-        fixed = assess_fixed(scenario, gains_from_dict(fixed_json["gains"]))
+        fixed = assess_fixed(scenario, design.gains)
         print(_row(run, "fixed PID", fixed, fixed, None, time.time() - t0))
         scores = {}
         for kind in ("setpoint", "error") + (("abs(error)",) if args.abs_error else ()):

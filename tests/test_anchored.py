@@ -135,7 +135,7 @@ def test_tiny_budget_deploys_the_fixed_pid_and_says_so(tmp_path, capsys):
     # the held-out check of the rule: 8 training-distribution episodes at seeds 30000.. (agent seed 0), the same
     # for the schedule (the fixed PID's gains) and, recomputed here as constant gains, for the fixed PID
     from prlpid_fmi.loop.evaluation import evaluate_gains
-    from prlpid_fmi.run.trained import load_trained
+    from prlpid_fmi.run.state import load_trained
 
     trained = load_trained(run)  # scenario.yaml with the tuned b, c, Tf of fixed_pid.json
     fn = constant_gains(fixed["Kp"], fixed["Ti"], fixed["Td"], None)

@@ -12,7 +12,7 @@ from prlpid_fmi.deliver.rule import Deployed
 from prlpid_fmi.report.markdown import deployed_section, loop_units, render_report
 from prlpid_fmi.report.verdict import acceptance_section
 from prlpid_fmi.run.gains_csv import trajectory_csv
-from prlpid_fmi.run.trained import (deployed_controller, load_policy, load_trained, on_other_evaluation, read_fixed_pid,
+from prlpid_fmi.run.state import (deployed_controller, load_policy, load_trained, on_other_evaluation, read_fixed_pid,
                                     run_anchor)
 from prlpid_fmi.rundir import write_atomic, write_json
 from prlpid_fmi.scenario.load import Scenario, scenario_to_yaml

@@ -8,7 +8,7 @@ from prlpid_fmi import rundir as rd
 from prlpid_fmi.errors import ArgumentError, RunError
 from prlpid_fmi.export.controller import controller_name, from_schedule
 from prlpid_fmi.export.formats import CODE_FORMATS, output_paths, render
-from prlpid_fmi.run.trained import load_policy, load_trained, on_other_evaluation, read_fixed_pid, run_anchor
+from prlpid_fmi.run.state import load_policy, load_trained, on_other_evaluation, read_fixed_pid, run_anchor
 from prlpid_fmi.rundir import write_atomic
 from prlpid_fmi.scenario.load import Scenario
 

@@ -1,7 +1,7 @@
 """The run's record (run.json) as a typed object: what `tune` ran, how far it got and what happened on the way.
 
 `RunRecord.write` is the only writer of run.json and `RunRecord.read` its only reader; the stages of run.tune set
-its fields, and run.trained, evaluate and the sweep read them. A key this version does not know (a newer run.json)
+its fields, and run.state, evaluate and the sweep read them. A key this version does not know (a newer run.json)
 is kept in `extra` and written back unchanged.
 """
 from __future__ import annotations

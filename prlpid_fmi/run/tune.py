@@ -42,7 +42,7 @@ from prlpid_fmi.run.evaluate import (
     write_evaluation_files,
 )
 from prlpid_fmi.run.record import RunRecord, TrainingStopped
-from prlpid_fmi.run.trained import (anchor_name, load_policy, prior_fallback_for, read_fixed_pid, training_anchor,
+from prlpid_fmi.run.state import (anchor_name, load_policy, prior_fallback_for, read_fixed_pid, training_anchor,
                                    with_isolation, with_prior_fallback, with_structure)
 from prlpid_fmi.rundir import write_atomic, write_json
 from prlpid_fmi.scenario.load import Scenario, load_scenario, scenario_to_yaml
@@ -298,7 +298,7 @@ def training_stage(scenario: Scenario, run_dir: Path, record: RunRecord, resume:
 
     Episodes that keep ending at the same FMU fault (tuning.agent.FaultWatch) stop the training: when the forecast's
     prior (the FMU's second instance) was the instance in the crashing call, it is replaced once (the plant's own
-    instance rolled back, or no forecast: run.trained.prior_fallback_for; one warning, run.json "prior_fallback")
+    instance rolled back, or no forecast: run.state.prior_fallback_for; one warning, run.json "prior_fallback")
     and training goes on from the checkpoint; otherwise training ends there, said in one warning, run.json
     "training_stopped" and the report, and the run goes on with the policy learnt so far. The prior is blamed when
     the worker's crumb names it in the crashing call and the plant alone passes that time

@@ -190,7 +190,7 @@ def classical_schedule(scenario, fixed: DesignResult, progress: Steps = QUIET,
                        points: int = CLASSICAL_POINTS) -> tuple[GainSchedule, dict]:
     """The classical gain schedule of the module docstring over loop 0's setpoint, and what run.json records of it
     ({"rows": local_design infos, "refined": halfway points added, "failing_between": those still failing}).
-    scenario.tuning must carry the fixed PID's structure (run.trained.with_structure)."""
+    scenario.tuning must carry the fixed PID's structure (run.state.with_structure)."""
     from prlpid_fmi.fmu.resolve import loop_units
 
     config = dataclasses.replace(scenario.tuning, forecast_horizon=0)

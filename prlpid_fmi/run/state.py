@@ -1,4 +1,7 @@
-"""A finished run directory read back: its scenario, trained policy, fixed PID and deployed controller."""
+"""What a run has settled, for its next stage and for later commands: the scenario as the run runs it (plant
+isolation, prior fallback, the fixed PID's structure), the fixed PID, the anchor trained around, the policy and the
+deployed controller, set by `tune` as it goes and read back from a run directory by `--resume`, `evaluate` and
+`export`."""
 from __future__ import annotations
 
 import dataclasses
