@@ -272,7 +272,13 @@ def design_section(fixed: DesignResult, loop_names) -> str:
                      f"for an overshoot of {number(traded['Overshoot'], 3)} %.")
     followed = design.get("followed_setpoints")
     replaced = bool(followed and followed["source"])
-    if traded and not traded["feasible"]:  # tuning.fixed_pid: the load optimum stays, with the b of least overshoot
+    if traded and traded.get("nearest_load_tolerance"):
+        lines.append("No setpoint weight kept the overshoot within the limit with the load-optimal gains, and no gains "
+                     "within the load tolerance (baseline.load_tolerance) did: the gains nearest it that meet the "
+                     f"overshoot limit are kept, load IAE {number(traded['load_cost'] / design['load_optimum'], 3)}x "
+                     f"the optimum, overshoot {number(traded['Overshoot'], 3)} % (the overshoot limit ranks above the "
+                     "load tolerance).")
+    elif traded and not traded["feasible"]:  # the load optimum stays, with the b of least overshoot
         best = (f"its best: load IAE {number(traded['load_cost'] / design['load_optimum'], 3)}x the optimum, overshoot "
                 f"{number(traded['Overshoot'], 3)} %" if math.isfinite(traded["Overshoot"]) else
                 "the setpoint episodes of its best candidate diverged")

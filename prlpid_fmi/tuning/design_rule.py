@@ -9,7 +9,8 @@ baseline.objective "load" (the default) keeps, in this order:
    a step that settles only after setpoint_hold_steps is *slow*, not unsettled;
 2. Ms <= deploy.max_sensitivity at every operating point and parameter draw (the load search's Kp interval, then
    the check on the FMU, tuning.fixed_pid.detune_over);
-3. overshoot <= deploy.max_overshoot (the setpoint weight b, then, where no b meets it, gains traded for it);
+3. overshoot <= deploy.max_overshoot (the setpoint weight b, then, where no b meets it, gains traded for it within
+   the load tolerance, or where none is within it, the gains nearest the tolerance that meet the limit);
 4. load IAE <= baseline.load_tolerance x the load optimum (tuning.load_experiment; tuning.load_design's search);
 5. among those, the least setpoint ISE (tuning.load_design.SetpointDesign);
 6. std(u) <= deploy.max_noise_gain and std(u_k - u_(k-1)) <= deploy.max_noise_increment from the measurement
@@ -310,18 +311,22 @@ class Designer:
                 try:
                     second = trade.search(np.append(vector, 2.0 * weight - 1.0), seed, maxiter, popsize,
                                           progress=progress)
-                    feasible = bool(np.max(trade.constraint_values(second.x)) <= 0)
+                    values = trade.constraint_values(second.x)
+                    feasible = bool(np.max(values) <= 0)
+                    # the load tolerance (requirement 4) missed, every limit above it met: the gains nearest the
+                    # tolerance that meet the overshoot limit are kept (the search ranks by violation)
+                    nearest = not feasible and bool(np.max(np.delete(values, -2)) <= 0)
                     load, ise, overshoot = trade.evaluate(second.x)
                     traded = {"load_cost": load, "ISE": ise, "Overshoot": overshoot, "feasible": feasible,
-                              "evaluations": int(second.nfev)}
+                              "nearest_load_tolerance": nearest, "evaluations": int(second.nfev)}
                     self.evaluations += int(second.nfev)
-                    if feasible:  # else the load optimum stays, with the b of least overshoot
+                    if feasible or nearest:  # else the load optimum stays, with the b of least overshoot
                         vector = np.asarray(second.x)
                         gains, tf = design.gains(vector[:-1]), design.filters(vector[:-1])
                         b = [trade.weight(vector)] * config.n_loops
                 finally:
                     trade.close()
-            if traded is not None and not traded["feasible"]:
+            if traded is not None and not traded["feasible"] and not traded["nearest_load_tolerance"]:
                 followed, found = follow_setpoints(config, design, self.first, best_load, deploy, seeds, seed,
                                                    maxiter, popsize, progress,
                                                    diverged=not follows_setpoints(choices, traded))
