@@ -97,6 +97,25 @@ def test_the_verdict_gives_the_overshoot_itself_when_the_fixed_pid_has_none():
     assert "peak deviation" not in text
 
 
+def test_a_schedule_above_the_users_overshoot_limit_does_not_replace_a_fixed_pid_within_it():
+    """deploy.max_overshoot 5 %: a schedule at 6.5 % (within the acceptance floor of 25 %) with 2 % less ISE is not
+    deployed over a fixed PID at 4.5 %; where both are above the user's limit, ISE decides as before."""
+    from prlpid_fmi.deliver.acceptance import Acceptance
+
+    def checked(c, overshoot):
+        c.acceptance = Acceptance(overshoot_pct=overshoot, user_overshoot_pct=5.0)
+        return c
+
+    fixed = checked(cand("fixed PID", 1.0), 4.5)
+    kept = choose(checked(cand("gain schedule", 0.98), 6.5), fixed, 2.0)
+    assert kept.deploy == "fixed PID"
+    assert ("its overshoot 6.5 % is above deploy.max_overshoot (5 %) where the fixed PID's 4.5 % is within it"
+            in kept.reasons[0])
+    assert choose(checked(cand("gain schedule", 0.98), 5.0), fixed, 2.0).deploy == "gain schedule"  # at the limit
+    both = choose(checked(cand("gain schedule", 0.98), 8.0), checked(cand("fixed PID", 1.0), 9.0), 2.0)
+    assert both.deploy == "gain schedule"
+
+
 def test_a_win_on_the_evaluation_that_does_not_carry_over_to_held_out_episodes_is_refused():
     """Held-out training-distribution episodes: the schedule must be no worse there (NaN = not measured: no check)."""
     def held_out(c, ise):

@@ -15,8 +15,9 @@ Rule (one place; explained in docs/architecture.md "Deliverable"):
   is no worse than the fixed PID's (a win on one evaluation schedule must carry over to setpoints and
   disturbances it was not measured on), nor is its total variation of u there above TOTAL_VARIATION_LIMIT times
   the fixed PID's, nor does it leave a setpoint step unsettled in more of those episodes, and its load IAE (load steps at the plant input over the setpoint
-  range) is at most LOAD_TOLERANCE times the fixed PID's (setpoint ISE alone does not decide); otherwise the fixed PID when it is eligible; otherwise nothing
-  is deployable.
+  range) is at most LOAD_TOLERANCE times the fixed PID's (setpoint ISE alone does not decide), and its overshoot
+  (the acceptance check's) is within deploy.max_overshoot wherever the fixed PID's is; otherwise the fixed PID when it
+  is eligible; otherwise nothing is deployable.
 - With a classical gain schedule (tuning.schedule.classical, on nonlinear plants) there are three candidates:
   the classical schedule must first win over the fixed PID by the rule above (`choose_among`); the winner is
   the incumbent the adaptive schedule must then beat by the same rule. So the adaptive policy is deployed only
@@ -203,6 +204,12 @@ def choose(schedule: Candidate | None, fixed: Candidate, max_sensitivity: float,
             if not (math.isnan(v_s) or math.isnan(v_f) or math.isinf(v_s)) and v_s > TOTAL_VARIATION_LIMIT * v_f:
                 problems.append(f"on held-out episodes of the training distribution its control signal varies "
                                 f"{v_s / v_f:.1f}x as much as the {against}'s (limit {TOTAL_VARIATION_LIMIT}x)")
+            a_s, a_f = schedule.acceptance, fixed.acceptance
+            if a_s is not None and a_f is not None and a_s.above_user_overshoot > 0 \
+                    and a_f.above_user_overshoot == 0 and math.isfinite(a_f.overshoot_pct):
+                problems.append(f"its overshoot {a_s.overshoot_pct:.3g} % is above deploy.max_overshoot "
+                                f"({a_s.user_overshoot_pct:g} %) where the {against}'s {a_f.overshoot_pct:.3g} % is "
+                                "within it: the user's limit is not traded for ISE")
             n_s, n_f = schedule.holdout_unsettled, fixed.holdout_unsettled
             if n_s is not None and n_f is not None and n_s > n_f:
                 problems.append(f"on held-out episodes of the training distribution it leaves a setpoint step "
