@@ -300,9 +300,10 @@ def _long_hold(ep: Episode, unsettled: list[dict], replay: Replay, t: _Tally, in
         times = [p["SettlingTime"] if _is_step(p) else p["RecoveryTime"] for p in parts]
         if all(math.isfinite(x) for x in times):
             hold = (seg["end_step"] - seg["start_step"]) * ep.config.sample_time_s
-            settles = "it and its load step settle" if len(parts) > 1 else "settles"
-            t.slow.append(f"{where}: {settles} within a {LONG_HOLD}x longer hold "
-                          f"({times[0]:.4g} s after {'the step' if step else 'it starts'}; its hold is {hold:.4g} s)")
+            detail = f"{times[0]:.4g} s after {'the step' if step else 'it starts'}"
+            if len(parts) > 1:  # the hold's random load step too: what did not settle may be its recovery
+                detail += f", the load step in its hold recovered {max(times[1:]):.4g} s after the load"
+            t.slow.append(f"{where}: settles within a {LONG_HOLD}x longer hold ({detail}; its hold is {hold:.4g} s)")
             continue
         twin = next(p for p, x in zip(parts, times) if not math.isfinite(x))
         limit = _at_limit(traj, twin, i, config)
