@@ -141,12 +141,17 @@ def _init(args: argparse.Namespace) -> int:
 def _probe(args: argparse.Namespace) -> int:
     from pathlib import Path
 
+    from prlpid_fmi.fmu.worker import crash_seen
     from prlpid_fmi.probe.isolated import probe_isolated
     from prlpid_fmi.probe.step_test import format_probe, plot_probe
 
     result = probe_isolated(args.fmu, args.step_timeout, output=args.output, inputs=args.input or None,
                             start_values=_start_values(args.set))
     print(format_probe(result))
+    crash = crash_seen([args.fmu])
+    if crash:
+        print(f"{crash}: probed again with each run in a worker process of its own; a scenario for this FMU "
+              "needs plant.isolation: process (init writes it)")
     plot = Path(args.plot) if args.plot else Path(f"{Path(args.fmu).stem}-probe.png")
     plot_probe(result, plot)
     _say(args, f"plot: {plot}")

@@ -271,6 +271,10 @@ ARCHIVES = [
     ("no-binary-but-sources", lambda t: _rezip(t, _drop("binaries/")), "fmpy compile plant.fmu"),
     ("no-binary-no-sources", lambda t: _rezip(t, lambda n, d: [] if n.split("/")[0] in ("binaries", "sources")
                                               else [(n, d)]), "binaries for: no platform"),
+    ("empty-platform-folder", lambda t: _rezip(t, lambda n, d: (
+        [] if n.split("/")[0] in ("binaries", "sources") else [(n, d)]) + (
+        [("binaries/linux64/", b""), ("binaries/win64/FirstOrderUnstable.dll", b"MZ")] if n == MD else [])),
+     "binaries for: win64)"),  # an empty binaries/linux64/ folder is no binary for linux64 (SimulationX 3.7)
     ("corrupt-member", _corrupt, "corrupt archive member 'binaries/linux64/FirstOrderUnstable.so'"),
     ("truncated-archive", _truncated, "not a ZIP archive"),
     ("extracted-folder", lambda t: (t / "plant.fmu").mkdir(), "a folder, not an FMU file"),

@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -283,6 +284,36 @@ def test_a_segfault_that_kills_the_resumed_run_too_is_one_line_and_exit_2(faulty
     assert "FirstOrderUnstable.fmu crashed (SIGSEGV) in fmi2DoStep from t = 3 s" in lines[0]  # the switch's time
     assert "the tool's process" in lines[0] and f"the run directory {run} is kept" in lines[0]
     assert (run / "scenario.yaml").is_file() and (run / ".active").is_file()
+
+
+def test_init_and_probe_survive_a_crash_and_the_scenario_isolates_the_plant(faulty, tmp_path):
+    """init as written on an FMU that segfaults in doStep from 3 s: its worker crashes, the probe runs again with each
+    run in a worker of its own, cut at the crash; the scenario it proposes has plant.isolation: process with the crash
+    in its comment, loads, and its sample time follows the growth rate λ = a of dx/dt = a x + b u (here a = 2:
+    1/(10 λ) = 0.05 s, snapped to 1-2-5). A crash too early to measure anything is exit 2 and one line naming it."""
+    proc = cli("init", str(faulty["crash"]), "--set", "a=2")
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "Traceback" not in proc.stderr
+    path = tmp_path / "init.yaml"
+    path.write_text(proc.stdout)
+    plant = yaml.safe_load(proc.stdout)["plant"]
+    assert plant["isolation"] == "process" and plant["parameters"] == {"a": 2.0}
+    line = next(line for line in proc.stdout.splitlines() if line.strip().startswith("isolation:"))
+    assert "# FirstOrderUnstable.fmu crashed (SIGSEGV) in fmi2DoStep from t = 3 s" in line
+    assert plant["sample_time"] == pytest.approx(0.05)
+    scenario = load_scenario(path)
+    assert scenario.tuning.isolation == "process"
+    probe = cli("probe", str(faulty["crash"]), "--set", "a=2", "--plot", str(tmp_path / "p.png"))
+    assert probe.returncode == 0, probe.stderr[-3000:]
+    rate = float(re.search(r"λ = ([0-9.]+) 1/s", probe.stdout).group(1))
+    assert rate == pytest.approx(2.0, rel=0.02)
+    assert any("crashed (SIGSEGV)" in line and "plant.isolation: process" in line for line in probe.stdout.splitlines())
+    early = build_fmu("FirstOrderUnstable", out_dir=tmp_path / "early", defines={"PRLPID_FAULT_CRASH_AFTER_S": 0.0})
+    failed = cli("init", str(early))
+    assert failed.returncode == 2 and failed.stdout == "", failed.stderr[-3000:]
+    lines = error_lines(failed.stderr)
+    assert len(lines) == 1 and "Traceback" not in failed.stderr, failed.stderr[-3000:]
+    assert "crashed (SIGSEGV) in fmi2DoStep from t = 0 s" in lines[0]
 
 
 def _monitor_rows(run: Path) -> list[str]:

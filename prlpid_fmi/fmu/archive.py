@@ -88,7 +88,8 @@ def missing_binary_hint(fmu_name: str, names: list[str], platform: str, identifi
                 f"modelIdentifier {identifier!r}: rename the model's library to {identifier}{extension}")
     if any(n.startswith("sources/") and n.endswith((".c", ".cpp")) for n in names):
         return f"it has C sources in sources/: compile them with `fmpy compile {fmu_name}`"
-    present = sorted({n.split("/")[1] for n in names if n.startswith("binaries/") and n.count("/") >= 2})
+    present = sorted({n.split("/")[1] for n in names  # files, not folder entries: an empty folder has no binary
+                      if n.startswith("binaries/") and n.count("/") >= 2 and not n.endswith("/")})
     return f"binaries for: {', '.join(present) or 'no platform'}"
 
 

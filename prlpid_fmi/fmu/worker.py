@@ -163,6 +163,10 @@ class WorkerCrashed(PlantError):
     """A worker process running an FMU died (the FMU crashed it)."""
 
 
+class WorkerHung(WorkerCrashed):
+    """A worker process running an FMU was ended by its step watchdog (an FMI call that did not return)."""
+
+
 # -- crashes seen in this process's workers (loop.isolated.runs_isolated reads them) -----------------
 _crashes: dict[str, str] = {}   # resolved FMU path -> the line of the first worker it crashed or hung
 
@@ -210,7 +214,8 @@ def call_in_worker(fn, *args, fmus=(), what: str = "the call", step_timeout_s: f
     fmus: FMU paths fn opens (extracted here first, once). step_timeout_s: the step watchdog's timeout in the
     worker [s] (None: the measured default); check_outputs: a non-finite or denormal output of any plant is a
     PlantError (FmuPlant.check_outputs). Raises WorkerCrashed naming the FMU, the FMI call, the time and how the
-    worker ended when it dies (a crash) or is ended by its watchdog (a call that did not return) before answering.
+    worker ended when it dies (a crash) before answering, WorkerHung (a WorkerCrashed) when its watchdog ended it
+    (a call that did not return).
     """
     ctx = mp_context()
     parent, child = ctx.Pipe()
@@ -233,7 +238,7 @@ def call_in_worker(fn, *args, fmus=(), what: str = "the call", step_timeout_s: f
         remove_crumb_file(crumb)
     if tag == "hang":
         note_crash(fmus, f"{payload}, in a worker process during {what}")
-        raise WorkerCrashed(f"{payload}, in a worker process during {what}")
+        raise WorkerHung(f"{payload}, in a worker process during {what}")
     if tag == "error":
         raise payload
     return payload

@@ -34,6 +34,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping, Optional, Sequence
@@ -275,12 +277,32 @@ class _Runs:
         return self._cache[key]
 
     def _simulate(self, u, dt, samples) -> np.ndarray:
-        from prlpid_fmi.fmu import FmuPlant
-        from prlpid_fmi.fmu.plant import StepRejected
+        from prlpid_fmi.fmu.worker import crash_seen
 
-        with FmuPlant(self.path, inputs=self.inputs, outputs=self.outputs, sample_time_s=dt,
-                      parameters=self.parameters, instance_name="probe") as plant:
+        args = (self.path, self.inputs, self.outputs, self.parameters, tuple(float(v) for v in u), dt, samples)
+        if crash_seen([self.path]):
+            return _record_in_worker(*args)
+        return record_run(*args)
+
+    def column(self, u, dt, output: str, samples: int = SAMPLES) -> np.ndarray:
+        return self.run(u, dt, samples)[:, self.outputs.index(output)]
+
+
+def record_run(path, inputs: Sequence[str], outputs: Sequence[str], parameters: Mapping[str, float],
+               u: Sequence[float], dt: float, samples: int, sink: Optional[str] = None) -> np.ndarray:
+    """Output samples, shape (n <= samples + 1, n_outputs), of one open-loop run holding the inputs at u, with
+    sample time dt [s]; stops at a rejected step or a non-finite output. sink: a file each sample is also appended
+    to (float64 rows) as it is made, so the samples before a crash of this process can be read back."""
+    from prlpid_fmi.fmu import FmuPlant
+    from prlpid_fmi.fmu.plant import StepRejected
+
+    fd = os.open(sink, os.O_WRONLY | os.O_APPEND) if sink else None
+    try:
+        with FmuPlant(path, inputs=list(inputs), outputs=list(outputs), sample_time_s=dt,
+                      parameters=dict(parameters), instance_name="probe") as plant:
             y = [np.array(plant.read_outputs(), dtype=float)]
+            if fd is not None:
+                os.write(fd, y[0].tobytes())
             values = [float(v) for v in u]
             for _ in range(samples):
                 try:
@@ -290,10 +312,34 @@ class _Runs:
                 if not np.all(np.isfinite(value)) or np.any(np.abs(value) > 1e150):
                     break
                 y.append(value)
-        return np.array(y)
+                if fd is not None:
+                    os.write(fd, value.tobytes())
+    finally:
+        if fd is not None:
+            os.close(fd)
+    return np.array(y)
 
-    def column(self, u, dt, output: str, samples: int = SAMPLES) -> np.ndarray:
-        return self.run(u, dt, samples)[:, self.outputs.index(output)]
+
+def _record_in_worker(path, inputs, outputs, parameters, u, dt, samples) -> np.ndarray:
+    """record_run in a worker process (for an FMU that crashed a worker before: fmu.worker.crash_seen). A run
+    that crashes or hangs its worker ends at the sample before the call that failed, as a rejected step does;
+    PlantError with the crash's line when it failed before its first output."""
+    from prlpid_fmi.fmu.worker import WorkerCrashed, call_in_worker
+
+    fd, sink = tempfile.mkstemp(prefix="prlpid-fmi-probe-run-")
+    os.close(fd)
+    try:
+        try:
+            return call_in_worker(record_run, path, list(inputs), list(outputs), dict(parameters), u, dt, samples,
+                                  sink, fmus=[path], what="a probe run", check_outputs=True)
+        except WorkerCrashed as exc:
+            rows = np.fromfile(sink, dtype=float)
+            y = rows[:len(rows) // len(outputs) * len(outputs)].reshape(-1, len(outputs))
+            if not len(y):
+                raise PlantError(str(exc)) from None
+            return y
+    finally:
+        os.unlink(sink)
 
 
 def _simulate(path, inputs, u, output, dt, parameters) -> np.ndarray:

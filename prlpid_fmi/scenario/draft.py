@@ -52,9 +52,12 @@ def init_scenario(fmu_path: str | Path, output: Optional[str] = None,
     disturbance-like input while another one moves it, never one that acts on/off; u_limits, setpoint range, sample time and gain
     ranges, setpoint hold and episode length come from the probe's identified model and the FMU's declared
     min, max and nominal values, each with a comment saying where it came from. start_values {parameter or input: value}: the operating point to probe at
-    (parameters are written to plant.parameters). Raises ScenarioError with one line when the FMU cannot
+    (parameters are written to plant.parameters). An FMU that crashed a worker process in this process (init_isolated)
+    gets plant.isolation: process, with the crash in its comment. Raises ScenarioError with one line when the FMU cannot
     be read or probed.
     """
+    from prlpid_fmi.fmu.worker import crash_seen
+
     p = Path(fmu_path)
     start_values = dict(start_values or {})
     d, loop = _probed_loop(fmu_path, output, start_values)
@@ -83,6 +86,9 @@ def init_scenario(fmu_path: str | Path, output: Optional[str] = None,
     parameters = "{" + ", ".join(f"{k}: {v!r}" for k, v in given.items()) + "}"
     gains = {g: f"[{a!r}, {b!r}, {s}]" for g, (a, b, s) in loop.gains.items()}
     w = loop.why
+    crash = crash_seen([p])
+    isolation = (f"\n  isolation: process   # {crash}: the plant runs in a worker process of its own (auto | process | "
+                 "none)" if crash else "")
     return f"""\
 # yaml-language-server: $schema={schema_uri()}
 # Scenario for {d.model_name} ({p.name}), written by `prlpid-fmi init` from an open-loop step and trim test
@@ -92,7 +98,7 @@ name: {name}
 plant:
   fmu: {fmu_text}   # a relative path resolves against this file's folder
   sample_time: {loop.sample_time_s!r}   # s, control period: {w['sample_time']}
-  parameters: {parameters}   # {{FMU parameter: value}} set before each episode
+  parameters: {parameters}   # {{FMU parameter: value}} set before each episode{isolation}
   # tunable parameters of this FMU (start values):
 {params or '  #   none'}
   loops:
@@ -130,8 +136,9 @@ evaluation:
 
 
 def init_isolated(fmu: str | Path, step_timeout_s: float | None = None, **kwargs) -> str:
-    """init_scenario(fmu, **kwargs) in a worker process (fmu.isolate.run_isolated): the scenario's text; a crash, a
-    hang or garbage outputs are one line (PlantError) and the FMU's stdout never reaches the text."""
+    """init_scenario(fmu, **kwargs) in a worker process (fmu.isolate.run_isolated): the scenario's text; after a
+    crash, init again with each FMU run in a worker (its scenario isolates the plant); a hang, garbage outputs or a
+    probe that the crash leaves too short are one line (PlantError), and the FMU's stdout never reaches the text."""
     from prlpid_fmi.fmu.isolate import run_isolated
 
     return run_isolated(init_scenario, fmu, "init (the probe of the FMU)", step_timeout_s, **kwargs)
