@@ -21,7 +21,7 @@ import numpy as np
 
 from prlpid_fmi.loop.evaluation import evaluate_gains
 from prlpid_fmi.probe.proposal import choose_loop, propose_loop
-from prlpid_fmi.probe.step_test import probe_outputs
+from prlpid_fmi.probe.open_loop import probe_outputs
 from prlpid_fmi.scenario.draft import init_scenario
 from prlpid_fmi.scenario.load import load_scenario
 

@@ -29,7 +29,7 @@ _API = {
     # plants
     "FmuPlant": "prlpid_fmi.fmu.plant",
     "describe_fmu": "prlpid_fmi.fmu.description",
-    "probe": "prlpid_fmi.probe.step_test",
+    "probe": "prlpid_fmi.probe.open_loop",
     # the workflows on a run directory
     "tune": "prlpid_fmi.run.tune",
     "evaluate_run": "prlpid_fmi.run.evaluate",

@@ -143,7 +143,7 @@ def _probe(args: argparse.Namespace) -> int:
 
     from prlpid_fmi.fmu.worker import crash_seen
     from prlpid_fmi.probe.isolated import probe_isolated
-    from prlpid_fmi.probe.step_test import format_probe, plot_probe
+    from prlpid_fmi.probe.open_loop import format_probe, plot_probe
 
     result = probe_isolated(args.fmu, args.step_timeout, output=args.output, inputs=args.input or None,
                             start_values=_start_values(args.set))

@@ -21,7 +21,7 @@ import yaml
 
 from prlpid_fmi.cli import main
 from prlpid_fmi.probe.proposal import choose_loop, propose_loop
-from prlpid_fmi.probe.step_test import probe_outputs
+from prlpid_fmi.probe.open_loop import probe_outputs
 from prlpid_fmi.scenario.draft import init_scenario
 
 DATA = Path(__file__).parent / "data" / "pythonfmu"

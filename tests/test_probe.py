@@ -21,7 +21,7 @@ from prlpid_fmi.cli import main
 from prlpid_fmi.loop.evaluation import evaluate_gains
 from prlpid_fmi.fmu import build_fmu
 from prlpid_fmi.fmu.build import bundled_fmu
-from prlpid_fmi.probe.step_test import probe
+from prlpid_fmi.probe.open_loop import probe
 from prlpid_fmi.probe.proposal import propose_loop
 from prlpid_fmi.scenario.draft import init_scenario
 from prlpid_fmi.scenario.load import load_scenario
@@ -159,7 +159,7 @@ def test_init_writes_the_operating_point(tmp_path):
 def test_a_delayed_static_response_is_static_with_its_dead_time():
     """Δy = 0 for three samples, then 2.5 per input unit for good: a gain behind a transport delay. The
     delay is counted from the sample before the first move (the step acts over one sample): 2 samples."""
-    from prlpid_fmi.probe.step_test import _analyse
+    from prlpid_fmi.probe.open_loop import _analyse
 
     dt, du = 0.1, 0.004
     dy = np.r_[np.zeros(3), np.full(97, 2.5 * du)]

@@ -25,7 +25,7 @@ import yaml
 
 from prlpid_fmi.cli import main
 from prlpid_fmi.probe.feasibility import check_loops
-from prlpid_fmi.probe.step_test import probe_outputs
+from prlpid_fmi.probe.open_loop import probe_outputs
 from prlpid_fmi.scenario.load import load_scenario
 
 DATA = Path(__file__).parent / "data"

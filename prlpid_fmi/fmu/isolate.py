@@ -3,7 +3,7 @@ returns or garbage outputs end the command with one line naming the FMU, the FMI
 exit 2), and the FMU's own stdout (a banner printed by its C code) goes to stderr, never into the results.
 
 A crash of that worker is survived: the work runs again in this process with each of its FMU runs in a worker
-process of its own (probe.step_test runs them so once fmu.worker.crash_seen names the FMU), a run that crashes
+process of its own (probe.open_loop runs them so once fmu.worker.crash_seen names the FMU), a run that crashes
 keeping the samples before the crash; what it still cannot do is one line as above."""
 from __future__ import annotations
 

@@ -4,9 +4,9 @@
 fixed-PID search, and `init` applies the same rules to the loop it proposes. Per loop, at the scenario's
 operating point (plant.parameters; every other input at its start value):
 
-- the loop's input is stepped (probe.step_test): an output that does not move, or returns to where it was
+- the loop's input is stepped (probe.open_loop): an output that does not move, or returns to where it was
   (a zero-gain pulse: a velocity under a spring), is refused: no PID can hold it at a setpoint;
-- the input is held at REACH_LEVELS levels over u_limits until the output settles (step_test.sweep_input): a
+- the input is held at REACH_LEVELS levels over u_limits until the output settles (open_loop.sweep_input): a
   stable or static output's setpoint_range must lie inside what it reaches there (2 % of the reach as
   tolerance); an integrating output, held at u_limits[0] and u_limits[1], must move one way at one limit and the
   other way at the other;
@@ -31,7 +31,7 @@ REACH_LEVELS = 5                 # input levels over u_limits a stable output's 
 def loop_findings(tuning) -> tuple[list[str], list[str]]:
     """(problems, warnings) of every loop of a TuningConfig, each one line starting with its scenario key."""
     from prlpid_fmi.fmu.resolve import resolve_fmu
-    from prlpid_fmi.probe.step_test import probe, sweep_input
+    from prlpid_fmi.probe.open_loop import probe, sweep_input
 
     path = resolve_fmu(tuning.fmu, tuning.fmi_version)
     problems, notes = [], []

@@ -25,8 +25,8 @@ def frozen_output(result) -> str:
 
 
 def probe_isolated(fmu: str | Path, step_timeout_s: float | None = None, **kwargs):
-    """probe.step_test.probe(fmu, **kwargs) in a worker process; a frozen output is a PlantError too."""
-    from prlpid_fmi.probe.step_test import probe
+    """probe.open_loop.probe(fmu, **kwargs) in a worker process; a frozen output is a PlantError too."""
+    from prlpid_fmi.probe.open_loop import probe
 
     result = run_isolated(probe, fmu, "the probe", step_timeout_s, **kwargs)
     frozen = frozen_output(result)

@@ -30,7 +30,7 @@ from typing import Optional, Sequence
 from prlpid_fmi.errors import PlantError
 import numpy as np
 
-from prlpid_fmi.probe.step_test import ProbeResult, StepResponse, Sweep, snap_sample_time, sweep_input
+from prlpid_fmi.probe.open_loop import ProbeResult, StepResponse, Sweep, snap_sample_time, sweep_input
 
 
 @dataclass(frozen=True)
@@ -456,7 +456,7 @@ def _design(r: StepResponse, u_trim: float, u_limits, sp, result: ProbeResult, w
     if r.kind == "unstable":
         return _unstable_design(r, headroom, step, why, fmu_step_s)
     if model is None:  # an integrator the probe could not model: its rate alone
-        from prlpid_fmi.probe.step_test import Model
+        from prlpid_fmi.probe.open_loop import Model
         model = Model((r.rate,), (1.0, 0.0), r.dead_time_s)
     K, lags, theta = _half_rule(model, r.dead_time_s)
     m = model.integrators

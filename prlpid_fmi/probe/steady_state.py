@@ -1,7 +1,7 @@
 """Where a stable loop's steady-state gain changes sign: an extremum of its steady-state map y_ss(u).
 
 Per loop, at the scenario's operating point (plant.parameters; every other input at its start value), the input
-is held at LEVELS levels evenly spaced over u_limits until the output settles (probe.step_test.sweep_input). When
+is held at LEVELS levels evenly spaced over u_limits until the output settles (probe.open_loop.sweep_input). When
 every level settles and the values rise then fall (or fall then rise) by more than SIGNIFICANT of their spread, with
 at least two levels on each side, and the extremum's output lies within NEAR_RANGE of the setpoint range, the map
 has an interior extremum the loop meets: past it the loop's gain has the other sign, so a PID that works on one side
@@ -68,7 +68,7 @@ def extremum_of(levels, values, loop: str = "y", name: str = "u") -> Extremum | 
 def loop_extrema(tuning) -> list[Extremum]:
     """The interior extrema of every stable loop's steady-state map over its u_limits (module docstring)."""
     from prlpid_fmi.fmu.resolve import resolve_fmu
-    from prlpid_fmi.probe.step_test import probe, sweep_input
+    from prlpid_fmi.probe.open_loop import probe, sweep_input
 
     path = resolve_fmu(tuning.fmu, tuning.fmi_version)
     out = []

@@ -20,7 +20,7 @@ def _probed_loop(fmu_path: str | Path, output: Optional[str], start_values: dict
     cannot be read, cannot be a plant, or cannot be probed."""
     from prlpid_fmi.fmu import describe_fmu
     from prlpid_fmi.probe.proposal import choose_loop, propose_loop
-    from prlpid_fmi.probe.step_test import probe_outputs
+    from prlpid_fmi.probe.open_loop import probe_outputs
 
     try:
         d = describe_fmu(Path(fmu_path))
