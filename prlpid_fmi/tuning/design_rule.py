@@ -45,7 +45,7 @@ from prlpid_fmi.progress import QUIET, Steps
 from prlpid_fmi.robustness.margins import margins_of, setpoint_range_points
 from prlpid_fmi.robustness.status import meets_limit
 from prlpid_fmi.tuning.fixed_pid import FixedPid, detune_over, setpoint_pid
-from prlpid_fmi.tuning.load_design import LoadDesign, SetpointDesign, setpoint_weight
+from prlpid_fmi.tuning.load_design import LoadDesign, SetpointDesign, penalised, setpoint_weight
 from prlpid_fmi.tuning.load_experiment import approach, open_core, parameter_samples, start_measurement
 from prlpid_fmi.tuning.search_pool import search_workers
 
@@ -235,6 +235,7 @@ class Designer:
         self.measured: dict | None = None
         self.evaluations = self.first.evaluations
         self.load_optimum: float | None = None
+        self.model_record: dict = {}  # the last load search's path (Designer.load_search)
 
     def design_under(self, limits: NoiseLimits, relaxed: tuple = ()) -> Candidate:
         """Requirements 2-6 at these noise limits: the load search (Ms and noise by the Kp interval), b for the
@@ -244,20 +245,47 @@ class Designer:
         if limits.filter_tuned != (config.measurement_filter == "tuned"):
             config = dataclasses.replace(config, measurement_filter="tuned")
         design = LoadDesign(config, baseline.load_step, self.limit, limits.gain, baseline.widen_ranges,
-                            limits.increment, search_workers(baseline.workers))
+                            limits.increment, search_workers(baseline.workers), baseline.design_model)
         try:
             progress.step(f"frequency response of the plant at {len(design.points)} operating points"
                           + (f" and {len(parameter_samples(config))} parameter draws" if parameter_samples(config)
                              else ""))
             design.prepare(self.first.gains.values(), measured=self.measured)
             self.measured = design.measured()
-            progress.step("load design (differential evolution, then Nelder-Mead)",
-                          design.budget(self.maxiter, self.popsize))
-            result = design.search(self.seed, self.maxiter, self.popsize, progress=progress)
-            self.evaluations += int(result.nfev)
+            result, self.model_record = self.load_search(design)
             return self._finish(config, design, result, limits, relaxed)
         finally:
             design.close()
+
+    def load_search(self, design: LoadDesign) -> tuple:
+        """The load search on the local models (baseline.design_model "identified", where LoadDesign.identify_models
+        found them), its result verified on the FMU (LoadDesign.validate_models): its cost is then the FMU's; where
+        they disagree, the search again on the FMU. Returns (scipy's result, the record of fixed_pid.json's
+        "design_model": {"requested", "path" ("identified" | "fmu"), "note", "models", and the validation's keys})."""
+        progress = self.progress
+        record = {"requested": design.design_model, "path": "fmu", "note": design.model_note,
+                  "models": [m.as_dict() for m in design.models or []]}
+        if design.models is not None:
+            progress.step("load design on the identified local models (differential evolution, then Nelder-Mead)",
+                          design.budget(self.maxiter, self.popsize))
+            result = design.search(self.seed, self.maxiter, self.popsize, progress=progress)
+            self.evaluations += int(result.nfev)
+            progress.step("load design: the identified models' choice verified on the FMU")
+            check = design.validate_models(result.x)
+            record.update(check)
+            if check["agrees"]:
+                record["path"] = "identified"
+                result.fun = penalised(check["fmu_load_cost"], check["fmu_chatter"])
+                return result, record
+            record["note"] = (f"the FMU's load cost {check['fmu_load_cost']:.4g} differs from the models' "
+                              f"{check['predicted_load_cost']:.4g} by {100 * check['validation_error']:.1f} % "
+                              f"(tolerance {100 * check['tolerance']:.0f} %) or the loop chatters on the FMU "
+                              f"({check['fmu_chatter']:.3f}): the search ran on the FMU")
+            design.use_fmu()
+        progress.step("load design (differential evolution, then Nelder-Mead)", design.budget(self.maxiter, self.popsize))
+        result = design.search(self.seed, self.maxiter, self.popsize, progress=progress)
+        self.evaluations += int(result.nfev)
+        return result, record
 
     def _finish(self, config, design: LoadDesign, result, limits: NoiseLimits, relaxed: tuple) -> Candidate:
         """Requirements 3-5 and the Ms check after the load search (design_under)."""
@@ -275,7 +303,9 @@ class Designer:
             weight, choices = setpoint_weight(config, gains, (b, c, tf), seeds, deploy.max_overshoot)
             b = [weight] * config.n_loops
             if not any(r["Overshoot"] <= 100.0 * deploy.max_overshoot for r in choices):
-                trade = SetpointDesign(design, best_load, baseline.load_tolerance, deploy.max_overshoot, seeds)
+                # on the local models where the load search used them: the load limit of the models' optimum
+                reference = (self.model_record["predicted_load_cost"] if design.models is not None else best_load)
+                trade = SetpointDesign(design, reference, baseline.load_tolerance, deploy.max_overshoot, seeds)
                 progress.step("setpoint ISE within the overshoot limit (no b met it)", trade.budget(maxiter, popsize))
                 try:
                     second = trade.search(np.append(vector, 2.0 * weight - 1.0), seed, maxiter, popsize,
@@ -338,7 +368,7 @@ class Designer:
                    "feasible": bool(getattr(result, "constr_violation", 0) <= 0),
                    "fell_back_to_setpoint_search": fallback is not None,
                    "noise_increment_limit_relaxed": design.increment_relaxed,
-                   "noise": noise_shares(design, gains, tf)}
+                   "noise": noise_shares(design, gains, tf), "design_model": self.model_record}
         if design.increment_relaxed:  # no Kp met it with Ms for the stabilising PID's Ti, Td (LoadDesign.prepare)
             relaxed = tuple(r for r in relaxed if r.limit != "max_noise_increment") + (
                 Relaxation("max_noise_increment", self.deploy.max_noise_increment, math.inf),)
@@ -374,7 +404,8 @@ class Designer:
                                           "evaluations": 0},
                    "estimates": [], "active_limits": [], "setpoint_weights": rows,
                    "stabilising_gains": first.gains.as_dict(), "feasible": True,
-                   "fell_back_to_setpoint_search": False, "noise_increment_limit_relaxed": False}
+                   "fell_back_to_setpoint_search": False, "noise_increment_limit_relaxed": False,
+                   "design_model": self.model_record}
         return Candidate(np.asarray(first.action), gains, structure, details, limits, (), True, best["Overshoot"],
                          best["ISE"], details["load_cost"])
 
