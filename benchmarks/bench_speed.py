@@ -364,6 +364,11 @@ def sb3_trivial_steps_per_s(name: str, steps: int) -> float:
             return np.zeros(obs_space.shape, obs_space.dtype), reward, False, self.k >= length, {}
 
     agent = scenario.agent
+    import torch
+
+    from prlpid_fmi.tuning.agent import torch_threads
+
+    torch.set_num_threads(torch_threads(agent.torch_threads))  # as tuning.agent.train sets them for the tune
     with tempfile.TemporaryDirectory() as tmp:
         env = make_vec_env(Trivial, n_envs=agent.envs, seed=agent.seed, vec_env_cls=DummyVecEnv, monitor_dir=tmp)
         if agent.normalize:

@@ -154,3 +154,22 @@ def test_a_model_that_disagrees_with_the_fmu_sends_the_search_to_the_fmu(monkeyp
     assert reference.report.details["design_model"]["path"] == "fmu"
     np.testing.assert_allclose(result.gains.values()[0], reference.gains.values()[0])
     assert result.cost == pytest.approx(reference.cost)
+
+
+def test_the_vectorised_kp_scan_equals_the_per_controller_estimates():
+    """MeasuredPlant.scan (what the Kp interval of every candidate uses) against sensitivity_peak, winding and
+    noise_gains of each PID alone, on 1/(s - 1)'s exact ZOH response: the same Ms, winding and noise gains."""
+    Ts = 0.1
+    b, a = zoh([1.0], [1.0, -1.0], Ts)
+    w = np.geomspace(2 * math.pi / (4096 * Ts), math.pi / Ts, 120)
+    q = np.exp(-1j * w * Ts)
+    plant = MeasuredPlant(w, np.polyval(b[::-1], q) / np.polyval(a[::-1], q), Ts, (0.0,), ())
+    Ti, Td, N, Tf = 0.8, 0.05, 10.0, 0.2
+    kps = np.geomspace(0.1, 40.0, 9)
+    ms, noise, winding, increments = plant.scan(kps, lambda x: pid_frequency_response(1.0, Ti, Td, Ts, x, N, Tf))
+    for j, kp in enumerate(kps):
+        C = lambda x, kp=kp: pid_frequency_response(kp, Ti, Td, Ts, x, N, Tf)  # noqa: E731
+        assert ms[j] == pytest.approx(plant.sensitivity_peak(C), rel=1e-9)
+        assert winding[j] == pytest.approx(plant.winding(C), abs=1e-9)
+        assert (noise[j], increments[j]) == pytest.approx(plant.noise_gains(C), rel=1e-9)
+    assert len(set(np.round(winding / math.pi))) > 1  # the scan crosses from unstable to stable gains

@@ -45,7 +45,7 @@ from prlpid_fmi.progress import QUIET, Steps
 from prlpid_fmi.robustness.margins import margins_of, setpoint_range_points
 from prlpid_fmi.robustness.status import meets_limit
 from prlpid_fmi.tuning.fixed_pid import FixedPid, detune_over, setpoint_pid
-from prlpid_fmi.tuning.load_design import LoadDesign, SetpointDesign, penalised, setpoint_weight
+from prlpid_fmi.tuning.load_design import LoadDesign, SetpointDesign, setpoint_weight
 from prlpid_fmi.tuning.load_experiment import approach, open_core, parameter_samples, start_measurement
 from prlpid_fmi.tuning.search_pool import search_workers
 
@@ -252,40 +252,11 @@ class Designer:
                              else ""))
             design.prepare(self.first.gains.values(), measured=self.measured)
             self.measured = design.measured()
-            result, self.model_record = self.load_search(design)
+            result, self.model_record = design.search_verified(self.seed, self.maxiter, self.popsize, progress)
+            self.evaluations += int(result.nfev)
             return self._finish(config, design, result, limits, relaxed)
         finally:
             design.close()
-
-    def load_search(self, design: LoadDesign) -> tuple:
-        """The load search on the local models (baseline.design_model "identified", where LoadDesign.identify_models
-        found them), its result verified on the FMU (LoadDesign.validate_models): its cost is then the FMU's; where
-        they disagree, the search again on the FMU. Returns (scipy's result, the record of fixed_pid.json's
-        "design_model": {"requested", "path" ("identified" | "fmu"), "note", "models", and the validation's keys})."""
-        progress = self.progress
-        record = {"requested": design.design_model, "path": "fmu", "note": design.model_note,
-                  "models": [m.as_dict() for m in design.models or []]}
-        if design.models is not None:
-            progress.step("load design on the identified local models (differential evolution, then Nelder-Mead)",
-                          design.budget(self.maxiter, self.popsize))
-            result = design.search(self.seed, self.maxiter, self.popsize, progress=progress)
-            self.evaluations += int(result.nfev)
-            progress.step("load design: the identified models' choice verified on the FMU")
-            check = design.validate_models(result.x)
-            record.update(check)
-            if check["agrees"]:
-                record["path"] = "identified"
-                result.fun = penalised(check["fmu_load_cost"], check["fmu_chatter"])
-                return result, record
-            record["note"] = (f"the FMU's load cost {check['fmu_load_cost']:.4g} differs from the models' "
-                              f"{check['predicted_load_cost']:.4g} by {100 * check['validation_error']:.1f} % "
-                              f"(tolerance {100 * check['tolerance']:.0f} %) or the loop chatters on the FMU "
-                              f"({check['fmu_chatter']:.3f}): the search ran on the FMU")
-            design.use_fmu()
-        progress.step("load design (differential evolution, then Nelder-Mead)", design.budget(self.maxiter, self.popsize))
-        result = design.search(self.seed, self.maxiter, self.popsize, progress=progress)
-        self.evaluations += int(result.nfev)
-        return result, record
 
     def _finish(self, config, design: LoadDesign, result, limits: NoiseLimits, relaxed: tuple) -> Candidate:
         """Requirements 3-5 and the Ms check after the load search (design_under)."""

@@ -524,6 +524,36 @@ class LoadDesign(OutcomeCache):
             result.nfev += int(polished.nfev)
         return result
 
+    def search_verified(self, seed: int, maxiter: int, popsize: int, progress: Steps = QUIET) -> tuple:
+        """`search` on the local models where `identify_models` found them, its result verified on the FMU
+        (`validate_models`; its cost is then the FMU's); where they disagree, or without models, `search` on the FMU.
+        Returns (scipy's result, nfev the evaluations of both searches; the record of fixed_pid.json's
+        "design_model": {"requested", "path" ("identified" | "fmu"), "note", "models", and validate_models' keys})."""
+        record = {"requested": self.design_model, "path": "fmu", "note": self.model_note,
+                  "models": [m.as_dict() for m in self.models or []]}
+        spent = 0
+        if self.models is not None:
+            progress.step("load design on the identified local models (differential evolution, then Nelder-Mead)",
+                          self.budget(maxiter, popsize))
+            result = self.search(seed, maxiter, popsize, progress=progress)
+            progress.step("load design: the identified models' choice verified on the FMU")
+            check = self.validate_models(result.x)
+            record.update(check)
+            if check["agrees"]:
+                record["path"] = "identified"
+                result.fun = penalised(check["fmu_load_cost"], check["fmu_chatter"])
+                return result, record
+            record["note"] = (f"the FMU's load cost {check['fmu_load_cost']:.4g} differs from the models' "
+                              f"{check['predicted_load_cost']:.4g} by {100 * check['validation_error']:.1f} % "
+                              f"(tolerance {100 * check['tolerance']:.0f} %) or the loop chatters on the FMU "
+                              f"({check['fmu_chatter']:.3f}): the search ran on the FMU")
+            spent = int(result.nfev)
+            self.use_fmu()
+        progress.step("load design (differential evolution, then Nelder-Mead)", self.budget(maxiter, popsize))
+        result = self.search(seed, maxiter, popsize, progress=progress)
+        result.nfev = int(result.nfev) + spent
+        return result, record
+
     def close(self) -> None:
         for core in self.cores + self.quiet_cores:
             core.close()
