@@ -130,30 +130,56 @@ def test_model_based_design_on_the_unstable_plant_equals_the_fmu_simulation_desi
     assert on_models == pytest.approx(on_fmu, rel=0.02)
 
 
-def test_a_model_that_disagrees_with_the_fmu_sends_the_search_to_the_fmu(monkeypatch):
+BUDGET = dict(seed=0, episodes=1, maxiter=3, popsize=5, max_sensitivity=2.0)  # a small fixed-PID design
+
+
+def fixed_pid(design_model: str):
+    """tune_fixed_pid of first_order on a small budget with baseline.design_model = design_model, one worker."""
+    from prlpid_fmi.tuning import design_rule
+
+    return design_rule.tune_fixed_pid(preset("first_order"), baseline=dataclasses.replace(
+        design_rule.BaselineConfig(), design_model=design_model, workers=1), **BUDGET)
+
+
+@pytest.fixture(scope="module")
+def on_fmu():
+    """The small design of first_order with every candidate simulated on the FMU."""
+    return fixed_pid("fmu")
+
+
+def test_the_fixed_pid_on_local_models_is_the_fmu_paths_on_the_unstable_plant(on_fmu):
+    """1/(s - 1) (linear: its local models are exact): the whole fixed-PID rule on the identified models, the load
+    search and the setpoint search within the load tolerance, keeps the design the FMU path keeps (load IAE on the
+    FMU within 2 %), and its report says which path it took and how well the models predicted the FMU."""
+    result = fixed_pid("identified")
+    record = result.report.details["design_model"]
+    assert record["path"] == "identified" and record["agrees"] and record["validation_error"] < 1e-6
+    assert [m["order"] for m in record["models"]] == [1, 1, 1]
+    traded = result.report.details["traded_for_overshoot"]
+    if traded is not None:  # the setpoint search ran on the models too, its result verified on the FMU
+        assert record["setpoint_search"] == "identified" and traded["validation_error"] < 1e-6
+    assert on_fmu.report.details["design_model"]["path"] == "fmu"
+    assert result.cost == pytest.approx(on_fmu.cost, rel=0.02)
+
+
+def test_a_model_that_disagrees_with_the_fmu_sends_the_search_to_the_fmu(monkeypatch, on_fmu):
     """A local model with twice the plant's gain: the validation on the FMU finds the disagreement (> 10 %), the
     design report says the FMU path was used and why, and the design is the FMU path's."""
     from prlpid_fmi.robustness import local_model
-    from prlpid_fmi.tuning import design_rule, load_design
+    from prlpid_fmi.tuning import load_design
 
     def doubled(plant, *args, **kwargs):
         m = local_model.identify(plant, *args, **kwargs)
         return dataclasses.replace(m, numerator=2.0 * m.numerator)
 
-    config = preset("first_order")
-    budget = dict(seed=0, episodes=1, maxiter=3, popsize=5, max_sensitivity=2.0)
-    reference = design_rule.tune_fixed_pid(config, baseline=dataclasses.replace(
-        design_rule.BaselineConfig(), design_model="fmu", workers=1), **budget)
     monkeypatch.setattr(load_design, "identify", doubled)
-    result = design_rule.tune_fixed_pid(config, baseline=dataclasses.replace(
-        design_rule.BaselineConfig(), design_model="identified", workers=1), **budget)
+    result = fixed_pid("identified")
     record = result.report.details["design_model"]
     assert record["path"] == "fmu" and record["requested"] == "identified"
     assert record["validation_error"] > 0.1 and not record["agrees"]
     assert "differs" in record["note"]
-    assert reference.report.details["design_model"]["path"] == "fmu"
-    np.testing.assert_allclose(result.gains.values()[0], reference.gains.values()[0])
-    assert result.cost == pytest.approx(reference.cost)
+    np.testing.assert_allclose(result.gains.values()[0], on_fmu.gains.values()[0])
+    assert result.cost == pytest.approx(on_fmu.cost)
 
 
 def test_the_vectorised_kp_scan_equals_the_per_controller_estimates():

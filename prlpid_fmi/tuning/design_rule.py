@@ -45,7 +45,7 @@ from prlpid_fmi.progress import QUIET, Steps
 from prlpid_fmi.robustness.margins import margins_of, setpoint_range_points
 from prlpid_fmi.robustness.status import meets_limit
 from prlpid_fmi.tuning.fixed_pid import FixedPid, detune_over, setpoint_pid
-from prlpid_fmi.tuning.load_design import LoadDesign, SetpointDesign, setpoint_weight
+from prlpid_fmi.tuning.load_design import MODEL_TOLERANCE, LoadDesign, SetpointDesign, setpoint_weight
 from prlpid_fmi.tuning.load_experiment import approach, open_core, parameter_samples, start_measurement
 from prlpid_fmi.tuning.search_pool import search_workers
 
@@ -274,24 +274,11 @@ class Designer:
             weight, choices = setpoint_weight(config, gains, (b, c, tf), seeds, deploy.max_overshoot)
             b = [weight] * config.n_loops
             if not any(r["Overshoot"] <= 100.0 * deploy.max_overshoot for r in choices):
-                # on the local models where the load search used them: the load limit of the models' optimum
-                reference = (self.model_record["predicted_load_cost"] if design.models is not None else best_load)
-                trade = SetpointDesign(design, reference, baseline.load_tolerance, deploy.max_overshoot, seeds)
-                progress.step("setpoint ISE within the overshoot limit (no b met it)", trade.budget(maxiter, popsize))
-                try:
-                    second = trade.search(np.append(vector, 2.0 * weight - 1.0), seed, maxiter, popsize,
-                                          progress=progress)
-                    feasible = bool(np.max(trade.constraint_values(second.x)) <= 0)
-                    load, ise, overshoot = trade.evaluate(second.x)
-                    traded = {"load_cost": load, "ISE": ise, "Overshoot": overshoot, "feasible": feasible,
-                              "evaluations": int(second.nfev)}
-                    self.evaluations += int(second.nfev)
-                    if feasible:  # else the load optimum stays, with the b of least overshoot
-                        vector = np.asarray(second.x)
-                        gains, tf = design.gains(vector[:-1]), design.filters(vector[:-1])
-                        b = [trade.weight(vector)] * config.n_loops
-                finally:
-                    trade.close()
+                traded, second = self._trade(design, vector, weight, best_load)
+                if traded["feasible"]:  # else the load optimum stays, with the b of least overshoot
+                    vector = second
+                    gains, tf = design.gains(vector[:-1]), design.filters(vector[:-1])
+                    b = [SetpointDesign.weight(vector)] * config.n_loops
             if traded is not None and not traded["feasible"]:
                 followed, found = follow_setpoints(config, design, self.first, best_load, deploy, seeds, seed,
                                                    maxiter, popsize, progress,
@@ -344,6 +331,47 @@ class Designer:
             relaxed = tuple(r for r in relaxed if r.limit != "max_noise_increment") + (
                 Relaxation("max_noise_increment", self.deploy.max_noise_increment, math.inf),)
         return Candidate(vector, gains, structure, details, limits, relaxed, ms_met, overshoot, ise, cost)
+
+    def _trade(self, design: LoadDesign, vector, weight: float, best_load: float) -> tuple[dict, np.ndarray]:
+        """The setpoint search within the load tolerance (SetpointDesign) from the load optimum with b = weight:
+        (what it found: {"load_cost", "ISE", "Overshoot", "feasible", "evaluations"}, its vector). Where the load
+        search used the local models, so does this one (its load limit the models' optimum's), and its result's load
+        IAE is verified on the FMU ("load_cost" the FMU's, "load_cost_model", "validation_error"); where the two
+        differ by more than MODEL_TOLERANCE, the search runs again on the FMU (design_model's "setpoint_search")."""
+        baseline, deploy, seed = self.baseline, self.deploy, self.seed
+        while True:
+            on_models = design.models is not None
+            reference = self.model_record["predicted_load_cost"] if on_models else best_load
+            trade = SetpointDesign(design, reference, baseline.load_tolerance, deploy.max_overshoot, self.seeds)
+            self.progress.step("setpoint ISE within the overshoot limit (no b met it)"
+                               + (" on the local models' load cost" if on_models else ""),
+                               trade.budget(self.maxiter, self.popsize))
+            try:
+                second = trade.search(np.append(vector, 2.0 * weight - 1.0), seed, self.maxiter, self.popsize,
+                                      progress=self.progress)
+                feasible = bool(np.max(trade.constraint_values(second.x)) <= 0)
+                load, ise, overshoot = trade.evaluate(second.x)
+            finally:
+                trade.close()
+            self.evaluations += int(second.nfev)
+            found = {"load_cost": load, "ISE": ise, "Overshoot": overshoot, "feasible": feasible,
+                     "evaluations": int(second.nfev)}
+            if not on_models:
+                if "setpoint_search" not in self.model_record:
+                    self.model_record["setpoint_search"] = "fmu"
+                return found, np.asarray(second.x)
+            x = np.asarray(second.x)
+            measured = design.load_cost(design.gains(x[:-1]), design.filters(x[:-1]))
+            error = abs(measured - load) / measured if measured > 0 else math.inf
+            found.update({"load_cost": measured, "load_cost_model": load, "validation_error": error})
+            if error <= MODEL_TOLERANCE:
+                self.model_record["setpoint_search"] = "identified"
+                return found, x
+            self.model_record["setpoint_search"] = "fmu"
+            self.model_record["setpoint_search_note"] = (
+                f"the setpoint search's result has load cost {measured:.4g} on the FMU, {load:.4g} on the models "
+                f"({100 * error:.1f} % apart, tolerance {100 * MODEL_TOLERANCE:.0f} %): that search ran again on the FMU")
+            design.use_fmu()
 
     def _setpoint_response(self, config: TuningConfig, gains: tuple, structure: tuple) -> tuple[float, float]:
         """(ISE, worst overshoot [%]) of the training episodes the design chose b on (noise free)."""

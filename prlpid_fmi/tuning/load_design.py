@@ -19,9 +19,9 @@ and the setpoint search within a load limit. tuning.design_rule orders them; tun
    With baseline.design_model "identified" (one loop, uncoupled), the search scores its candidates on local models
    instead (`identify_models`: robustness.local_model fitted to the response measured at each point; the load
    response per unit load by lfilter, the chatter of the PID output's response): microseconds of numpy instead of
-   an FMU simulation. tuning.design_rule verifies the choice on the FMU (`validate_models`) and reruns the search on
-   the FMU (`use_fmu`) where the two differ by more than MODEL_TOLERANCE. The setpoint search's load cost follows
-   the same path (`search_load_cost`).
+   an FMU simulation. The choice is verified on the FMU (`validate_models`) and the search reruns on
+   the FMU (`use_fmu`) where the two differ by more than MODEL_TOLERANCE (`search_verified`). The setpoint search's
+   load cost follows the same path (`search_load_cost`; tuning.design_rule verifies its result on the FMU too).
 2. b (`setpoint_weight`): on noise-free training episodes (setpoint steps), the b in B_GRID with the lowest ISE
    among those with overshoot <= deploy.max_overshoot. b changes neither Ms nor the load response.
 3. The setpoint search (`SetpointDesign`): (Kp, Ti, Td[, Tf], b) minimise the setpoint ISE of those episodes
@@ -613,7 +613,9 @@ class SetpointDesign(OutcomeCache):
         self._seen: dict = {}
         self._owns_design = False  # a replica's design is its own (closed with it)
 
-    def weight(self, vector) -> float:
+    @staticmethod
+    def weight(vector) -> float:
+        """b of a vector: its last entry mapped from [-1, 1] to [0, 1]."""
         return (min(max(float(vector[-1]), -1.0), 1.0) + 1.0) / 2.0
 
     @classmethod
