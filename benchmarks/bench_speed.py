@@ -6,6 +6,10 @@ Run:  python benchmarks/bench_speed.py            (full table, a few minutes)
       python benchmarks/bench_speed.py --search [NAME ...]
                                                   (the fixed-PID search on one process and on all cores, default
                                                   first_order and two_tank; minutes)
+      python benchmarks/bench_speed.py --design-model [NAME ...]
+                                                  (the fixed-PID stage with baseline.design_model fmu and
+                                                  identified, default first_order, first_order_1p5 and two_tank,
+                                                  its load IAE on the FMU, and the yardstick; minutes)
       python benchmarks/bench_speed.py --stages [STEPS] [--stages-only]
                                                   (stage times of `tune` on first_order, two_tank and the quadrotor,
                                                   STEPS training steps each, default 500000; tens of minutes)
@@ -30,6 +34,13 @@ Targets (issue 7) are printed beside the ratios they apply to.
 Search rows (--search, issue 24): tuning.design_rule.tune_fixed_pid of the scenario's file with its own budget and
 limits, baseline.workers 1 and then one per core, each in a fresh subprocess, one after another: wall seconds,
 the ratio, and whether the two controllers (Kp, Ti, Td, b, c, Tf, cost, evaluations) are the same bit for bit.
+
+Design-model rows (--design-model, issue 36): the same fixed-PID search (one fresh subprocess each, one after another,
+baseline.workers one per core) with baseline.design_model "fmu" (every candidate of the load search simulated on the
+FMU) and "identified" (on local models fitted to the measured frequency responses, the choice verified on the FMU):
+wall seconds, each against the yardstick (SB3's PPO, 50,000 steps on the trivial env like first_order's, measured in
+the same run), the design's load IAE on the FMU for both (quality: identified / fmu), the path the identified
+option took and its model-vs-FMU validation error.
 
 Stage rows (--stages, issue 24): `prlpid-fmi tune <scenario> --timesteps STEPS` in a subprocess per scenario, one
 after another; its wall time, the seconds of each stage from the run's run.json ("stage_seconds", recorded by
@@ -247,28 +258,38 @@ from prlpid_fmi.tuning.design_rule import tune_fixed_pid
 def main():
     scenario = load_scenario(scenario_path(sys.argv[1]))
     baseline = dataclasses.replace(scenario.baseline, workers=int(sys.argv[2]))
+    if len(sys.argv) > 3:
+        baseline = dataclasses.replace(baseline, design_model=sys.argv[3])
     start = time.perf_counter()
     fixed = tune_fixed_pid(scenario.tuning, seed=scenario.agent.seed, max_sensitivity=max_sensitivity(scenario),
                            baseline=baseline, deploy=scenario.deploy)
     wall = time.perf_counter() - start
+    design = fixed.report.details if fixed.report is not None else {}
+    record = design.get("design_model") or {}
     print(json.dumps({"wall": wall, "result": repr((fixed.gains.values(), fixed.structure, fixed.cost,
-                                                    fixed.evaluations))}))
+                                                    fixed.evaluations)),
+                      "load_cost": design.get("load_cost"), "load_optimum": design.get("load_optimum"),
+                      "path": record.get("path"), "validation_error": record.get("validation_error"),
+                      "note": record.get("note")}))
 
 if __name__ == "__main__":
     main()
 """
 
 
-def search_times(name: str, workers: int) -> dict:
-    """The fixed-PID search of scenario `name` with baseline.workers = workers in a fresh subprocess:
-    {"wall", "result"} (result: repr of gains, structure, cost, evaluations), or {"error"}."""
+def search_times(name: str, workers: int, design_model: str | None = None) -> dict:
+    """The fixed-PID search of scenario `name` with baseline.workers = workers (and baseline.design_model, None: the
+    scenario's) in a fresh subprocess: {"wall", "result", "load_cost", "load_optimum", "path", "validation_error",
+    "note"} (result: repr of gains, structure, cost, evaluations; load_cost: the design's load IAE on the FMU), or
+    {"error"}."""
     import json
 
     with tempfile.TemporaryDirectory() as tmp:
         script = Path(tmp) / "search_child.py"
         script.write_text(_SEARCH_CHILD)
-        proc = subprocess.run([sys.executable, str(script), name, str(workers)], capture_output=True, text=True,
-                              cwd=REPO)
+        extra = [] if design_model is None else [design_model]
+        proc = subprocess.run([sys.executable, str(script), name, str(workers), *extra], capture_output=True,
+                              text=True, cwd=REPO)
     if proc.returncode:
         return {"error": proc.stderr.strip().splitlines()[-1] if proc.stderr.strip() else f"exit {proc.returncode}"}
     return json.loads(proc.stdout.strip().splitlines()[-1])
@@ -284,6 +305,34 @@ def print_search(rows: dict, cores: int) -> None:
             continue
         print(f"| {name} | {one['wall']:.1f} | {many['wall']:.1f} | {one['wall'] / many['wall']:.2f}x | "
               f"{'yes' if one['result'] == many['result'] else 'NO'} |")
+
+
+DESIGN_SCENARIOS = ("first_order", "first_order_1p5", "two_tank")
+YARDSTICK_STEPS = 50_000  # SB3's PPO on the trivial env like first_order's: the yardstick of the fixed-PID stage
+FIXED_PID_TARGET = 1.3  # issue 36: the fixed-PID stage on first_order <= this many yardsticks
+
+
+def print_design_model(rows: dict, yardstick_s: float, cores: int) -> None:
+    """The fixed-PID stage per scenario with baseline.design_model fmu and identified (issue 36)."""
+    print(f"\nFixed-PID stage, baseline.design_model fmu (every candidate simulated) vs identified (local models, "
+          f"verified on the FMU), {cores} workers; yardstick: SB3 PPO {YARDSTICK_STEPS} steps on the trivial env like "
+          f"first_order's = {yardstick_s:.1f} s, measured in this run\n")
+    print("| scenario | fmu s | identified s | speed-up | fmu / yardstick | identified / yardstick | load IAE fmu | "
+          "load IAE identified | identified / fmu | path | model vs FMU |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    for name, (fmu, ident) in rows.items():
+        if "error" in fmu or "error" in ident:
+            print(f"| {name} | {fmu.get('error', '')} | {ident.get('error', '')} | | | | | | | | |")
+            continue
+        ratio = ident["load_cost"] / fmu["load_cost"] if fmu.get("load_cost") else float("nan")
+        target = f" (target <= {FIXED_PID_TARGET})" if name == "first_order" else ""
+        error = ident.get("validation_error")
+        print(f"| {name} | {fmu['wall']:.1f} | {ident['wall']:.1f} | {fmu['wall'] / ident['wall']:.2f}x | "
+              f"{fmu['wall'] / yardstick_s:.2f} | {ident['wall'] / yardstick_s:.2f}{target} | {fmu['load_cost']:.5g} | "
+              f"{ident['load_cost']:.5g} | {ratio:.4f} | {ident.get('path')} | "
+              f"{'–' if error is None else f'{100 * error:.2g} %'} |")
+    print("load IAE: the chosen design's load cost on the FMU (tuning.load_experiment, fixed_pid.json design.load_cost); "
+          "identified / fmu <= 1.02 is the quality target")
 
 
 def sb3_trivial_steps_per_s(name: str, steps: int) -> float:
@@ -315,6 +364,11 @@ def sb3_trivial_steps_per_s(name: str, steps: int) -> float:
             return np.zeros(obs_space.shape, obs_space.dtype), reward, False, self.k >= length, {}
 
     agent = scenario.agent
+    import torch
+
+    from prlpid_fmi.tuning.agent import torch_threads
+
+    torch.set_num_threads(torch_threads(agent.torch_threads))  # as tuning.agent.train sets them for the tune
     with tempfile.TemporaryDirectory() as tmp:
         env = make_vec_env(Trivial, n_envs=agent.envs, seed=agent.seed, vec_env_cls=DummyVecEnv, monitor_dir=tmp)
         if agent.normalize:
@@ -445,8 +499,23 @@ def main() -> None:
     parser.add_argument("--search", nargs="*", default=None, metavar="NAME",
                         help=f"only the fixed-PID search on one process and on all cores (default "
                              f"{' '.join(SEARCH_SCENARIOS)})")
+    parser.add_argument("--design-model", nargs="*", default=None, metavar="NAME",
+                        help=f"only the fixed-PID stage with baseline.design_model fmu and identified, and the yardstick "
+                             f"(default {' '.join(DESIGN_SCENARIOS)})")
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
+    if args.design_model is not None:
+        from prlpid_fmi.tuning.search_pool import search_workers
+
+        cores = search_workers(None)
+        rows = {}
+        for name in args.design_model or DESIGN_SCENARIOS:
+            print(f"  fixed-PID stage of {name}, design_model fmu and identified ...", file=sys.stderr, flush=True)
+            rows[name] = (search_times(name, cores, "fmu"), search_times(name, cores, "identified"))
+        print("  yardstick: SB3 PPO on the trivial env like first_order's ...", file=sys.stderr, flush=True)
+        yardstick_s = YARDSTICK_STEPS / sb3_trivial_steps_per_s("first_order", YARDSTICK_STEPS)
+        print_design_model(rows, yardstick_s, cores)
+        return
     if args.search is not None:
         from prlpid_fmi.tuning.search_pool import search_workers
 

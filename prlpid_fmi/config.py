@@ -219,6 +219,7 @@ class BaselineConfig:
     load_tolerance: float = _d(_m.BaselineModel, "load_tolerance")  # factor on the load optimum (step 4)
     widen_ranges: float = _d(_m.BaselineModel, "widen_ranges")  # factor on log ranges (and Td's high end)
     workers: int | None = _d(_m.BaselineModel, "workers")  # processes of the search (None: one per core)
+    design_model: str = _d(_m.BaselineModel, "design_model")  # identified | fmu: the load search's cost
 
 
 @dataclass(frozen=True)

@@ -89,14 +89,15 @@ class MeasuredPlant:
         (m,); the noise gains None unless `noise`."""
         w, P = self.grid()
         G = shape(w)
-        C = np.asarray(gains, float)[:, None] * G[None, :]
-        S = 1.0 / (1.0 + C * P[None, :])
-        ms = np.max(np.abs(S), axis=1)
-        phase = np.unwrap(np.angle(1.0 + C * P[None, :]), axis=1)
-        winding = phase[:, -1] - phase[:, 0]
+        K = np.asarray(gains, float)[:, None]
+        R = 1.0 + K * (G * P)[None, :]  # 1 + C P, (m, K)
+        with np.errstate(divide="ignore"):
+            ms = 1.0 / np.sqrt(np.min(R.real ** 2 + R.imag ** 2, axis=1))
+        # the unwrapped phase change: the sum of the phase steps between neighbouring frequencies, each in (-pi, pi]
+        winding = np.sum(np.angle(R[:, 1:] * np.conj(R[:, :-1])), axis=1)
         if not noise:
             return ms, None, winding, None
-        cs2, theta = np.abs(C * S) ** 2, w * self.sample_time_s
+        cs2, theta = np.abs(K * G[None, :] / R) ** 2, w * self.sample_time_s
         return ms, _noise_gains(cs2, theta, False), winding, _noise_gains(cs2, theta, True)
 
 

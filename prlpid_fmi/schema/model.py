@@ -760,6 +760,12 @@ class BaselineModel(Section):
         None, description="processes that evaluate the search's candidates (and the margin experiments of the "
                           "stages after training) side by side, each with its own FMU instances; null: one per CPU "
                           "core this process may use (1 in a sweep's trial). The result does not depend on it")
+    design_model: Literal["identified", "fmu"] = Field(
+        "identified", description="identified: the load search evaluates its candidates on a local linear model per "
+                                  "operating point, fitted to the frequency response measured there, and the chosen "
+                                  "gains are verified on the FMU (the search reruns on the FMU where the two load "
+                                  "IAEs differ by more than 10 % or the FMU's loop chatters; always with several "
+                                  "loops); fmu: every candidate simulated on the FMU")
 
 
 ClassicalSchedule = AutoOrFlag  # deploy.classical_schedule (prlpid_fmi.tuning.schedule.classical)

@@ -46,7 +46,7 @@ from prlpid_fmi.progress import QUIET, Steps
 from prlpid_fmi.robustness.margins import margins_of, setpoint_range_points
 from prlpid_fmi.robustness.status import meets_limit
 from prlpid_fmi.tuning.fixed_pid import FixedPid, detune_over, setpoint_pid
-from prlpid_fmi.tuning.load_design import LoadDesign, SetpointDesign, setpoint_weight
+from prlpid_fmi.tuning.load_design import MODEL_TOLERANCE, LoadDesign, SetpointDesign, setpoint_weight
 from prlpid_fmi.tuning.load_experiment import approach, open_core, parameter_samples, start_measurement
 from prlpid_fmi.tuning.search_pool import search_workers
 
@@ -266,6 +266,7 @@ class Designer:
         self.measured: dict | None = None
         self.evaluations = self.first.evaluations
         self.load_optimum: float | None = None
+        self.model_record: dict = {}  # the last load search's path (Designer.load_search)
 
     def design_under(self, limits: NoiseLimits, relaxed: tuple = ()) -> Candidate:
         """Requirements 2-6 at these noise limits: the load search (Ms and noise by the Kp interval), b for the
@@ -275,16 +276,14 @@ class Designer:
         if limits.filter_tuned != (config.measurement_filter == "tuned"):
             config = dataclasses.replace(config, measurement_filter="tuned")
         design = LoadDesign(config, baseline.load_step, self.limit, limits.gain, baseline.widen_ranges,
-                            limits.increment, search_workers(baseline.workers))
+                            limits.increment, search_workers(baseline.workers), baseline.design_model)
         try:
             progress.step(f"frequency response of the plant at {len(design.points)} operating points"
                           + (f" and {len(parameter_samples(config))} parameter draws" if parameter_samples(config)
                              else ""))
             design.prepare(self.first.gains.values(), measured=self.measured)
             self.measured = design.measured()
-            progress.step("load design (differential evolution, then Nelder-Mead)",
-                          design.budget(self.maxiter, self.popsize))
-            result = design.search(self.seed, self.maxiter, self.popsize, progress=progress)
+            result, self.model_record = design.search_verified(self.seed, self.maxiter, self.popsize, progress)
             self.evaluations += int(result.nfev)
             return self._finish(config, design, result, limits, relaxed)
         finally:
@@ -306,26 +305,14 @@ class Designer:
             weight, choices = setpoint_weight(config, gains, (b, c, tf), seeds, deploy.max_overshoot)
             b = [weight] * config.n_loops
             if not any(r["Overshoot"] <= 100.0 * deploy.max_overshoot for r in choices):
-                trade = SetpointDesign(design, best_load, baseline.load_tolerance, deploy.max_overshoot, seeds)
-                progress.step("setpoint ISE within the overshoot limit (no b met it)", trade.budget(maxiter, popsize))
-                try:
-                    second = trade.search(np.append(vector, 2.0 * weight - 1.0), seed, maxiter, popsize,
-                                          progress=progress)
-                    values = trade.constraint_values(second.x)
-                    feasible = bool(np.max(values) <= 0)
-                    # the load tolerance (requirement 4) missed, every limit above it met: the gains nearest the
-                    # tolerance that meet the overshoot limit are kept (the search ranks by violation)
-                    nearest = not feasible and bool(np.max(np.delete(values, -2)) <= 0)
-                    load, ise, overshoot = trade.evaluate(second.x)
-                    traded = {"load_cost": load, "ISE": ise, "Overshoot": overshoot, "feasible": feasible,
-                              "nearest_load_tolerance": nearest, "evaluations": int(second.nfev)}
-                    self.evaluations += int(second.nfev)
-                    if feasible or nearest:  # else the load optimum stays, with the b of least overshoot
-                        vector = np.asarray(second.x)
-                        gains, tf = design.gains(vector[:-1]), design.filters(vector[:-1])
-                        b = [trade.weight(vector)] * config.n_loops
-                finally:
-                    trade.close()
+                traded, second = self._trade(design, vector, weight, best_load)
+                # the load tolerance (requirement 4) missed, every limit above it met: the gains nearest the
+                # tolerance that meet the overshoot limit are kept (the search ranks by violation)
+                if traded["feasible"] or traded["nearest_load_tolerance"]:  # else the load optimum stays, with the
+                    # b of least overshoot
+                    vector = second
+                    gains, tf = design.gains(vector[:-1]), design.filters(vector[:-1])
+                    b = [SetpointDesign.weight(vector)] * config.n_loops
             if traded is not None and not traded["feasible"] and not traded["nearest_load_tolerance"]:
                 followed, found = follow_setpoints(config, design, self.first, best_load, deploy, seeds, seed,
                                                    maxiter, popsize, progress,
@@ -373,11 +360,55 @@ class Designer:
                    "feasible": bool(getattr(result, "constr_violation", 0) <= 0),
                    "fell_back_to_setpoint_search": fallback is not None,
                    "noise_increment_limit_relaxed": design.increment_relaxed,
-                   "noise": noise_shares(design, gains, tf)}
+                   "noise": noise_shares(design, gains, tf), "design_model": self.model_record}
         if design.increment_relaxed:  # no Kp met it with Ms for the stabilising PID's Ti, Td (LoadDesign.prepare)
             relaxed = tuple(r for r in relaxed if r.limit != "max_noise_increment") + (
                 Relaxation("max_noise_increment", self.deploy.max_noise_increment, math.inf),)
         return Candidate(vector, gains, structure, details, limits, relaxed, ms_met, overshoot, ise, cost)
+
+    def _trade(self, design: LoadDesign, vector, weight: float, best_load: float) -> tuple[dict, np.ndarray]:
+        """The setpoint search within the load tolerance (SetpointDesign) from the load optimum with b = weight:
+        (what it found: {"load_cost", "ISE", "Overshoot", "feasible", "nearest_load_tolerance": every limit but the load
+        tolerance met, "evaluations"}, its vector). Where the load
+        search used the local models, so does this one (its load limit the models' optimum's), and its result's load
+        IAE is verified on the FMU ("load_cost" the FMU's, "load_cost_model", "validation_error"); where the two
+        differ by more than MODEL_TOLERANCE, the search runs again on the FMU (design_model's "setpoint_search")."""
+        baseline, deploy, seed = self.baseline, self.deploy, self.seed
+        while True:
+            on_models = design.models is not None
+            reference = self.model_record["predicted_load_cost"] if on_models else best_load
+            trade = SetpointDesign(design, reference, baseline.load_tolerance, deploy.max_overshoot, self.seeds)
+            self.progress.step("setpoint ISE within the overshoot limit (no b met it)"
+                               + (" on the local models' load cost" if on_models else ""),
+                               trade.budget(self.maxiter, self.popsize))
+            try:
+                second = trade.search(np.append(vector, 2.0 * weight - 1.0), seed, self.maxiter, self.popsize,
+                                      progress=self.progress)
+                values = trade.constraint_values(second.x)
+                feasible = bool(np.max(values) <= 0)
+                nearest = not feasible and bool(np.max(np.delete(values, -2)) <= 0)  # only the load limit missed
+                load, ise, overshoot = trade.evaluate(second.x)
+            finally:
+                trade.close()
+            self.evaluations += int(second.nfev)
+            found = {"load_cost": load, "ISE": ise, "Overshoot": overshoot, "feasible": feasible,
+                     "nearest_load_tolerance": nearest, "evaluations": int(second.nfev)}
+            if not on_models:
+                if "setpoint_search" not in self.model_record:
+                    self.model_record["setpoint_search"] = "fmu"
+                return found, np.asarray(second.x)
+            x = np.asarray(second.x)
+            measured = design.load_cost(design.gains(x[:-1]), design.filters(x[:-1]))
+            error = abs(measured - load) / measured if measured > 0 else math.inf
+            found.update({"load_cost": measured, "load_cost_model": load, "validation_error": error})
+            if error <= MODEL_TOLERANCE:
+                self.model_record["setpoint_search"] = "identified"
+                return found, x
+            self.model_record["setpoint_search"] = "fmu"
+            self.model_record["setpoint_search_note"] = (
+                f"the setpoint search's result has load cost {measured:.4g} on the FMU, {load:.4g} on the models "
+                f"({100 * error:.1f} % apart, tolerance {100 * MODEL_TOLERANCE:.0f} %): that search ran again on the FMU")
+            design.use_fmu()
 
     def _setpoint_response(self, config: TuningConfig, gains: tuple, structure: tuple) -> tuple[float, float]:
         """(ISE, worst overshoot [%]) of the training episodes the design chose b on (noise free)."""
@@ -409,7 +440,8 @@ class Designer:
                                           "evaluations": 0},
                    "estimates": [], "active_limits": [], "setpoint_weights": rows,
                    "stabilising_gains": first.gains.as_dict(), "feasible": True,
-                   "fell_back_to_setpoint_search": False, "noise_increment_limit_relaxed": False}
+                   "fell_back_to_setpoint_search": False, "noise_increment_limit_relaxed": False,
+                   "design_model": self.model_record}
         return Candidate(np.asarray(first.action), gains, structure, details, limits, (), True, best["Overshoot"],
                          best["ISE"], details["load_cost"])
 

@@ -16,6 +16,12 @@ and the setpoint search within a load limit. tuning.design_rule orders them; tun
    gives no constraint; the Ms check on the FMU (tuning.fixed_pid.detune_over) covers it. Where no Kp meets the
    noise-increment limit with Ms for the stabilising PID's Ti, Td and any filter, the limit is dropped
    (`relax_increment_limit`).
+   With baseline.design_model "identified" (one loop, uncoupled), the search scores its candidates on local models
+   instead (`identify_models`: robustness.local_model fitted to the response measured at each point; the load
+   response per unit load by lfilter, the chatter of the PID output's response): microseconds of numpy instead of
+   an FMU simulation. The choice is verified on the FMU (`validate_models`) and the search reruns on
+   the FMU (`use_fmu`) where the two differ by more than MODEL_TOLERANCE (`search_verified`). The setpoint search's
+   load cost follows the same path (`search_load_cost`; tuning.design_rule verifies its result on the FMU too).
 2. b (`setpoint_weight`): on noise-free training episodes (setpoint steps), the b in B_GRID with the lowest ISE
    among those with overshoot <= deploy.max_overshoot. b changes neither Ms nor the load response.
 3. The setpoint search (`SetpointDesign`): (Kp, Ti, Td[, Tf], b) minimise the setpoint ISE of those episodes
@@ -36,6 +42,7 @@ from prlpid_fmi.loop.core import LoopCore, control_scales, pid_structure
 from prlpid_fmi.loop.evaluation import gains_rollout
 from prlpid_fmi.metrics import chatter_fraction
 from prlpid_fmi.progress import QUIET, Steps, batch_counted, counted
+from prlpid_fmi.robustness.local_model import closed_loop_stable, feedback_polynomials, identify, load_responses
 from prlpid_fmi.robustness.margins import pid_frequency_response, setpoint_range_points
 from prlpid_fmi.tuning.load_experiment import (DIVERGED_COST, load_config, load_iae, open_core, parameter_samples,
                                                plant_responses, signed_loads, start_measurement)
@@ -52,6 +59,14 @@ ACTIVE_TOLERANCE = 0.01  # an estimate this close (relative) to its limit holds 
 CHATTER_PENALTY = 10.0  # the load cost grows by this x the chatter above MAX_CHATTER (relative to it)
 KP_SCAN = 48  # |Kp| values scanned for the interval that meets the limits
 KP_REFINE = 24  # |Kp| values on the finer grid at each end of that interval
+MODEL_FIT_LIMIT = 0.05  # RMS relative misfit of a local model to its measured response above which it is not used
+MODEL_TOLERANCE = 0.10  # |FMU - model| / FMU load cost of the search's result above which the search reruns on the FMU
+
+
+def penalised(load: float, chatter: float) -> float:
+    """The load cost of a J_load and a worst chatter: J_load x (1 + CHATTER_PENALTY x the chatter above MAX_CHATTER,
+    relative to it)."""
+    return load * (1.0 + CHATTER_PENALTY * max(0.0, chatter - MAX_CHATTER) / MAX_CHATTER)
 
 
 def columns(population) -> np.ndarray:
@@ -119,8 +134,11 @@ class LoadDesign(OutcomeCache):
     """
 
     def __init__(self, config: TuningConfig, load_step: float, max_sensitivity: float | None, max_noise_gain: float,
-                 widen: float, max_noise_increment: float = math.inf, workers: int = 1):
+                 widen: float, max_noise_increment: float = math.inf, workers: int = 1, design_model: str = "fmu"):
         self.config = dataclasses.replace(config, forecast_horizon=0)
+        self.design_model = design_model  # "identified": the search's load cost on local models (`identify_models`)
+        self.models: list | None = None  # per nominal point: its LocalModel (one loop), while the search uses them
+        self.model_note = ""  # why the local models are not used ("" where they are or were not asked for)
         self.workers = int(workers)  # processes `search` evaluates on (tuning.search_pool)
         self.args = (config, load_step, max_sensitivity, max_noise_gain, widen, max_noise_increment)
         self.load_step = float(load_step)
@@ -310,6 +328,7 @@ class LoadDesign(OutcomeCache):
             probe = gains_rollout(lambda c: gains, quiet, seed=0, core=core)
             self.loads.append(signed_loads(self.config, probe, self.load_step))
             self.cores.append(open_core(load_config(self.config, p, self.loads[-1], start)))
+        self.identify_models()
 
     def measured(self) -> dict:
         """The plant responses `prepare` measured and their reference windings (picklable), for another design's
@@ -319,7 +338,8 @@ class LoadDesign(OutcomeCache):
     def prepared(self) -> dict:
         """What `prepare` measured and decided (picklable): a replica (`replica`) evaluates exactly as this design."""
         return {"plants": self.plants, "reference": self.reference, "max_increment": self.max_increment,
-                "increment_relaxed": self.increment_relaxed, "loads": self.loads, "start": self.start}
+                "increment_relaxed": self.increment_relaxed, "loads": self.loads, "start": self.start,
+                "models": self.models, "model_note": self.model_note}
 
     @classmethod
     def replica(cls, args: tuple, prepared: dict) -> "LoadDesign":
@@ -390,21 +410,84 @@ class LoadDesign(OutcomeCache):
         """J_load (module docstring) of constant gains with measurement filter tf."""
         return self.load_response(gains, tf)[0]
 
+    def search_load_cost(self, gains: tuple, tf: list[float]) -> float:
+        """J_load as the searches see it: on the local models while they are used, else on the FMU (load_cost)."""
+        return self.model_load_response(gains, tf)[0] if self.models is not None else self.load_cost(gains, tf)
+
     def new_outcome(self, vector) -> tuple[float, float] | None:
-        """load_response of a vector, None when a loop has no Kp interval for it (not simulated); `outcome` keeps it."""
+        """load_response of a vector (model_load_response while `models` are used), None when a loop has no Kp
+        interval for it (not simulated); `outcome` keeps it."""
         if not self.feasible(vector):
             return None
+        if self.models is not None:
+            return self.model_load_response(self.gains(vector), self.filters(vector))
         return self.load_response(self.gains(vector), self.filters(vector))
+
+    # -- the load cost on local models -------------------------------------------------------------------------
+    def identify_models(self) -> None:
+        """With design_model "identified": a LocalModel (robustness.local_model.identify) per nominal operating point
+        from its measured response, used by the search (`models`), or the reason it cannot be (`model_note`): several
+        loops or the coupled PID, a point without a verified response, a fit worse than MODEL_FIT_LIMIT."""
+        self.models, self.model_note = None, ""
+        if self.design_model != "identified":
+            return
+        if self.config.n_loops != 1 or self.config.coupled:
+            self.model_note = "several loops: the load cost is simulated on the FMU"
+            return
+        models = []
+        for p, plants in zip(self.points, self.plants):
+            if plants is None:
+                self.model_note = f"no verified frequency response at the operating point {list(p)}"
+                return
+            model = identify(plants[0])
+            if not model.fit_error <= MODEL_FIT_LIMIT:
+                self.model_note = (f"the local model at {list(p)} fits the measured response to "
+                                   f"{100 * model.fit_error:.1f} % (limit {100 * MODEL_FIT_LIMIT:.0f} %)")
+                return
+            models.append(model)
+        self.models = models
+
+    def model_load_response(self, gains: tuple, tf: list[float]) -> tuple[float, float]:
+        """(J_load, worst chatter) as load_response defines them, on the local models (one loop): the load response
+        of robustness.local_model.load_responses over the load experiment's samples after the load, per unit load;
+        chatter of the PID output's response to the point's load. A closed loop unstable on a model: DIVERGED_COST."""
+        c = self.config
+        Kp, Ti, Td, _ = gains
+        Nc, Dc = feedback_polynomials(Kp[0], Ti[0], Td[0], c.sample_time_s, c.derivative_filter_N, tf[0],
+                                      c.measurement_filter_order)
+        total, chatter = 0.0, 0.0
+        for model, loads in zip(self.models, self.loads):
+            if not closed_loop_stable(model, Nc, Dc):
+                return DIVERGED_COST, 0.0
+            dy, du = load_responses(model, Nc, Dc, c.setpoint_hold_steps)
+            iae = float(np.sum(np.abs(dy)) * c.sample_time_s)
+            total += iae
+            chatter = max(chatter, chatter_fraction(abs(loads[0]) * du, self.spans[0]))
+        return total / len(self.models), chatter
+
+    def validate_models(self, vector) -> dict:
+        """The search's result on the FMU against its prediction on the local models: {"predicted_load_cost",
+        "fmu_load_cost", "fmu_chatter", "validation_error" (|FMU - model| / FMU), "tolerance", "agrees"}: agrees when
+        the error is at most MODEL_TOLERANCE and the FMU's chatter at most MAX_CHATTER."""
+        gains, tf = self.gains(vector), self.filters(vector)
+        predicted, _ = self.model_load_response(gains, tf)
+        measured, chatter = self.load_response(gains, tf)
+        error = abs(measured - predicted) / measured if measured > 0 else math.inf
+        return {"predicted_load_cost": float(predicted), "fmu_load_cost": float(measured), "fmu_chatter": float(chatter),
+                "validation_error": float(error), "tolerance": MODEL_TOLERANCE,
+                "agrees": bool(error <= MODEL_TOLERANCE and chatter <= MAX_CHATTER and measured < DIVERGED_COST)}
+
+    def use_fmu(self) -> None:
+        """The search's load cost on the FMU from here on (the local models dropped, their outcomes forgotten)."""
+        self.models = None
+        self._seen.clear()
 
     def cost(self, vector) -> float:
         """The load cost of a vector: DIVERGED_COST when a loop has no Kp interval (not simulated); J_load x
         (1 + CHATTER_PENALTY x the chatter above MAX_CHATTER, relative) otherwise: a saturating limit cycle,
         which the linear Ms cannot see, chatters."""
         found = self.outcome(vector)
-        if found is None:
-            return DIVERGED_COST
-        load, chatter = found
-        return load * (1.0 + CHATTER_PENALTY * max(0.0, chatter - MAX_CHATTER) / MAX_CHATTER)
+        return DIVERGED_COST if found is None else penalised(*found)
 
     def costs(self, population: np.ndarray, pool: SearchPool) -> np.ndarray:
         """`cost` of every column of population (n, S) (scipy's vectorized form), the new ones evaluated on `pool`."""
@@ -419,11 +502,17 @@ class LoadDesign(OutcomeCache):
         per parameter at most); scipy's OptimizeResult of the better. Each generation is evaluated as a whole
         (deferred updating) on `pool_workers()` processes (tuning.search_pool): the same result for any number.
         progress: counts every cost evaluation."""
-        with SearchPool(self, LoadDesign.replica, (self.args, self.prepared()), self.pool_workers(),
-                        fmus=search_fmus(self.config)) as pool:
-            costs = batch_counted(lambda x: self.costs(x, pool), progress)
+        if self.models is not None:  # the local models: in this process, microseconds a candidate
+            costs = batch_counted(lambda x: np.array([self.cost(v) for v in columns(x)]), progress)
             result = differential_evolution(costs, [(-1.0, 1.0)] * self.n, maxiter=maxiter, popsize=popsize,
                                             seed=seed, polish=False, tol=1e-6, vectorized=True, updating="deferred")
+        else:
+            with SearchPool(self, LoadDesign.replica, (self.args, self.prepared()), self.pool_workers(),
+                            fmus=search_fmus(self.config)) as pool:
+                costs = batch_counted(lambda x: self.costs(x, pool), progress)
+                result = differential_evolution(costs, [(-1.0, 1.0)] * self.n, maxiter=maxiter, popsize=popsize,
+                                                seed=seed, polish=False, tol=1e-6, vectorized=True,
+                                                updating="deferred")
         result.nfev = costs.calls  # scipy counts a vectorized call as one
         if result.fun < DIVERGED_COST:
             cost = counted(self.cost, progress, start=costs.calls)
@@ -434,6 +523,36 @@ class LoadDesign(OutcomeCache):
                 result.x, result.fun = polished.x, float(polished.fun)
             result.nfev += int(polished.nfev)
         return result
+
+    def search_verified(self, seed: int, maxiter: int, popsize: int, progress: Steps = QUIET) -> tuple:
+        """`search` on the local models where `identify_models` found them, its result verified on the FMU
+        (`validate_models`; its cost is then the FMU's); where they disagree, or without models, `search` on the FMU.
+        Returns (scipy's result, nfev the evaluations of both searches; the record of fixed_pid.json's
+        "design_model": {"requested", "path" ("identified" | "fmu"), "note", "models", and validate_models' keys})."""
+        record = {"requested": self.design_model, "path": "fmu", "note": self.model_note,
+                  "models": [m.as_dict() for m in self.models or []]}
+        spent = 0
+        if self.models is not None:
+            progress.step("load design on the identified local models (differential evolution, then Nelder-Mead)",
+                          self.budget(maxiter, popsize))
+            result = self.search(seed, maxiter, popsize, progress=progress)
+            progress.step("load design: the identified models' choice verified on the FMU")
+            check = self.validate_models(result.x)
+            record.update(check)
+            if check["agrees"]:
+                record["path"] = "identified"
+                result.fun = penalised(check["fmu_load_cost"], check["fmu_chatter"])
+                return result, record
+            record["note"] = (f"the FMU's load cost {check['fmu_load_cost']:.4g} differs from the models' "
+                              f"{check['predicted_load_cost']:.4g} by {100 * check['validation_error']:.1f} % "
+                              f"(tolerance {100 * check['tolerance']:.0f} %) or the loop chatters on the FMU "
+                              f"({check['fmu_chatter']:.3f}): the search ran on the FMU")
+            spent = int(result.nfev)
+            self.use_fmu()
+        progress.step("load design (differential evolution, then Nelder-Mead)", self.budget(maxiter, popsize))
+        result = self.search(seed, maxiter, popsize, progress=progress)
+        result.nfev = int(result.nfev) + spent
+        return result, record
 
     def close(self) -> None:
         for core in self.cores + self.quiet_cores:
@@ -494,7 +613,9 @@ class SetpointDesign(OutcomeCache):
         self._seen: dict = {}
         self._owns_design = False  # a replica's design is its own (closed with it)
 
-    def weight(self, vector) -> float:
+    @staticmethod
+    def weight(vector) -> float:
+        """b of a vector: its last entry mapped from [-1, 1] to [0, 1]."""
         return (min(max(float(vector[-1]), -1.0), 1.0) + 1.0) / 2.0
 
     @classmethod
@@ -515,7 +636,7 @@ class SetpointDesign(OutcomeCache):
         """(load cost, ISE, overshoot) of a vector, simulated."""
         d = self.design
         gains, tf = d.gains(vector[:-1]), d.filters(vector[:-1])
-        load = d.load_cost(gains, tf)
+        load = d.search_load_cost(gains, tf)
         self.core.set_structure([self.weight(vector)] * d.config.n_loops, d.c, tf)
         return (load, *setpoint_response(self.core, gains, self.seeds))
 

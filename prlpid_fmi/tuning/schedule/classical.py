@@ -8,7 +8,8 @@ What a control engineer does by hand on a nonlinear plant, from the FMU alone (n
    around the trim the loop itself holds, so an open-loop unstable branch needs no open-loop trim), and the
    fixed PID's load design (tuning.load_design, the same objective, limits and budget) is made for that point
    alone: Kp, Ti, Td minimise the IAE of a load step at the plant input there, under Ms <= deploy.max_sensitivity
-   and the noise bounds of the local plant; a row whose check on the FMU detuned it below the fixed PID's load
+   and the noise bounds of the local plant (on the local model identified there, verified on the FMU, as the fixed
+   PID's: LoadDesign.search_verified); a row whose check on the FMU detuned it below the fixed PID's load
    rejection at that point is the fixed PID there. The structure (b, c, Tf) is the fixed PID's for every row: Tf is a
    noise choice, and b acts on setpoint steps, which cross operating points.
 3. The table is interpolated linearly over the setpoint (GainSchedule: held outside the breakpoints) and its Ms
@@ -106,11 +107,11 @@ def local_design(config: TuningConfig, setpoint: float, start: tuple, baseline, 
     point = operating_point(config, setpoint)
     local = _at(config, point)
     design = LoadDesign(local, baseline.load_step, limit, deploy.max_noise_gain, baseline.widen_ranges,
-                        deploy.max_noise_increment, search_workers(baseline.workers))
+                        deploy.max_noise_increment, search_workers(baseline.workers), baseline.design_model)
     try:
         design.prepare(start)
-        progress.step(f"local load design at {setpoint:.4g}", design.budget(baseline.maxiter, baseline.popsize))
-        result = design.search(seed, baseline.maxiter, baseline.popsize, progress=progress)
+        progress.step(f"local load design at {setpoint:.4g}")
+        result, record = design.search_verified(seed, baseline.maxiter, baseline.popsize, progress=progress)
         gains = design.gains(np.asarray(result.x))
         estimate = design.estimates(gains, list(design.tf))[0]["Ms"]
         repaired = detune_over(dataclasses.replace(design.search_config, tuned_structure=config.tuned_structure),
@@ -126,7 +127,8 @@ def local_design(config: TuningConfig, setpoint: float, start: tuple, baseline, 
     finally:
         design.close()
     return final, {"setpoint": float(setpoint), "load_cost": float(cost), "Ms_estimate": estimate,
-                   "detuned": (not kept) and repaired != gains, "kept_fixed": kept}
+                   "detuned": (not kept) and repaired != gains, "kept_fixed": kept,
+                   "design_model": {k: v for k, v in record.items() if k != "models"}}
 
 
 def _row(gains: tuple) -> dict:

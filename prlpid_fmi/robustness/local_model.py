@@ -1,0 +1,167 @@
+"""A local linear model of the plant at one operating point, identified from its measured frequency response, and
+the load response of any PID on it.
+
+The model: a discrete transfer function in q = z^-1 from the plant input u_k to the measurement y_k,
+
+    P(q) = (b_1 q + ... + b_n q^n) / (1 + a_1 q + ... + a_n q^n)      (b_0 = 0: u_k moves y_{k+1} first)
+
+fitted to robustness.plant_response.MeasuredPlant's P(e^{j w Ts}) (the multisine experiment the Ms limits already
+use: the ZOH discretisation of the plant, one sample of delay included) by Sanathanan-Koerner iterations: linear
+least squares of the relative error |A P_meas - B| / (|A_prev| |P_meas|) over the measured frequencies, SK_ITERATIONS
+times. The order is the lowest of 1..MAX_ORDER whose RMS relative error over the measured frequencies is at most
+FIT_TOLERANCE (else the best of them). A ZOH-discretised linear plant of order n is matched exactly at order n.
+
+The load response (`load_responses`): the loop held at the point, a step d at the plant input, the PID's
+feedback law (control.pid: measurement filter F, integral of the unfiltered error, backward-difference derivative
+with its filter Td/N on the filtered measurement; setpoint weights do not enter at a constant setpoint; output limits
+and anti-windup ignored) in closed loop with P:
+
+    dy/d = B Dc / (A Dc + B Nc),   du_pid/d = -B Nc / (A Dc + B Nc),   C = Nc / Dc (`feedback_polynomials`)
+
+simulated with scipy.signal.lfilter per candidate.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.signal import lfilter
+
+from prlpid_fmi.robustness.plant_response import MeasuredPlant
+
+MAX_ORDER = 4  # highest order tried
+FIT_TOLERANCE = 0.02  # RMS relative error at which the lowest order is taken
+SK_ITERATIONS = 20  # Sanathanan-Koerner re-weightings
+
+
+@dataclass(frozen=True, eq=False)
+class LocalModel:
+    """P(q) at one operating point: numerator (n+1,) b_0 = 0, b_1..b_n and denominator (n+1,) 1, a_1..a_n in powers
+    of q = z^-1; sample_time_s [s]; point: the setpoints per loop; fit_error: RMS over the measured frequencies of
+    |P_model - P_meas| / |P_meas|."""
+
+    numerator: np.ndarray
+    denominator: np.ndarray
+    sample_time_s: float
+    point: tuple
+    fit_error: float
+
+    @property
+    def order(self) -> int:
+        return len(self.denominator) - 1
+
+    def response(self, omega) -> np.ndarray:
+        """P(e^{j w Ts}) at omega [rad/s] (complex, omega's shape)."""
+        q = np.exp(-1j * np.asarray(omega, float) * self.sample_time_s)
+        return np.polyval(self.numerator[::-1], q) / np.polyval(self.denominator[::-1], q)
+
+    def as_dict(self) -> dict:
+        """{"point", "order", "numerator", "denominator", "fit_error"} (fixed_pid.json)."""
+        return {"point": list(self.point), "order": self.order, "numerator": self.numerator.tolist(),
+                "denominator": self.denominator.tolist(), "fit_error": float(self.fit_error)}
+
+
+def _fit(omega: np.ndarray, P: np.ndarray, Ts: float, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(numerator, denominator) of order n by Sanathanan-Koerner iterations on the relative error."""
+    q = np.exp(-1j * omega * Ts)
+    powers = q[:, None] ** np.arange(1, n + 1)[None, :]  # (K, n): q^1 .. q^n
+    weight = 1.0 / np.abs(P)
+    a = np.zeros(n)
+    for _ in range(SK_ITERATIONS):
+        w = weight / np.abs(1.0 + powers @ a)
+        # A P - B = P + sum a_i q^i P - sum b_i q^i: unknowns [a, b], real and imaginary parts stacked
+        M = np.hstack([powers * P[:, None], -powers]) * w[:, None]
+        rhs = -P * w
+        x, *_ = np.linalg.lstsq(np.vstack([M.real, M.imag]), np.concatenate([rhs.real, rhs.imag]), rcond=None)
+        if not np.all(np.isfinite(x)):
+            break
+        a = x[:n]
+        b = x[n:]
+    return np.concatenate([[0.0], b]), np.concatenate([[1.0], a])
+
+
+def identify(plant: MeasuredPlant, max_order: int = MAX_ORDER, tolerance: float = FIT_TOLERANCE) -> LocalModel:
+    """The LocalModel of a measured response (module docstring): the lowest order with fit_error <= tolerance, else
+    the order with the least fit_error."""
+    omega = np.asarray(plant.frequencies_rad_s, float)
+    P = np.asarray(plant.response, complex)
+    if len(omega) < 2 or not np.all(np.isfinite(P)) or np.any(P == 0):
+        raise ValueError("a local model needs a finite, nonzero response at two frequencies or more")
+    best = None
+    for n in range(1, max_order + 1):
+        if 2 * len(omega) < 2 * n + 1:
+            break
+        num, den = _fit(omega, P, plant.sample_time_s, n)
+        model = LocalModel(num, den, float(plant.sample_time_s), tuple(plant.point), math.inf)
+        error = float(np.sqrt(np.mean(np.abs(model.response(omega) - P) ** 2 / np.abs(P) ** 2)))
+        error = error if math.isfinite(error) else math.inf
+        model = LocalModel(num, den, float(plant.sample_time_s), tuple(plant.point), error)
+        if best is None or error < best.fit_error:
+            best = model
+        if error <= tolerance:
+            return model
+    return best
+
+
+def _lowpass(T: float, Ts: float) -> tuple[np.ndarray, np.ndarray]:
+    """Backward-Euler first-order low pass x_k = (T x_{k-1} + Ts in_k) / (T + Ts) as (num, den) in q."""
+    return np.array([Ts / (T + Ts)]), np.array([1.0, -T / (T + Ts)])
+
+
+def feedback_polynomials(Kp: float, Ti: float, Td: float, sample_time_s: float,
+                         derivative_filter_N: float | None = None, measurement_filter_s: float = 0.0,
+                         measurement_filter_order: int = 1) -> tuple[np.ndarray, np.ndarray]:
+    """(Nc, Dc) in powers of q = z^-1 of the PID's feedback law u = -C y at a constant setpoint (control.pid):
+    C = Kp (F (1 + Td Fd (1 - q) / Ts) + Ts / (Ti (1 - q))), F the measurement filter (order 1: one backward-Euler
+    section of Tf; order 2: two of Tf/2), Fd the derivative filter of Td/N. Ti = inf: no integral term."""
+    Ts = float(sample_time_s)
+    num_f, den_f = np.array([1.0]), np.array([1.0])
+    if measurement_filter_s > 0:
+        section = _lowpass(measurement_filter_s / measurement_filter_order, Ts)
+        for _ in range(measurement_filter_order):
+            num_f, den_f = np.polymul(num_f, section[0]), np.polymul(den_f, section[1])
+    Tdf = Td / derivative_filter_N if derivative_filter_N and Td != 0 else 0.0
+    dd = np.array([Tdf + Ts, -Tdf])  # the derivative's denominator x Ts: D = (1 - q) / ((Tdf + Ts) - Tdf q) ed
+    diff = np.array([1.0, -1.0])
+    integral = math.isfinite(Ti)
+    # common denominator den_f * dd (* (1 - q) with an integral term)
+    num = np.polymul(num_f, dd)
+    if Td != 0:
+        num = _add(num, Td * np.polymul(num_f, diff))
+    den = np.polymul(den_f, dd)
+    if integral:
+        num = _add(np.polymul(num, diff), (Ts / Ti) * den)
+        den = np.polymul(den, diff)
+    return Kp * num, den
+
+
+def _add(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a + b as polynomials in ascending powers of q (the shorter padded with zeros at the end)."""
+    out = np.zeros(max(len(a), len(b)))
+    out[:len(a)] += a
+    out[:len(b)] += b
+    return out
+
+
+def closed_loop(model: LocalModel, Nc: np.ndarray, Dc: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(num_y, num_u, den) in q of the load responses dy/d = B Dc / den and du_pid/d = -B Nc / den,
+    den = A Dc + B Nc."""
+    B, A = model.numerator, model.denominator
+    den = _add(np.convolve(A, Dc), np.convolve(B, Nc))
+    return np.convolve(B, Dc), -np.convolve(B, Nc), den
+
+
+def closed_loop_stable(model: LocalModel, Nc: np.ndarray, Dc: np.ndarray) -> bool:
+    """Every root of A Dc + B Nc (in z) strictly inside the unit circle."""
+    den = np.trim_zeros(closed_loop(model, Nc, Dc)[2], "b")
+    return bool(np.all(np.isfinite(den))) and (len(den) < 2 or bool(np.max(np.abs(np.roots(den))) < 1.0))
+
+
+def load_responses(model: LocalModel, Nc: np.ndarray, Dc: np.ndarray, steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """(dy, du_pid), each (steps,), of a unit step at the plant input from sample 0 on: dy_k the measurement's
+    change at sample k, du_pid_k the PID output's (its first nonzero value is at k = 1)."""
+    num_y, num_u, den = closed_loop(model, Nc, Dc)
+    step = np.ones(int(steps))
+    with np.errstate(over="ignore", invalid="ignore"):
+        return lfilter(num_y, den, step), lfilter(num_u, den, step)

@@ -1,0 +1,201 @@
+"""robustness.local_model: the local models identified from the measured frequency responses, the PID's feedback
+law as polynomials, and the load search on those models (tuning.load_design, baseline.design_model)."""
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from scipy.signal import cont2discrete, lfilter
+
+from prlpid_fmi.control.pid import PID
+from prlpid_fmi.robustness.local_model import (closed_loop_stable, feedback_polynomials, identify, load_responses)
+from prlpid_fmi.robustness.margins import pid_frequency_response, setpoint_range_points
+from prlpid_fmi.robustness.plant_response import MeasuredPlant
+from prlpid_fmi.scenario.presets import preset
+from prlpid_fmi.tuning.load_design import LoadDesign
+from prlpid_fmi.tuning.load_experiment import plant_responses
+
+STABILISING = ([4.0], [1.0], [0.05], None)  # Kp, Ti, Td, coupling: stabilises 1/(s - 1) and 1/(s - 1.5) at Ts 0.1
+
+
+def zoh(num, den, Ts):
+    """(numerator, denominator) in powers of z^-1 of the ZOH discretisation (scipy.signal.cont2discrete)."""
+    b, a, _ = cont2discrete((num, den), Ts, method="zoh")
+    return np.ravel(b), np.ravel(a)
+
+
+@pytest.mark.parametrize("name, pole", [("first_order", 1.0), ("first_order_1p5", 1.5)])
+def test_identified_model_of_an_unstable_first_order_plant_is_its_zoh_discretisation(name, pole):
+    """1/(s - a) measured on the FMU at each operating point: the identified model is of order 1 and its
+    coefficients are scipy's ZOH discretisation's within 1e-4 (the multisine estimate converges to 1e-3 of |1 + L|;
+    a linear plant's is far closer)."""
+    config = preset(name)
+    b_ref, a_ref = zoh([1.0], [1.0, -pole], config.sample_time_s)
+    for plants in plant_responses(config, STABILISING, setpoint_range_points(config)):
+        model = identify(plants[0])
+        assert model.order == 1
+        np.testing.assert_allclose(model.denominator, a_ref, rtol=0, atol=1e-4)
+        np.testing.assert_allclose(model.numerator, b_ref, rtol=0, atol=1e-4)
+        assert model.fit_error < 1e-3
+
+
+def test_identify_picks_the_lowest_order_that_fits_a_second_order_response():
+    """A ZOH-discretised 2/((s + 1)(s + 3)) sampled at 60 frequencies: order 2, coefficients within 1e-8; the order-1
+    fit would miss it by far more than the fit tolerance."""
+    Ts = 0.05
+    b, a = zoh([2.0], [1.0, 4.0, 3.0], Ts)
+    w = np.geomspace(0.01, math.pi / Ts, 60)
+    q = np.exp(-1j * w * Ts)
+    P = np.polyval(b[::-1], q) / np.polyval(a[::-1], q)
+    model = identify(MeasuredPlant(w, P, Ts, (0.0,), ()))
+    assert model.order == 2
+    np.testing.assert_allclose(model.denominator, a, atol=1e-8)
+    np.testing.assert_allclose(model.numerator, b, atol=1e-8)
+    assert identify(MeasuredPlant(w, P, Ts, (0.0,), ()), max_order=1).fit_error > 0.05
+
+
+@pytest.mark.parametrize("Kp, Ti, Td, N, Tf, order", [(2.0, 1.5, 0.3, 10.0, 0.2, 2), (2.0, math.inf, 0.3, None, 0.0, 1),
+                                                      (1.3, 0.7, 0.0, None, 0.5, 1), (0.8, 2.0, 0.1, 5.0, 0.0, 1)])
+def test_feedback_polynomials_are_the_pid_law(Kp, Ti, Td, N, Tf, order):
+    """u = -C y at a constant setpoint: the polynomials filter a random measurement exactly as control.pid.PID steps
+    it (from rest at 0, no limits), and equal margins.pid_frequency_response on the unit circle."""
+    Ts = 0.1
+    Nc, Dc = feedback_polynomials(Kp, Ti, Td, Ts, N, Tf, order)
+    y = np.concatenate([[0.0], np.random.default_rng(3).normal(size=300)])
+    pid = PID(Ts, derivative_filter_N=N, setpoint_weight=1.0, derivative_weight=0.0, measurement_filter_s=Tf,
+              measurement_filter_order=order, anti_windup="none")
+    u = np.array([pid.step_values([0.0], [v], [Kp], [Ti], [Td])[0] for v in y])
+    np.testing.assert_allclose(lfilter(-Nc, Dc, y), u, rtol=1e-9, atol=1e-9)
+    w = np.geomspace(0.01, math.pi / Ts, 50)
+    q = np.exp(-1j * w * Ts)
+    C = np.polyval(Nc[::-1], q) / np.polyval(Dc[::-1], q)
+    R = pid_frequency_response(Kp, Ti, Td, Ts, w, N, Tf, order)
+    np.testing.assert_allclose(C, R, rtol=1e-9)
+
+
+def test_load_response_of_a_p_controller_on_a_first_order_lag_by_hand():
+    """y_{k+1} = 0.5 y_k + u_k + d_k with u = -y (P control, Kp 1) and d a unit step from k = 0: y_0 = 0 and
+    y_{k+1} = -0.5 y_k + 1 (0, 1, 0.5, 0.75, ...); the PID output -y. Kp 2 puts the closed-loop pole at -1.5."""
+    from prlpid_fmi.robustness.local_model import LocalModel
+
+    model = LocalModel(np.array([0.0, 1.0]), np.array([1.0, -0.5]), 1.0, (0.0,), 0.0)
+    Nc, Dc = feedback_polynomials(1.0, math.inf, 0.0, 1.0)
+    dy, du = load_responses(model, Nc, Dc, 6)
+    expected = [0.0]
+    for _ in range(5):
+        expected.append(-0.5 * expected[-1] + 1.0)
+    np.testing.assert_allclose(dy, expected, atol=1e-12)
+    np.testing.assert_allclose(du, -np.array(expected), atol=1e-12)
+    assert closed_loop_stable(model, Nc, Dc)
+    assert not closed_loop_stable(model, *feedback_polynomials(2.0, math.inf, 0.0, 1.0))  # pole at -1.5
+
+
+def test_nonlinear_plants_model_matches_the_fmus_small_load_step():
+    """The two tanks (nonlinear: outflow ~ sqrt(h)): the load IAE and chatter of a PID on the identified local
+    models equal the FMU's load experiment with a small load (2 % of the span) within 5 %, at every point."""
+    config = preset("two_tank")
+    design = LoadDesign(config, 0.02, 2.0, math.inf, 4.0, design_model="identified")
+    try:
+        design.prepare(([5.0], [40.0], [1.0], None))
+        assert design.models is not None, design.model_note
+        for gains in (([5.0], [40.0], [1.0], None), ([10.0], [20.0], [0.0], None)):
+            model, _ = design.model_load_response(gains, list(design.tf))
+            fmu, _ = design.load_response(gains, list(design.tf))
+            assert model == pytest.approx(fmu, rel=0.05)
+    finally:
+        design.close()
+
+
+def load_search(config, design_model: str, maxiter: int = 6, popsize: int = 8):
+    """The load search (tuning.load_design) of config on design_model's path: (vector, its load cost on the FMU,
+    the design's model note)."""
+    design = LoadDesign(config, 0.1, 2.0, math.inf, 4.0, workers=1, design_model=design_model)
+    try:
+        design.prepare(STABILISING)
+        result = design.search(0, maxiter, popsize)
+        return result.x, design.load_cost(design.gains(result.x), design.filters(result.x)), design.models
+    finally:
+        design.close()
+
+
+def test_model_based_design_on_the_unstable_plant_equals_the_fmu_simulation_design():
+    """1/(s - 1): the load search on the identified models finds a design whose load IAE on the FMU is within 2 % of
+    the design found by simulating every candidate on the FMU (same budget, same seed)."""
+    config = preset("first_order")
+    _, on_models, models = load_search(config, "identified")
+    _, on_fmu, none = load_search(config, "fmu")
+    assert models is not None and none is None
+    assert on_models == pytest.approx(on_fmu, rel=0.02)
+
+
+BUDGET = dict(seed=0, episodes=1, maxiter=3, popsize=5, max_sensitivity=2.0)  # a small fixed-PID design
+
+
+def fixed_pid(design_model: str):
+    """tune_fixed_pid of first_order on a small budget with baseline.design_model = design_model, one worker."""
+    from prlpid_fmi.tuning import design_rule
+
+    return design_rule.tune_fixed_pid(preset("first_order"), baseline=dataclasses.replace(
+        design_rule.BaselineConfig(), design_model=design_model, workers=1), **BUDGET)
+
+
+@pytest.fixture(scope="module")
+def on_fmu():
+    """The small design of first_order with every candidate simulated on the FMU."""
+    return fixed_pid("fmu")
+
+
+def test_the_fixed_pid_on_local_models_is_the_fmu_paths_on_the_unstable_plant(on_fmu):
+    """1/(s - 1) (linear: its local models are exact): the whole fixed-PID rule on the identified models, the load
+    search and the setpoint search within the load tolerance, keeps the design the FMU path keeps (load IAE on the
+    FMU within 2 %), and its report says which path it took and how well the models predicted the FMU."""
+    result = fixed_pid("identified")
+    record = result.report.details["design_model"]
+    assert record["path"] == "identified" and record["agrees"] and record["validation_error"] < 1e-6
+    assert [m["order"] for m in record["models"]] == [1, 1, 1]
+    traded = result.report.details["traded_for_overshoot"]
+    if traded is not None:  # the setpoint search ran on the models too, its result verified on the FMU
+        assert record["setpoint_search"] == "identified" and traded["validation_error"] < 1e-6
+    assert on_fmu.report.details["design_model"]["path"] == "fmu"
+    assert result.cost == pytest.approx(on_fmu.cost, rel=0.02)
+
+
+def test_a_model_that_disagrees_with_the_fmu_sends_the_search_to_the_fmu(monkeypatch, on_fmu):
+    """A local model with twice the plant's gain: the validation on the FMU finds the disagreement (> 10 %), the
+    design report says the FMU path was used and why, and the design is the FMU path's."""
+    from prlpid_fmi.robustness import local_model
+    from prlpid_fmi.tuning import load_design
+
+    def doubled(plant, *args, **kwargs):
+        m = local_model.identify(plant, *args, **kwargs)
+        return dataclasses.replace(m, numerator=2.0 * m.numerator)
+
+    monkeypatch.setattr(load_design, "identify", doubled)
+    result = fixed_pid("identified")
+    record = result.report.details["design_model"]
+    assert record["path"] == "fmu" and record["requested"] == "identified"
+    assert record["validation_error"] > 0.1 and not record["agrees"]
+    assert "differs" in record["note"]
+    np.testing.assert_allclose(result.gains.values()[0], on_fmu.gains.values()[0])
+    assert result.cost == pytest.approx(on_fmu.cost)
+
+
+def test_the_vectorised_kp_scan_equals_the_per_controller_estimates():
+    """MeasuredPlant.scan (what the Kp interval of every candidate uses) against sensitivity_peak, winding and
+    noise_gains of each PID alone, on 1/(s - 1)'s exact ZOH response: the same Ms, winding and noise gains."""
+    Ts = 0.1
+    b, a = zoh([1.0], [1.0, -1.0], Ts)
+    w = np.geomspace(2 * math.pi / (4096 * Ts), math.pi / Ts, 120)
+    q = np.exp(-1j * w * Ts)
+    plant = MeasuredPlant(w, np.polyval(b[::-1], q) / np.polyval(a[::-1], q), Ts, (0.0,), ())
+    Ti, Td, N, Tf = 0.8, 0.05, 10.0, 0.2
+    kps = np.geomspace(0.1, 40.0, 9)
+    ms, noise, winding, increments = plant.scan(kps, lambda x: pid_frequency_response(1.0, Ti, Td, Ts, x, N, Tf))
+    for j, kp in enumerate(kps):
+        C = lambda x, kp=kp: pid_frequency_response(kp, Ti, Td, Ts, x, N, Tf)  # noqa: E731
+        assert ms[j] == pytest.approx(plant.sensitivity_peak(C), rel=1e-9)
+        assert winding[j] == pytest.approx(plant.winding(C), abs=1e-9)
+        assert (noise[j], increments[j]) == pytest.approx(plant.noise_gains(C), rel=1e-9)
+    assert len(set(np.round(winding / math.pi))) > 1  # the scan crosses from unstable to stable gains
