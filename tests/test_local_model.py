@@ -56,6 +56,27 @@ def test_identify_picks_the_lowest_order_that_fits_a_second_order_response():
     assert identify(MeasuredPlant(w, P, Ts, (0.0,), ()), max_order=1).fit_error > 0.05
 
 
+def test_identify_finds_the_dead_time_of_a_delayed_lag():
+    """A ZOH-discretised e^(-0.35 s)/(2 s + 1) at Ts = 0.05 (7 samples of delay, the ZOH's sample on top): no order
+    1..4 without dead time fits it within the tolerance; with it, order 1 and d = 7, the coefficients within 1e-8 of
+    scipy's discretisation, and its unit step response is scipy's delayed by 7 samples."""
+    from scipy.signal import dlsim
+
+    Ts, delay = 0.05, 7
+    b, a = zoh([1.0], [2.0, 1.0], Ts)
+    w = np.geomspace(0.01, math.pi / Ts, 120)
+    q = np.exp(-1j * w * Ts)
+    P = q ** delay * np.polyval(b[::-1], q) / np.polyval(a[::-1], q)
+    assert identify(MeasuredPlant(w, P, Ts, (0.0,), ()), max_delay=0).fit_error > 0.05
+    model = identify(MeasuredPlant(w, P, Ts, (0.0,), ()))
+    assert model.order == 1 and model.fit_error < 1e-6
+    np.testing.assert_allclose(model.numerator, np.concatenate([np.zeros(delay), b]), atol=1e-8)
+    np.testing.assert_allclose(model.denominator, a, atol=1e-8)
+    _, y_ref = dlsim((b[1:], a, Ts), np.ones(60))  # b_1 q / (1 + a_1 q) = b_1 / (z + a_1)
+    y = lfilter(model.numerator, model.denominator, np.ones(60 + delay))
+    np.testing.assert_allclose(y[delay:], y_ref[:, 0], atol=1e-8)
+
+
 @pytest.mark.parametrize("Kp, Ti, Td, N, Tf, order", [(2.0, 1.5, 0.3, 10.0, 0.2, 2), (2.0, math.inf, 0.3, None, 0.0, 1),
                                                       (1.3, 0.7, 0.0, None, 0.5, 1), (0.8, 2.0, 0.1, 5.0, 0.0, 1)])
 def test_feedback_polynomials_are_the_pid_law(Kp, Ti, Td, N, Tf, order):

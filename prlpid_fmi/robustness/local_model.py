@@ -9,7 +9,9 @@ fitted to robustness.plant_response.MeasuredPlant's P(e^{j w Ts}) (the multisine
 use: the ZOH discretisation of the plant, one sample of delay included) by Sanathanan-Koerner iterations: linear
 least squares of the relative error |A P_meas - B| / (|A_prev| |P_meas|) over the measured frequencies, SK_ITERATIONS
 times. The order is the lowest of 1..MAX_ORDER whose RMS relative error over the measured frequencies is at most
-FIT_TOLERANCE (else the best of them). A ZOH-discretised linear plant of order n is matched exactly at order n.
+FIT_TOLERANCE; where none meets it, a dead time of d = 1..MAX_DELAY further samples is tried (q^d B(q) / A(q): the
+numerator's leading zeros), lowest order first, then least d (else the best of them). A ZOH-discretised linear
+plant of order n is matched exactly at order n, with its delay when that is a whole number of samples.
 
 The load response (`load_responses`): the loop held at the point, a step d at the plant input, the PID's
 feedback law (control.pid: measurement filter F, integral of the unfiltered error, backward-difference derivative
@@ -33,11 +35,13 @@ from prlpid_fmi.robustness.plant_response import MeasuredPlant
 MAX_ORDER = 4  # highest order tried
 FIT_TOLERANCE = 0.02  # RMS relative error at which the lowest order is taken
 SK_ITERATIONS = 20  # Sanathanan-Koerner re-weightings
+MAX_DELAY = 40  # extra samples of dead time tried where no order fits without
 
 
 @dataclass(frozen=True, eq=False)
 class LocalModel:
-    """P(q) at one operating point: numerator (n+1,) b_0 = 0, b_1..b_n and denominator (n+1,) 1, a_1..a_n in powers
+    """P(q) at one operating point: numerator (n+1+d,) d + 1 leading zeros, then b_1..b_n, and denominator (n+1,) 1,
+    a_1..a_n in powers
     of q = z^-1; sample_time_s [s]; point: the setpoints per loop; fit_error: RMS over the measured frequencies of
     |P_model - P_meas| / |P_meas|."""
 
@@ -81,26 +85,32 @@ def _fit(omega: np.ndarray, P: np.ndarray, Ts: float, n: int) -> tuple[np.ndarra
     return np.concatenate([[0.0], b]), np.concatenate([[1.0], a])
 
 
-def identify(plant: MeasuredPlant, max_order: int = MAX_ORDER, tolerance: float = FIT_TOLERANCE) -> LocalModel:
-    """The LocalModel of a measured response (module docstring): the lowest order with fit_error <= tolerance, else
-    the order with the least fit_error."""
+def identify(plant: MeasuredPlant, max_order: int = MAX_ORDER, tolerance: float = FIT_TOLERANCE,
+             max_delay: int = MAX_DELAY) -> LocalModel:
+    """The LocalModel of a measured response (module docstring): the lowest order with fit_error <= tolerance; where
+    no order meets it, the lowest order and then the least dead time of 1..max_delay extra samples that does (the
+    numerator's leading zeros: q^d B(q) / A(q), fitted to P e^{j w Ts d}); else the model with the least fit_error."""
     omega = np.asarray(plant.frequencies_rad_s, float)
     P = np.asarray(plant.response, complex)
     if len(omega) < 2 or not np.all(np.isfinite(P)) or np.any(P == 0):
         raise ValueError("a local model needs a finite, nonzero response at two frequencies or more")
+    Ts = float(plant.sample_time_s)
     best = None
-    for n in range(1, max_order + 1):
-        if 2 * len(omega) < 2 * n + 1:
-            break
-        num, den = _fit(omega, P, plant.sample_time_s, n)
-        model = LocalModel(num, den, float(plant.sample_time_s), tuple(plant.point), math.inf)
-        error = float(np.sqrt(np.mean(np.abs(model.response(omega) - P) ** 2 / np.abs(P) ** 2)))
-        error = error if math.isfinite(error) else math.inf
-        model = LocalModel(num, den, float(plant.sample_time_s), tuple(plant.point), error)
-        if best is None or error < best.fit_error:
-            best = model
-        if error <= tolerance:
-            return model
+    for delays in ((0,), range(1, max_delay + 1)):
+        for n in range(1, max_order + 1):
+            if 2 * len(omega) < 2 * n + 1:
+                break
+            for d in delays:
+                num, den = _fit(omega, P * np.exp(1j * omega * Ts * d), Ts, n)
+                num = np.concatenate([np.zeros(d), num])
+                model = LocalModel(num, den, Ts, tuple(plant.point), math.inf)
+                error = float(np.sqrt(np.mean(np.abs(model.response(omega) - P) ** 2 / np.abs(P) ** 2)))
+                error = error if math.isfinite(error) else math.inf
+                model = LocalModel(num, den, Ts, tuple(plant.point), error)
+                if best is None or error < best.fit_error:
+                    best = model
+                if error <= tolerance:
+                    return model
     return best
 
 

@@ -441,8 +441,8 @@ class LoadDesign(OutcomeCache):
                 return
             model = identify(plants[0])
             if not model.fit_error <= MODEL_FIT_LIMIT:
-                self.model_note = (f"the local model at {list(p)} fits the measured response to "
-                                   f"{100 * model.fit_error:.1f} % (limit {100 * MODEL_FIT_LIMIT:.0f} %)")
+                self.model_note = (f"the local model at {list(p)} misses the measured response by "
+                                   f"{100 * model.fit_error:.1f} % RMS (limit {100 * MODEL_FIT_LIMIT:.0f} %)")
                 return
             models.append(model)
         self.models = models
