@@ -371,7 +371,9 @@ def test_tune_progress_goes_to_stderr_and_never_passes_the_target(tmp_path, caps
     search = [line[len("prlpid-fmi: fixed-PID search: "):] for line in err.splitlines()
               if line.startswith("prlpid-fmi: fixed-PID search: ")]
     budgets = {"stabilising PID (setpoint search)": (STABILISING_GENERATIONS + 1) * 2 * 3,
-               "load design (differential evolution, then Nelder-Mead)": (1 + 1) * 2 * 3 + POLISH_PER_GENERATION * 2 * 3}
+               # baseline.design_model identified (the default): the load search on the local models
+               "load design on the identified local models (differential evolution, then Nelder-Mead)":
+                   (1 + 1) * 2 * 3 + POLISH_PER_GENERATION * 2 * 3}
     for name, budget in budgets.items():
         counts = [line.split(": ", 1)[1] for line in search if line.startswith(name + ": ")]
         assert counts[0] == f"0/{budget:,} evaluations (0 %)", counts
@@ -379,6 +381,7 @@ def test_tune_progress_goes_to_stderr_and_never_passes_the_target(tmp_path, caps
         done = int(counts[-1].split(" evaluations in ")[0].replace(",", ""))
         assert 0 < done <= budget and (done == budget) != ("done early" in counts[-1])
     steps = [line.split(" ...")[0] for line in search if line.endswith(" ...")]
+    assert "load design: the identified models' choice verified on the FMU" in steps
     assert steps[0].startswith("Ms check on the FMU of the stabilising PID")
     assert steps[1] == "frequency response of the plant at 3 operating points"
     assert steps[-2].startswith("Ms check on the FMU (3 operating points")
