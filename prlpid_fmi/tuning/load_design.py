@@ -30,6 +30,7 @@ and the setpoint search within a load limit. tuning.design_rule orders them; tun
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 
@@ -502,17 +503,14 @@ class LoadDesign(OutcomeCache):
         per parameter at most); scipy's OptimizeResult of the better. Each generation is evaluated as a whole
         (deferred updating) on `pool_workers()` processes (tuning.search_pool): the same result for any number.
         progress: counts every cost evaluation."""
-        if self.models is not None:  # the local models: in this process, microseconds a candidate
-            costs = batch_counted(lambda x: np.array([self.cost(v) for v in columns(x)]), progress)
+        # the local models in this process (microseconds a candidate), the FMU on the search pool
+        with (contextlib.nullcontext() if self.models is not None else
+              SearchPool(self, LoadDesign.replica, (self.args, self.prepared()), self.pool_workers(),
+                         fmus=search_fmus(self.config))) as pool:
+            costs = batch_counted((lambda x: np.array([self.cost(v) for v in columns(x)])) if pool is None else
+                                  (lambda x: self.costs(x, pool)), progress)
             result = differential_evolution(costs, [(-1.0, 1.0)] * self.n, maxiter=maxiter, popsize=popsize,
                                             seed=seed, polish=False, tol=1e-6, vectorized=True, updating="deferred")
-        else:
-            with SearchPool(self, LoadDesign.replica, (self.args, self.prepared()), self.pool_workers(),
-                            fmus=search_fmus(self.config)) as pool:
-                costs = batch_counted(lambda x: self.costs(x, pool), progress)
-                result = differential_evolution(costs, [(-1.0, 1.0)] * self.n, maxiter=maxiter, popsize=popsize,
-                                                seed=seed, polish=False, tol=1e-6, vectorized=True,
-                                                updating="deferred")
         result.nfev = costs.calls  # scipy counts a vectorized call as one
         if result.fun < DIVERGED_COST:
             cost = counted(self.cost, progress, start=costs.calls)
