@@ -10,7 +10,8 @@ import pytest
 from scipy.signal import cont2discrete, lfilter
 
 from prlpid_fmi.control.pid import PID
-from prlpid_fmi.robustness.local_model import (closed_loop_stable, feedback_polynomials, identify, load_responses)
+from prlpid_fmi.robustness.local_model import (LocalModel, closed_loop_stable, feedback_polynomials, identify,
+                                              load_responses, reference_polynomial, setpoint_response)
 from prlpid_fmi.robustness.margins import pid_frequency_response, setpoint_range_points
 from prlpid_fmi.robustness.plant_response import MeasuredPlant
 from prlpid_fmi.scenario.presets import preset
@@ -96,6 +97,40 @@ def test_feedback_polynomials_are_the_pid_law(Kp, Ti, Td, N, Tf, order):
     np.testing.assert_allclose(C, R, rtol=1e-9)
 
 
+@pytest.mark.parametrize("Kp, Ti, Td, N, Tf, order, b, c", [(2.0, 1.5, 0.3, 10.0, 0.2, 2, 0.4, 0.0),
+                                                            (2.0, math.inf, 0.3, None, 0.0, 1, 1.0, 0.0),
+                                                            (1.3, 0.7, 0.2, 8.0, 0.5, 1, 0.0, 1.0),
+                                                            (0.8, 2.0, 0.1, 5.0, 0.0, 1, 0.7, 0.5)])
+def test_setpoint_response_is_the_pid_law_in_closed_loop(Kp, Ti, Td, N, Tf, order, b, c):
+    """A random setpoint sequence through control.pid.PID (setpoint weights b, c; from rest, no limits) in closed loop
+    with y_{k+1} = 0.8 y_k + 0.3 u_k: u = Cr r - C y with Cr = Nr / Dc (`reference_polynomial`) gives the same u to
+    1e-9, and a unit step gives `setpoint_response`'s y. (The PID's derivative starts from ed(-1) := ed(0), so both
+    sequences start at r = 0 for a sample: a step at k = 0 from rest would skip the c-weighted derivative kick.)"""
+    Ts = 0.1
+    model = LocalModel(np.array([0.0, 0.3]), np.array([1.0, -0.8]), Ts, (0.0,), 0.0)
+    Nc, Dc = feedback_polynomials(Kp, Ti, Td, Ts, N, Tf, order)
+    Nr = reference_polynomial(Kp, Ti, Td, Ts, b, c, N, Tf, order)
+
+    def run(r):
+        pid = PID(Ts, derivative_filter_N=N, setpoint_weight=b, derivative_weight=c, measurement_filter_s=Tf,
+                  measurement_filter_order=order, anti_windup="none")
+        y, ys, us = 0.0, [], []
+        for rk in r:
+            u = pid.step_values([float(rk)], [y], [Kp], [Ti], [Td])[0]
+            ys.append(y)
+            us.append(u)
+            y = 0.8 * y + 0.3 * u
+        return np.array(ys), np.array(us)
+
+    r = np.concatenate([[0.0], np.repeat(np.random.default_rng(5).normal(size=20), 10)])
+    y, u = run(r)
+    np.testing.assert_allclose(lfilter(Nr, Dc, r) - lfilter(Nc, Dc, y), u, rtol=1e-9, atol=1e-9)
+    step = np.concatenate([[0.0], np.ones(80)])
+    y, _ = run(step)
+    np.testing.assert_allclose(np.concatenate([[0.0], setpoint_response(model, Nc, Dc, Nr, 80)]), y, rtol=1e-9,
+                               atol=1e-9)
+
+
 def test_load_response_of_a_p_controller_on_a_first_order_lag_by_hand():
     """y_{k+1} = 0.5 y_k + u_k + d_k with u = -y (P control, Kp 1) and d a unit step from k = 0: y_0 = 0 and
     y_{k+1} = -0.5 y_k + 1 (0, 1, 0.5, 0.75, ...); the PID output -y. Kp 2 puts the closed-loop pole at -1.5."""
@@ -168,19 +203,24 @@ def on_fmu():
     return fixed_pid("fmu")
 
 
-def test_the_fixed_pid_on_local_models_is_the_fmu_paths_on_the_unstable_plant(on_fmu):
+def test_the_fixed_pid_on_local_models_is_no_worse_than_the_fmu_paths_on_the_unstable_plant(on_fmu):
     """1/(s - 1) (linear: its local models are exact): the whole fixed-PID rule on the identified models, the load
-    search and the setpoint search within the load tolerance, keeps the design the FMU path keeps (load IAE on the
-    FMU within 2 %), and its report says which path it took and how well the models predicted the FMU."""
+    search and the setpoint search within the load tolerance, keeps a design no worse than the FMU path's on both
+    the load IAE and the setpoint ISE on the FMU (2 % slack; the setpoint search on the models affords more
+    generations), and its report says which path it took and how well the models predicted the FMU."""
     result = fixed_pid("identified")
     record = result.report.details["design_model"]
     assert record["path"] == "identified" and record["agrees"] and record["validation_error"] < 1e-6
     assert [m["order"] for m in record["models"]] == [1, 1, 1]
     traded = result.report.details["traded_for_overshoot"]
-    if traded is not None:  # the setpoint search ran on the models too, its result verified on the FMU
-        assert record["setpoint_search"] == "identified" and traded["validation_error"] < 1e-6
+    assert traded is not None and traded["on_models"]["kept"]  # searched on the models, verified on the FMU
+    assert record["setpoint_search"] == "identified"
+    assert traded["on_models"]["model_load_cost"] == pytest.approx(traded["load_cost"], rel=1e-6)
     assert on_fmu.report.details["design_model"]["path"] == "fmu"
-    assert result.cost == pytest.approx(on_fmu.cost, rel=0.02)
+
+    def ise(r):
+        return next(q.value for q in r.report.requirements if q.name == "setpoint ISE")
+    assert result.cost <= 1.02 * on_fmu.cost and ise(result) <= 1.02 * ise(on_fmu)
 
 
 def test_a_model_that_disagrees_with_the_fmu_sends_the_search_to_the_fmu(monkeypatch, on_fmu):
@@ -220,3 +260,53 @@ def test_the_vectorised_kp_scan_equals_the_per_controller_estimates():
         assert winding[j] == pytest.approx(plant.winding(C), abs=1e-9)
         assert (noise[j], increments[j]) == pytest.approx(plant.noise_gains(C), rel=1e-9)
     assert len(set(np.round(winding / math.pi))) > 1  # the scan crosses from unstable to stable gains
+
+
+# The setpoint optimum of 1/(s - 1) at Ts 0.1 s by benchmarks/bench_pid_design.py (its own law and optimiser: least
+# unit-step ISE over Kp, Ti, Td and a continuous b subject to Ms <= 2, load IAE <= 1.15 x the Ms <= 2 load optimum
+# 0.02515 and overshoot <= 5 %): Kp 8.246, Ti 0.234, Td 0, b 0.375.
+SETPOINT_OPTIMUM = dict(Kp=8.246, Ti=0.234, Td=0.0, b=0.375)
+LOAD_OPTIMUM = 0.02515
+
+
+def _first_order_loop(Kp, Ti, Td, b, r, load, steps=3000, Ts=0.1):
+    """y (steps,) of 1/(s - 1) (ZOH at Ts: y_{k+1} = e^Ts y_k + (e^Ts - 1)(u_k + load)) under the 2-DOF PID written
+    out here: e = r - y, I_k = I_{k-1} + e_k Ts, D on -y by backward difference (D = 0 at k = 0),
+    u = Kp (b r - y + I / Ti + Td D); from rest."""
+    a, g = math.exp(Ts), math.exp(Ts) - 1.0
+    y, integral, y_prev, out = 0.0, 0.0, 0.0, []
+    for k in range(steps):
+        out.append(y)
+        integral += (r - y) * Ts
+        derivative = 0.0 if k == 0 else -(y - y_prev) / Ts
+        u = Kp * (b * r - y + integral / Ti + Td * derivative)
+        y_prev, y = y, a * y + g * (u + load)
+    return np.array(out)
+
+
+def _first_order_figures(Kp, Ti, Td, b, Ts=0.1):
+    """(unit-step ISE, overshoot [%], unit-load IAE, Ms on 2000 frequencies) of the loop above."""
+    y = _first_order_loop(Kp, Ti, Td, b, 1.0, 0.0)
+    y_load = _first_order_loop(Kp, Ti, Td, b, 0.0, 1.0)
+    z = np.exp(1j * np.linspace(1e-4, math.pi, 2000))
+    P = (math.exp(Ts) - 1.0) / (z - math.exp(Ts))
+    C = Kp * (1.0 + Ts / Ti * z / (z - 1.0) + Td / Ts * (z - 1.0) / z)
+    return (float(np.sum((1.0 - y) ** 2) * Ts), 100.0 * max(0.0, float(np.max(y)) - 1.0),
+            float(np.sum(np.abs(y_load)) * Ts), float(np.max(np.abs(1.0 / (1.0 + C * P)))))
+
+
+def test_the_setpoint_search_on_the_local_models_reaches_the_independent_setpoint_optimum():
+    """1/(s - 1), no b meets the overshoot limit with the load optimum: the setpoint search on the local models
+    (tuning.design_rule requirement 5, verified on the FMU) keeps gains whose unit-step ISE, computed by this file's own
+    loop, is within 5 % of the independent setpoint optimum's, with overshoot <= 5 % (+0.3 for the episodes' steps
+    against this unit step), load IAE <= 1.15 x the design's load optimum and Ms <= 2 (+1 %)."""
+    result = fixed_pid("identified")
+    traded = result.report.details["traded_for_overshoot"]
+    assert traded["feasible"] and traded["on_models"]["kept"]
+    b = result.structure[0][0]
+    ise, overshoot, load_iae, ms = _first_order_figures(result.gains.Kp[0], result.gains.Ti[0], result.gains.Td[0], b)
+    ise_opt, overshoot_opt, load_opt, ms_opt = _first_order_figures(**SETPOINT_OPTIMUM)
+    assert overshoot_opt <= 5.0 + 1e-2 and ms_opt <= 2.0 + 1e-2 and load_opt <= 1.15 * LOAD_OPTIMUM * 1.001
+    assert ise <= 1.05 * ise_opt
+    # within the tolerance of the load optimum the tool found at this small budget (1.2x the independent one here)
+    assert overshoot <= 5.3 and load_iae <= 1.15 * result.report.details["load_optimum"] * 1.001 and ms <= 2.02

@@ -461,10 +461,29 @@ def _quiet_call(build, unzipdir: Path, build_dir: Path, out, defines: dict | Non
 
 def is_current(name: str, fmi_version: int = DEFAULT_FMI_VERSION, out_dir: Path | None = None,
                interface: str = "co-simulation") -> bool:
-    """True when the FMU exists and was built from the current sources (same instantiation token)."""
+    """True when the FMU exists and was built from the current sources (same instantiation token). The answer is
+    remembered for the process while neither the FMU nor a source file changes size or time (reading the token costs
+    milliseconds; a tune asks before every simulation)."""
     path = fmu_path(name, fmi_version, out_dir, interface)
     if not path.is_file():
         return False
+    directory = PLANT_SOURCES / name
+    files = [path, Path(__file__), *(PLANT_SOURCES / "common" / f for f in (*COMMON_SOURCES, API_SOURCE[fmi_version])),
+             *sorted(directory.glob("*"))]
+    signature = tuple((str(f), f.stat().st_size, f.stat().st_mtime_ns) for f in files if f.is_file())
+    key = (name, fmi_version, interface, signature)
+    if key not in _CURRENT:
+        if len(_CURRENT) >= 256:
+            _CURRENT.clear()
+        _CURRENT[key] = _token_matches(path, name, fmi_version, interface)
+    return _CURRENT[key]
+
+
+_CURRENT: dict = {}  # is_current's answers, keyed by the plant, the FMI version and its files' sizes and times
+
+
+def _token_matches(path: Path, name: str, fmi_version: int, interface: str) -> bool:
+    """The FMU at `path` carries the instantiation token of the current sources."""
     try:
         with zipfile.ZipFile(path) as zf:
             root = ET.fromstring(zf.read("modelDescription.xml"))

@@ -20,7 +20,9 @@ and anti-windup ignored) in closed loop with P:
 
     dy/d = B Dc / (A Dc + B Nc),   du_pid/d = -B Nc / (A Dc + B Nc),   C = Nc / Dc (`feedback_polynomials`)
 
-simulated with scipy.signal.lfilter per candidate.
+simulated with scipy.signal.lfilter per candidate. The setpoint response (`setpoint_response`): a unit setpoint step
+through the reference path Cr = Nr / Dc (`reference_polynomial`: u = Cr r - C y, the setpoint weights b and c), dy/dr =
+B Nr / (A Dc + B Nc).
 """
 from __future__ import annotations
 
@@ -144,6 +146,38 @@ def feedback_polynomials(Kp: float, Ti: float, Td: float, sample_time_s: float,
         num = _add(np.polymul(num, diff), (Ts / Ti) * den)
         den = np.polymul(den, diff)
     return Kp * num, den
+
+
+def reference_polynomial(Kp: float, Ti: float, Td: float, sample_time_s: float, b: float, c: float = 0.0,
+                         derivative_filter_N: float | None = None, measurement_filter_s: float = 0.0,
+                         measurement_filter_order: int = 1) -> np.ndarray:
+    """Nr in powers of q of the PID's reference path Cr = Nr / Dc, over `feedback_polynomials`' Dc (same arguments):
+    Cr = Kp (b + Ts / (Ti (1 - q)) + c Td Fd (1 - q) / Ts) (control.pid: the integral of the unfiltered error, the
+    setpoint unfiltered; Ti = inf: no integral term)."""
+    Ts = float(sample_time_s)
+    den_f = np.array([1.0])
+    if measurement_filter_s > 0:
+        section = _lowpass(measurement_filter_s / measurement_filter_order, Ts)[1]
+        for _ in range(measurement_filter_order):
+            den_f = np.polymul(den_f, section)
+    Tdf = Td / derivative_filter_N if derivative_filter_N and Td != 0 else 0.0
+    dd = np.array([Tdf + Ts, -Tdf])
+    diff = np.array([1.0, -1.0])
+    base = np.polymul(den_f, dd)  # Dc without the integrator's (1 - q)
+    num = b * base
+    if c != 0 and Td != 0:
+        num = _add(num, c * Td * np.polymul(den_f, diff))
+    if math.isfinite(Ti):
+        num = _add(np.polymul(num, diff), (Ts / Ti) * base)
+    return Kp * num
+
+
+def setpoint_response(model: LocalModel, Nc: np.ndarray, Dc: np.ndarray, Nr: np.ndarray, steps: int) -> np.ndarray:
+    """y_k (steps,) after a unit setpoint step at sample 0, the loop at rest before: B Nr / (A Dc + B Nc)."""
+    B, A = model.numerator, model.denominator
+    den = _add(np.convolve(A, Dc), np.convolve(B, Nc))
+    with np.errstate(over="ignore", invalid="ignore"):
+        return lfilter(np.convolve(B, Nr), den, np.ones(int(steps)))
 
 
 def _add(a: np.ndarray, b: np.ndarray) -> np.ndarray:

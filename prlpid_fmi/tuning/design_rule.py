@@ -12,7 +12,10 @@ baseline.objective "load" (the default) keeps, in this order:
 3. overshoot <= deploy.max_overshoot (the setpoint weight b, then, where no b meets it, gains traded for it within
    the load tolerance, or where none is within it, the gains nearest the tolerance that meet the limit);
 4. load IAE <= baseline.load_tolerance x the load optimum (tuning.load_experiment; tuning.load_design's search);
-5. among those, the least setpoint ISE (tuning.load_design.SetpointDesign);
+5. among those, the least setpoint ISE (tuning.load_design.SetpointDesign): where the load search used the identified
+   local models, over the gains and b within the load tolerance, searched on the models and verified on the FMU
+   (`_on_models`); on the FMU path, b alone where it meets the overshoot limit (a search of the gains there costs a
+   differential evolution of FMU setpoint episodes);
 6. std(u) <= deploy.max_noise_gain and std(u_k - u_(k-1)) <= deploy.max_noise_increment from the measurement
    noise, fractions of the control span: preferences.
 
@@ -56,6 +59,8 @@ RANGE_ORDER = (0, 1, 2, 1, 0)  # indices into (low, middle, high): up and down t
 SETTLING_BAND = 0.02  # a step is settled when |r - y| stays within this fraction of the step to the end of its hold
 RELAX_FACTORS = (2.0, 5.0, math.inf)  # factors on a noise limit the relaxation tries, in turn
 STABILISING_GENERATIONS = 6  # generations of the setpoint search that finds the PID the plant is measured with
+MODEL_GENERATIONS = 2  # the setpoint search on the local models runs this many x baseline.maxiter generations, ...
+MODEL_MIN_GENERATIONS, MODEL_MIN_POPSIZE = 20, 10  # ... and popsize, at least these (a model candidate costs ~0.1 ms)
 
 
 # -- typed results ------------------------------------------------------------------------------------------------
@@ -272,7 +277,7 @@ class Designer:
         """Requirements 2-6 at these noise limits: the load search (Ms and noise by the Kp interval), b for the
         overshoot, the trade within the load tolerance where no b meets it, the search without the load limit where
         that fails too, and the Ms check on the FMU."""
-        config, deploy, baseline, progress = self.config, self.deploy, self.baseline, self.progress
+        config, baseline, progress = self.config, self.baseline, self.progress
         if limits.filter_tuned != (config.measurement_filter == "tuned"):
             config = dataclasses.replace(config, measurement_filter="tuned")
         design = LoadDesign(config, baseline.load_step, self.limit, limits.gain, baseline.widen_ranges,
@@ -299,18 +304,25 @@ class Designer:
         if self.load_optimum is None:
             self.load_optimum = best_load  # the load optimum at the requested limits: what the tolerance is of
         b, c, _ = pid_structure(config)
-        choices, traded, followed = [], None, None
+        choices, traded, followed, refined = [], None, None, None
         if config.setpoint_weight == "tuned":
             progress.step("setpoint weight b")
             weight, choices = setpoint_weight(config, gains, (b, c, tf), seeds, deploy.max_overshoot)
             b = [weight] * config.n_loops
             if not any(r["Overshoot"] <= 100.0 * deploy.max_overshoot for r in choices):
-                traded, second = self._trade(design, vector, weight, best_load)
+                traded, second = self._trade(config, design, vector, weight, best_load, (b, c, tf))
                 # the load tolerance (requirement 4) missed, every limit above it met: the gains nearest the
                 # tolerance that meet the overshoot limit are kept (the search ranks by violation)
                 if traded["feasible"] or traded["nearest_load_tolerance"]:  # else the load optimum stays, with the
                     # b of least overshoot
                     vector = second
+                    gains, tf = design.gains(vector[:-1]), design.filters(vector[:-1])
+                    b = [SetpointDesign.weight(vector)] * config.n_loops
+            elif design.models is not None and 1.0 < baseline.load_tolerance < math.inf:
+                before = next(r for r in choices if r["b"] == weight)["ISE"]
+                refined, found = self._on_models(config, design, vector, weight, best_load, (b, c, tf), before)
+                if found is not None:
+                    vector, choices = found
                     gains, tf = design.gains(vector[:-1]), design.filters(vector[:-1])
                     b = [SetpointDesign.weight(vector)] * config.n_loops
             if traded is not None and not traded["feasible"] and not traded["nearest_load_tolerance"]:
@@ -355,6 +367,7 @@ class Designer:
         ise, overshoot = self._setpoint_response(config, gains, structure)
         details = {"objective": "load", "load_cost": cost, "load_optimum": self.load_optimum,
                    "load_step": baseline.load_step, "traded_for_overshoot": traded, "followed_setpoints": followed,
+                   "setpoint_refined": refined,
                    "estimates": design.estimates(gains, tf), "active_limits": design.active_limits(gains, tf),
                    "setpoint_weights": choices, "stabilising_gains": self.first.gains.as_dict(),
                    "feasible": bool(getattr(result, "constr_violation", 0) <= 0),
@@ -366,14 +379,26 @@ class Designer:
                 Relaxation("max_noise_increment", self.deploy.max_noise_increment, math.inf),)
         return Candidate(vector, gains, structure, details, limits, relaxed, ms_met, overshoot, ise, cost)
 
-    def _trade(self, design: LoadDesign, vector, weight: float, best_load: float) -> tuple[dict, np.ndarray]:
+    def _trade(self, config: TuningConfig, design: LoadDesign, vector, weight: float, best_load: float,
+               structure: tuple) -> tuple[dict, np.ndarray]:
         """The setpoint search within the load tolerance (SetpointDesign) from the load optimum with b = weight:
         (what it found: {"load_cost", "ISE", "Overshoot", "feasible", "nearest_load_tolerance": every limit but the load
-        tolerance met, "evaluations"}, its vector). Where the load
-        search used the local models, so does this one (its load limit the models' optimum's), and its result's load
-        IAE is verified on the FMU ("load_cost" the FMU's, "load_cost_model", "validation_error"); where the two
-        differ by more than MODEL_TOLERANCE, the search runs again on the FMU (design_model's "setpoint_search")."""
+        tolerance met, "evaluations"}, its vector). Where the load search used the local models, the search runs on
+        them first (`_on_models`: setpoint steps and load cost on the models, verified on the FMU); where the FMU does
+        not confirm it, it runs with the setpoint responses on the FMU, its load cost still on the models (its load
+        limit the models' optimum's) and its result's load IAE verified on the FMU ("load_cost" the FMU's,
+        "load_cost_model", "validation_error"); where the two differ by more than MODEL_TOLERANCE, the search runs
+        again on the FMU (design_model's "setpoint_search")."""
         baseline, deploy, seed = self.baseline, self.deploy, self.seed
+        on_models = None
+        if design.models is not None:
+            on_models, found = self._on_models(config, design, vector, weight, best_load, structure, math.inf)
+            record = on_models
+            if found is not None:
+                self.model_record["setpoint_search"] = "identified"
+                return {"load_cost": record["load_cost"], "ISE": record["ISE"], "Overshoot": record["Overshoot"],
+                        "feasible": True, "nearest_load_tolerance": False, "evaluations": record["evaluations"],
+                        "on_models": record}, found[0]
         while True:
             on_models = design.models is not None
             reference = self.model_record["predicted_load_cost"] if on_models else best_load
@@ -392,7 +417,7 @@ class Designer:
                 trade.close()
             self.evaluations += int(second.nfev)
             found = {"load_cost": load, "ISE": ise, "Overshoot": overshoot, "feasible": feasible,
-                     "nearest_load_tolerance": nearest, "evaluations": int(second.nfev)}
+                     "nearest_load_tolerance": nearest, "evaluations": int(second.nfev), "on_models": on_models}
             if not on_models:
                 if "setpoint_search" not in self.model_record:
                     self.model_record["setpoint_search"] = "fmu"
@@ -409,6 +434,48 @@ class Designer:
                 f"the setpoint search's result has load cost {measured:.4g} on the FMU, {load:.4g} on the models "
                 f"({100 * error:.1f} % apart, tolerance {100 * MODEL_TOLERANCE:.0f} %): that search ran again on the FMU")
             design.use_fmu()
+
+    def _on_models(self, config: TuningConfig, design: LoadDesign, vector, weight: float, best_load: float,
+                   structure: tuple, ise_to_beat: float) -> tuple[dict, tuple | None]:
+        """Requirements 3-5 on the local models (the load search used them): the least setpoint ISE within the load
+        tolerance and the overshoot limit, searched on the models (SetpointDesign with on_models: a unit step, from the
+        load optimum with b = weight; MODEL_GENERATIONS x baseline.maxiter generations, MODEL_MIN_GENERATIONS and
+        MODEL_MIN_POPSIZE at least), then verified on the FMU: b
+        chosen again on the training episodes (`setpoint_weight`), kept only where the FMU's load cost is within the
+        tolerance of the optimum's, its overshoot within the limit and its ISE below `ise_to_beat` (the optimum's
+        with its b; inf where no b met the overshoot limit). Returns (the record of fixed_pid.json's
+        "setpoint_refined" or "traded_for_overshoot"'s "on_models", (vector with b, the b table) or None)."""
+        baseline, deploy, seeds, progress = self.baseline, self.deploy, self.seeds, self.progress
+        trade = SetpointDesign(design, self.model_record["predicted_load_cost"], baseline.load_tolerance,
+                               deploy.max_overshoot, seeds, on_models=True)
+        maxiter = max(MODEL_GENERATIONS * self.maxiter, MODEL_MIN_GENERATIONS)
+        popsize = max(self.popsize, MODEL_MIN_POPSIZE)
+        progress.step("least setpoint ISE within the load tolerance on the local models", trade.budget(maxiter, popsize))
+        try:
+            second = trade.search(np.append(vector, 2.0 * weight - 1.0), self.seed, maxiter, popsize, progress=progress)
+            feasible = bool(np.max(trade.constraint_values(second.x)) <= 0)
+            model_load, model_ise, model_overshoot = trade.evaluate(second.x)
+            start_ise = trade.evaluate(np.append(vector, 2.0 * weight - 1.0))[1]
+        finally:
+            trade.close()
+        self.evaluations += int(second.nfev)
+        record = {"evaluations": int(second.nfev), "model_ise_ratio": model_ise / start_ise if start_ise > 0 else None,
+                  "model_load_cost": model_load, "model_overshoot": model_overshoot, "feasible_on_models": feasible,
+                  "ISE_before": ise_to_beat if math.isfinite(ise_to_beat) else None, "kept": False}
+        if not feasible or not model_ise <= start_ise:
+            return record, None
+        x = np.asarray(second.x)
+        gains, tf = design.gains(x[:-1]), design.filters(x[:-1])
+        progress.step("the refined gains' b and load cost verified on the FMU")
+        load = design.load_cost(gains, tf)
+        b, rows = setpoint_weight(config, gains, (structure[0], structure[1], tf), seeds, deploy.max_overshoot)
+        row = next(r for r in rows if r["b"] == b)
+        record.update({"load_cost": load, "ISE": row["ISE"], "Overshoot": row["Overshoot"], "b": b})
+        if not (load <= baseline.load_tolerance * best_load and row["Overshoot"] <= 100.0 * deploy.max_overshoot
+                and row["ISE"] < ise_to_beat):
+            return record, None
+        record["kept"] = True
+        return record, (np.append(x[:-1], 2.0 * b - 1.0), rows)
 
     def _setpoint_response(self, config: TuningConfig, gains: tuple, structure: tuple) -> tuple[float, float]:
         """(ISE, worst overshoot [%]) of the training episodes the design chose b on (noise free)."""

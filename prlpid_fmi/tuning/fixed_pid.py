@@ -140,14 +140,14 @@ def detune(config: TuningConfig, gains: tuple, point: list[float], limit: float,
 
     The scan and the bisection decide each step from the Ms predicted from the plant response measured at the
     point (`_likely_meets`; one independent loop) and measure on the FMU only where the prediction lies near the
-    limit; the result is then measured. Where that measurement fails the limit, or no k passes, the whole search
-    runs again on measurements alone (the search before predictions): same result whenever the predictions decide
-    as the measurements would."""
+    limit, or where no response was measured there yet (the first verified measurement of the scan is then the
+    point's response, and predicts the steps after it); the result is then measured. Where that measurement fails
+    the limit, or no k passes, the whole search runs again on measurements alone (the search before predictions):
+    same result whenever the predictions decide as the measurements would."""
     plant = config if plant is None else plant
-    if predicted_ms(plant, gains, point) is not None:
-        found = _detune(config, gains, point, limit, keep_ti, plant, _likely_meets)
-        if found is not None and _meets(plant, found, point, limit):
-            return found
+    found = _detune(config, gains, point, limit, keep_ti, plant, _likely_meets)
+    if found is not None and _meets(plant, found, point, limit):
+        return found
     return _detune(config, gains, point, limit, keep_ti, plant, _meets)
 
 

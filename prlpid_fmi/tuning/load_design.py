@@ -26,7 +26,8 @@ and the setpoint search within a load limit. tuning.design_rule orders them; tun
    among those with overshoot <= deploy.max_overshoot. b changes neither Ms nor the load response.
 3. The setpoint search (`SetpointDesign`): (Kp, Ti, Td[, Tf], b) minimise the setpoint ISE of those episodes
    subject to the limits of 1, J_load <= a load limit (baseline.load_tolerance x the load optimum, or none) and
-   overshoot <= deploy.max_overshoot.
+   overshoot <= deploy.max_overshoot; with on_models, the setpoint ISE and overshoot of a unit step on the local
+   models instead of the episodes on the FMU (`LoadDesign.model_setpoint_response`), and the load cost on the models.
 """
 from __future__ import annotations
 
@@ -43,7 +44,9 @@ from prlpid_fmi.loop.core import LoopCore, control_scales, pid_structure
 from prlpid_fmi.loop.evaluation import gains_rollout
 from prlpid_fmi.metrics import chatter_fraction
 from prlpid_fmi.progress import QUIET, Steps, batch_counted, counted
-from prlpid_fmi.robustness.local_model import closed_loop_stable, feedback_polynomials, identify, load_responses
+from prlpid_fmi.robustness.local_model import (closed_loop_stable, feedback_polynomials, identify, load_responses,
+                                              reference_polynomial)
+from prlpid_fmi.robustness.local_model import setpoint_response as model_step_response
 from prlpid_fmi.robustness.margins import pid_frequency_response, setpoint_range_points
 from prlpid_fmi.tuning.load_experiment import (DIVERGED_COST, load_config, load_iae, open_core, parameter_samples,
                                                plant_responses, signed_loads, start_measurement)
@@ -466,6 +469,24 @@ class LoadDesign(OutcomeCache):
             chatter = max(chatter, chatter_fraction(abs(loads[0]) * du, self.spans[0]))
         return total / len(self.models), chatter
 
+    def model_setpoint_response(self, gains: tuple, tf: list[float], b: float) -> tuple[float, float]:
+        """(ISE, worst overshoot [% of the step]) of a unit setpoint step on the local models (one loop, setpoint
+        weights b and the config's c), over training.setpoint_hold_steps samples: ISE = Ts sum_k (1 - y_k)^2, the mean
+        over the models; (inf, inf) where the loop is unstable on one."""
+        c = self.config
+        Kp, Ti, Td, _ = gains
+        args = (c.sample_time_s, c.derivative_filter_N, tf[0], c.measurement_filter_order)
+        Nc, Dc = feedback_polynomials(Kp[0], Ti[0], Td[0], *args)
+        Nr = reference_polynomial(Kp[0], Ti[0], Td[0], c.sample_time_s, b, self.c[0], *args[1:])
+        ise, overshoot = 0.0, 0.0
+        for model in self.models:
+            if not closed_loop_stable(model, Nc, Dc):
+                return math.inf, math.inf
+            y = model_step_response(model, Nc, Dc, Nr, c.setpoint_hold_steps)
+            ise += float(np.sum((1.0 - y) ** 2) * c.sample_time_s)
+            overshoot = max(overshoot, 100.0 * max(0.0, float(np.max(y)) - 1.0))
+        return ise / len(self.models), overshoot
+
     def validate_models(self, vector) -> dict:
         """The search's result on the FMU against its prediction on the local models: {"predicted_load_cost",
         "fmu_load_cost", "fmu_chatter", "validation_error" (|FMU - model| / FMU), "tolerance", "agrees"}: agrees when
@@ -595,18 +616,22 @@ def _worst_overshoot(r: np.ndarray, y: np.ndarray) -> float:
 class SetpointDesign(OutcomeCache):
     """Step 4 (module docstring): (Kp, Ti, Td[, Tf], b) minimising the setpoint ISE subject to Ms and noise as in
     step 2, J_load <= load_tolerance x the step-2 optimum and overshoot <= max_overshoot. Used when no b in B_GRID
-    meets the overshoot limit with the step-2 gains. The vector is the load design's plus one entry for b."""
+    meets the overshoot limit with the step-2 gains, with the setpoint responses simulated on the FMU's training
+    episodes; and, with on_models, where a b meets it, for the least setpoint ISE within the load tolerance
+    (tuning.design_rule, requirement 5) with the unit setpoint step simulated on the design's local models
+    (`model_setpoint_response`). The vector is the load design's plus one entry for b."""
 
     def __init__(self, design: LoadDesign, best_load: float, load_tolerance: float, max_overshoot: float,
-                 seeds: list[int]):
+                 seeds: list[int], on_models: bool = False):
         self.design = design
         self.best_load, self.load_tolerance, self.max_overshoot_fraction = best_load, load_tolerance, max_overshoot
         self.load_limit = load_tolerance * best_load if math.isfinite(load_tolerance) else math.inf  # inf: no limit
         self.max_overshoot = 100.0 * max_overshoot
         self.seeds = seeds
+        self.on_models = on_models and design.models is not None
         quiet = dataclasses.replace(design.config, measurement_noise_std=0.0, actuator_noise_std=0.0,
                                     load_disturbance=0.0)
-        self.core = open_core(quiet)
+        self.core = None if self.on_models else open_core(quiet)
         self.n = design.n + 1
         self._seen: dict = {}
         self._owns_design = False  # a replica's design is its own (closed with it)
@@ -631,10 +656,12 @@ class SetpointDesign(OutcomeCache):
         return cheap, (None if np.any(cheap > 0) else self._simulate(vector))
 
     def _simulate(self, vector) -> tuple[float, float, float]:
-        """(load cost, ISE, overshoot) of a vector, simulated."""
+        """(load cost, ISE, overshoot) of a vector, simulated (on the local models with on_models)."""
         d = self.design
         gains, tf = d.gains(vector[:-1]), d.filters(vector[:-1])
         load = d.search_load_cost(gains, tf)
+        if self.on_models:
+            return (load, *d.model_setpoint_response(gains, tf, self.weight(vector)))
         self.core.set_structure([self.weight(vector)] * d.config.n_loops, d.c, tf)
         return (load, *setpoint_response(self.core, gains, self.seeds))
 
@@ -657,7 +684,9 @@ class SetpointDesign(OutcomeCache):
         _, ise, _ = self.evaluate(vector)
         return ise if math.isfinite(ise) else DIVERGED_COST
 
-    def _batch(self, population: np.ndarray, pool: SearchPool, fn) -> list:
+    def _batch(self, population: np.ndarray, pool: SearchPool | None, fn) -> list:
+        if pool is None:
+            return [fn(v) for v in columns(population)]
         return [fn(v) for v in self.evaluate_new(population, pool)]
 
     def budget(self, maxiter: int, popsize: int, whole_box: bool = False) -> int:
@@ -685,9 +714,11 @@ class SetpointDesign(OutcomeCache):
             init = np.clip(start + rng.normal(0.0, INIT_SPREAD, (popsize * self.n, self.n)), -1.0, 1.0)
             init[0] = start
         d = self.design
-        with SearchPool(self, SetpointDesign.replica, (d.args, d.prepared(), self.best_load, self.load_tolerance,
+        # on the local models in this process (microseconds a candidate), else the FMU on the search pool
+        with (contextlib.nullcontext() if self.on_models else
+              SearchPool(self, SetpointDesign.replica, (d.args, d.prepared(), self.best_load, self.load_tolerance,
                                                         self.max_overshoot_fraction, self.seeds),
-                        d.pool_workers(), fmus=search_fmus(d.config)) as pool:
+                         d.pool_workers(), fmus=search_fmus(d.config))) as pool:
             constraints = batch_counted(lambda x: np.array(self._batch(x, pool, self.constraint_values)).T, progress)
             result = differential_evolution(lambda x: np.array(self._batch(x, pool, self.cost)),
                                             [(-1.0, 1.0)] * self.n, maxiter=maxiter, popsize=popsize, seed=seed,
@@ -697,7 +728,8 @@ class SetpointDesign(OutcomeCache):
         return result
 
     def close(self) -> None:
-        self.core.close()
+        if self.core is not None:
+            self.core.close()
         if self._owns_design:
             self.design.close()
 
