@@ -443,7 +443,8 @@ class Designer:
         MODEL_MIN_POPSIZE at least), then verified on the FMU: b
         chosen again on the training episodes (`setpoint_weight`), kept only where the FMU's load cost is within the
         tolerance of the optimum's, its overshoot within the limit and its ISE below `ise_to_beat` (the optimum's
-        with its b; inf where no b met the overshoot limit). Returns (the record of fixed_pid.json's
+        with its b; inf where no b met the overshoot limit), and, replacing an optimum that met the limits, where it
+        settles the range episode (requirement 1). Returns (the record of fixed_pid.json's
         "setpoint_refined" or "traded_for_overshoot"'s "on_models", (vector with b, the b table) or None)."""
         baseline, deploy, seeds, progress = self.baseline, self.deploy, self.seeds, self.progress
         trade = SetpointDesign(design, self.model_record["predicted_load_cost"], baseline.load_tolerance,
@@ -474,6 +475,10 @@ class Designer:
         if not (load <= baseline.load_tolerance * best_load and row["Overshoot"] <= 100.0 * deploy.max_overshoot
                 and row["ISE"] < ise_to_beat):
             return record, None
+        if math.isfinite(ise_to_beat):  # replacing gains that met every limit: only by gains that settle the range
+            record["settles_range"] = following(config, gains, ([b] * config.n_loops, structure[1], tf)).settles
+            if not record["settles_range"]:
+                return record, None
         record["kept"] = True
         return record, (np.append(x[:-1], 2.0 * b - 1.0), rows)
 
