@@ -310,3 +310,22 @@ def test_the_setpoint_search_on_the_local_models_reaches_the_independent_setpoin
     assert ise <= 1.05 * ise_opt
     # within the tolerance of the load optimum the tool found at this small budget (1.2x the independent one here)
     assert overshoot <= 5.3 and load_iae <= 1.15 * result.report.details["load_optimum"] * 1.001 and ms <= 2.02
+
+
+def test_where_no_gains_within_the_load_tolerance_meet_the_overshoot_limit_the_nearest_are_kept_from_the_models():
+    """1/(s - 1) with baseline.load_tolerance 1.01: no gains within 1 % of the load optimum keep a setpoint step's
+    overshoot within 5 % (the setpoint optimum needs about 1.15x); the search on the models ranks by violation and the
+    gains nearest the tolerance that meet the overshoot limit are kept (requirement 3 above 4), verified on the FMU:
+    this file's own loop gives overshoot <= 5 % (+0.3) and a load IAE above 1.01x the design's optimum."""
+    from prlpid_fmi.tuning import design_rule
+
+    # a load search that reaches the optimum (1.005x the benchmark's 0.02515), so that nothing within 1 % meets 5 %
+    result = design_rule.tune_fixed_pid(preset("first_order"), baseline=dataclasses.replace(
+        design_rule.BaselineConfig(), workers=1, load_tolerance=1.01), **{**BUDGET, "maxiter": 12, "popsize": 8})
+    traded = result.report.details["traded_for_overshoot"]
+    assert traded["nearest_load_tolerance"] and not traded["feasible"]
+    assert traded["on_models"]["kept"] and traded["on_models"]["nearest_on_models"]
+    _, overshoot, load_iae, ms = _first_order_figures(result.gains.Kp[0], result.gains.Ti[0], result.gains.Td[0],
+                                                      result.structure[0][0])
+    assert overshoot <= 5.3 and ms <= 2.02
+    assert load_iae > 1.01 * result.report.details["load_optimum"]
