@@ -162,6 +162,11 @@ def test_chatter_from_measurement_noise_is_reported_and_chatter_without_noise_fa
     assert fast_reversals(np.where(k % 2, 1.0, -1.0), 20.0) == pytest.approx(1.0)
     toggling = np.where(k % 2, 10.0, 9.8)  # between a limit and 1 % of a 10-unit span below it: 2 % moves
     assert fast_reversals(toggling, 10.0) == pytest.approx(1.0) and fast_reversals(toggling, 40.0) == 0.0
+    # a command at its limit that leaves it for one sample every 10 (a high-gain loop against a limit): 20 spikes in
+    # 201 samples, counted by hand; a full-span swing of 20 samples a period has no spike at its smooth peaks
+    dips = np.where(k % 10 == 5, 9.5, 10.0)
+    assert fast_reversals(dips, 10.0) == pytest.approx(20 / 198)
+    assert fast_reversals(5.0 + 5.0 * np.sin(2 * np.pi * k / 20), 10.0) == 0.0
     traj = episodes[1].trajectory
     cycle = dataclasses.replace(traj, pid_output=np.where(np.arange(len(traj.pid_output))[:, None] % 2, 1.0, -1.0))
     from prlpid_fmi.loop.evaluation import measure

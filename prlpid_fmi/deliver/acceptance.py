@@ -20,7 +20,8 @@ held-out episodes of the training distribution (deliver.evidence). On every one 
    verdict says by how much it is above the user's limit;
 4. its command does not chatter by itself: on the noise-free replays (`noise_free`), the fraction of samples at which
    the command oscillates at the sample rate (`fast_reversals`: three moves in a row of alternating sign, each above
-   CHATTER_THRESHOLD of the span: a limit cycle, a ringing derivative, a command toggling at a limit) is at most
+   CHATTER_THRESHOLD of the span, or a pulse one sample wide between small moves: a limit cycle, a ringing
+   derivative, a command toggling at a limit) is at most
    deploy.max_chatter. A swing at the loop's own bandwidth (damping an oscillatory plant) is not chatter. On the
    noisy replays the Chatter metric (metrics.chatter_fraction) is a preference, like the noise limits of the design:
    reported (`noisy_chatter`), not failed.
@@ -45,6 +46,7 @@ OVERSHOOT_FLOOR = 25.0  # [%] the overshoot limit is max(this, deploy.max_oversh
 LIMIT_TAIL = 0.25  # fraction of the long hold at its end over which a command at its limit excuses a setpoint
 MIN_STEP = 0.05  # overshoot is a fraction of the step, or of this fraction of the setpoint range if larger
 LIMIT_TOLERANCE = 0.005  # a command within this fraction of the span of a limit sits at it
+SPIKE_RATIO = 0.5  # a one-sample pulse of the command is a spike when the moves around it are below this x its own
 
 Replay = Callable[[TuningConfig, int], tuple]  # (config, seed) -> (metrics, loop.evaluation.Trajectory)
 
@@ -218,16 +220,22 @@ def _is_step(seg: dict) -> bool:
 
 
 def fast_reversals(u, span: float) -> float:
-    """The fraction of the samples k = 3 .. n-1 of a command u (n,) at which its moves du_k, du_(k-1), du_(k-2)
-    alternate in sign and each exceeds CHATTER_THRESHOLD x span (an oscillation at the sample rate); NaN for fewer
-    than 4 samples or a span that is not finite and positive."""
+    """The fraction of the samples k = 3 .. n-1 of a command u (n,) at which it moves at the sample rate: its moves
+    du_k, du_(k-1), du_(k-2) alternate in sign and each exceeds CHATTER_THRESHOLD x span (an oscillation at the
+    sample rate), or it spikes: a pulse one sample wide (two moves of opposite sign above the threshold) between
+    moves less than SPIKE_RATIO of the pulse's (a command leaving a limit or a level for one sample; the peak of a
+    swing at the loop's bandwidth is flanked by larger moves); NaN for fewer than 4 samples or a span that is not
+    finite and positive."""
     u = np.asarray(u, float)
     if u.size < 4 or not (math.isfinite(span) and span > 0) or not np.all(np.isfinite(u)):
         return math.nan
     du = np.diff(u)
-    big = np.abs(du) > CHATTER_THRESHOLD * span
-    turn = (du[1:] * du[:-1] < 0) & big[1:] & big[:-1]
-    return float(np.count_nonzero(turn[1:] & turn[:-1])) / (u.size - 3)
+    size = np.abs(du)
+    big = size > CHATTER_THRESHOLD * span
+    turn = (du[1:] * du[:-1] < 0) & big[1:] & big[:-1]  # turn[j]: moves j and j + 1
+    pulse = SPIKE_RATIO * np.minimum(size[1:-2], size[2:-1])  # the pulses of turn[1:-1]
+    spikes = turn[1:-1] & (size[:-3] < pulse) & (size[3:] < pulse)
+    return float(np.count_nonzero(turn[1:] & turn[:-1]) + np.count_nonzero(spikes)) / (u.size - 3)
 
 
 def noise_free(config: TuningConfig) -> bool:
