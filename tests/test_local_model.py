@@ -54,7 +54,7 @@ def test_identify_picks_the_lowest_order_that_fits_a_second_order_response():
     assert model.order == 2
     np.testing.assert_allclose(model.denominator, a, atol=1e-8)
     np.testing.assert_allclose(model.numerator, b, atol=1e-8)
-    assert identify(MeasuredPlant(w, P, Ts, (0.0,), ()), max_order=1).fit_error > 0.05
+    assert identify(MeasuredPlant(w, P, Ts, (0.0,), ()), max_order=1, high_order=1).fit_error > 0.05
 
 
 def test_identify_finds_the_dead_time_of_a_delayed_lag():
@@ -68,7 +68,7 @@ def test_identify_finds_the_dead_time_of_a_delayed_lag():
     w = np.geomspace(0.01, math.pi / Ts, 120)
     q = np.exp(-1j * w * Ts)
     P = q ** delay * np.polyval(b[::-1], q) / np.polyval(a[::-1], q)
-    assert identify(MeasuredPlant(w, P, Ts, (0.0,), ()), max_delay=0).fit_error > 0.05
+    assert identify(MeasuredPlant(w, P, Ts, (0.0,), ()), max_delay=0, high_order=4).fit_error > 0.05
     model = identify(MeasuredPlant(w, P, Ts, (0.0,), ()))
     assert model.order == 1 and model.fit_error < 1e-6
     np.testing.assert_allclose(model.numerator, np.concatenate([np.zeros(delay), b]), atol=1e-8)
@@ -76,6 +76,22 @@ def test_identify_finds_the_dead_time_of_a_delayed_lag():
     _, y_ref = dlsim((b[1:], a, Ts), np.ones(60))  # b_1 q / (1 + a_1 q) = b_1 / (z + a_1)
     y = lfilter(model.numerator, model.denominator, np.ones(60 + delay))
     np.testing.assert_allclose(y[delay:], y_ref[:, 0], atol=1e-8)
+
+
+def test_identify_fits_a_sixth_order_lag_after_the_low_orders_and_dead_times_fail():
+    """A ZOH-discretised 1/(s + 1)^6 at Ts = 0.1 (scipy) sampled at 120 frequencies: no order 1..4, with or without dead
+    time, fits it within the tolerance; the high-order stage returns order 6 without dead time, its coefficients
+    within 1e-6 of scipy's."""
+    Ts = 0.1
+    b, a = zoh([1.0], np.poly([-1.0] * 6), Ts)
+    w = np.geomspace(0.01, math.pi / Ts, 120)
+    q = np.exp(-1j * w * Ts)
+    plant = MeasuredPlant(w, np.polyval(b[::-1], q) / np.polyval(a[::-1], q), Ts, (0.0,), ())
+    assert identify(plant, high_order=4).fit_error > 0.02
+    model = identify(plant)
+    assert model.order == 6 and len(model.numerator) == 7 and model.fit_error < 1e-6
+    np.testing.assert_allclose(model.denominator, a, atol=1e-6)
+    np.testing.assert_allclose(model.numerator, b, atol=1e-6)
 
 
 @pytest.mark.parametrize("Kp, Ti, Td, N, Tf, order", [(2.0, 1.5, 0.3, 10.0, 0.2, 2), (2.0, math.inf, 0.3, None, 0.0, 1),

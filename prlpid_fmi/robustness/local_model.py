@@ -10,7 +10,8 @@ use: the ZOH discretisation of the plant, one sample of delay included) by Sanat
 least squares of the relative error |A P_meas - B| / (|A_prev| |P_meas|) over the measured frequencies, SK_ITERATIONS
 times. The order is the lowest of 1..MAX_ORDER whose RMS relative error over the measured frequencies is at most
 FIT_TOLERANCE; where none meets it, a dead time of d = 1..MAX_DELAY further samples is tried (q^d B(q) / A(q): the
-numerator's leading zeros), lowest order first, then least d (else the best of them). A ZOH-discretised linear
+numerator's leading zeros), lowest order first, then least d; where none fits either, orders MAX_ORDER + 1 ..
+HIGH_ORDER without dead time (a high-order lag such as 1/(s + 1)^6; else the best of them). A ZOH-discretised linear
 plant of order n is matched exactly at order n, with its delay when that is a whole number of samples.
 
 The load response (`load_responses`): the loop held at the point, a step d at the plant input, the PID's
@@ -38,6 +39,7 @@ MAX_ORDER = 4  # highest order tried
 FIT_TOLERANCE = 0.02  # RMS relative error at which the lowest order is taken
 SK_ITERATIONS = 20  # Sanathanan-Koerner re-weightings
 MAX_DELAY = 40  # extra samples of dead time tried where no order fits without
+HIGH_ORDER = 8  # orders MAX_ORDER + 1 .. HIGH_ORDER (no dead time) are tried last, where nothing above fits
 
 
 @dataclass(frozen=True, eq=False)
@@ -88,18 +90,21 @@ def _fit(omega: np.ndarray, P: np.ndarray, Ts: float, n: int) -> tuple[np.ndarra
 
 
 def identify(plant: MeasuredPlant, max_order: int = MAX_ORDER, tolerance: float = FIT_TOLERANCE,
-             max_delay: int = MAX_DELAY) -> LocalModel:
+             max_delay: int = MAX_DELAY, high_order: int = HIGH_ORDER) -> LocalModel:
     """The LocalModel of a measured response (module docstring): the lowest order with fit_error <= tolerance; where
     no order meets it, the lowest order and then the least dead time of 1..max_delay extra samples that does (the
-    numerator's leading zeros: q^d B(q) / A(q), fitted to P e^{j w Ts d}); else the model with the least fit_error."""
+    numerator's leading zeros: q^d B(q) / A(q), fitted to P e^{j w Ts d}); where none does, the lowest order of
+    max_order + 1..high_order without dead time (a high-order lag); else the model with the least fit_error."""
     omega = np.asarray(plant.frequencies_rad_s, float)
     P = np.asarray(plant.response, complex)
     if len(omega) < 2 or not np.all(np.isfinite(P)) or np.any(P == 0):
         raise ValueError("a local model needs a finite, nonzero response at two frequencies or more")
     Ts = float(plant.sample_time_s)
     best = None
-    for delays in ((0,), range(1, max_delay + 1)):
-        for n in range(1, max_order + 1):
+    stages = ((range(1, max_order + 1), (0,)), (range(1, max_order + 1), range(1, max_delay + 1)),
+              (range(max_order + 1, max(max_order, high_order) + 1), (0,)))
+    for orders, delays in stages:
+        for n in orders:
             if 2 * len(omega) < 2 * n + 1:
                 break
             for d in delays:
