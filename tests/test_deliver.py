@@ -37,6 +37,23 @@ def test_a_schedule_above_the_ms_limit_or_chattering_or_diverging_or_not_better_
     assert choose(worse, cand("fixed PID", 1.0, mc=[metrics(1.0)]), 2.0).deploy == "fixed PID"
 
 
+def test_an_eligible_schedule_is_deployed_where_the_fixed_pid_is_refused_whatever_their_ise():
+    """A fixed PID above the Ms limit cannot be the bar a table must clear: a table that passes every check is
+    deployed in its place even with a higher ISE and total variation; with a classical schedule in between, the
+    classical one takes the refused fixed PID's place and the adaptive table is compared with it as usual."""
+    from prlpid_fmi.deliver.rule import choose_among
+
+    refused = cand("fixed PID", 1.0, ms=2.5)
+    d = choose(cand("gain schedule", 1.2, tv=30.0), refused, 2.0)
+    assert d.deploy == "gain schedule"
+    assert d.reasons[0].startswith("The fixed PID is not deployable: ") and "deployed in its place" in d.reasons[-1]
+    assert choose(cand("gain schedule", 1.2, ms=2.2), refused, 2.0).deploy == "none"
+    d = choose_among(cand("gain schedule", 1.19), cand("classical gain schedule", 1.2), refused, 2.0)
+    assert d.deploy == "classical gain schedule"  # the adaptive table does not beat it by 1 %
+    assert choose_among(cand("gain schedule", 1.0), cand("classical gain schedule", 1.2), refused,
+                        2.0).deploy == "gain schedule"
+
+
 def test_nothing_is_deployed_when_neither_meets_the_limit_and_the_verdict_says_so():
     d = choose(cand("gain schedule", 0.5, ms=3.0), cand("fixed PID", 1.0, ms=2.2), 2.0)
     assert d.deploy == "none"

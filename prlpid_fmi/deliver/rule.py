@@ -17,7 +17,8 @@ Rule (one place; explained in docs/architecture.md "Deliverable"):
   the fixed PID's, nor does it leave a setpoint step unsettled in more of those episodes, and its load IAE (load steps at the plant input over the setpoint
   range) is at most LOAD_TOLERANCE times the fixed PID's (setpoint ISE alone does not decide), and its overshoot
   (the acceptance check's) is within deploy.max_overshoot wherever the fixed PID's is; otherwise the fixed PID when it
-  is eligible; otherwise nothing is deployable.
+  is eligible; otherwise nothing is deployable. Where the fixed PID is not eligible itself, an eligible schedule is
+  deployed without those comparisons (they rank a table against a controller that may be deployed).
 - With a classical gain schedule (tuning.schedule.classical, on nonlinear plants) there are three candidates:
   the classical schedule must first win over the fixed PID by the rule above (`choose_among`); the winner is
   the incumbent the adaptive schedule must then beat by the same rule. So the adaptive policy is deployed only
@@ -187,6 +188,12 @@ def choose(schedule: Candidate | None, fixed: Candidate, max_sensitivity: float,
             problems.append(f"its robustness is not verified ({impossible} of {len(schedule.margins)} Ms estimates "
                             "impossible to make: the plant varies faster than the margin experiment); "
                             "deploy.allow_unverified: true deploys it anyway")
+        refused = fixed.problems(max_sensitivity)
+        if not problems and refused:  # comparisons with a controller that may not be deployed mean nothing
+            return Decision(Deployed(schedule.name), tuple(
+                [f"The {against} is not deployable: {p}." for p in refused]
+                + [f"The {schedule.name} passes every check, so it is deployed in its place (the comparisons with "
+                   f"the {against} do not apply)."]))
         if not problems:
             if not schedule.score <= (1 - MIN_IMPROVEMENT) * fixed.score:
                 problems.append(f"it does not beat the {against} on ISE by {MIN_IMPROVEMENT:.0%} or more "
