@@ -13,8 +13,9 @@ baseline.objective "load" (the default) keeps, in this order:
    the load tolerance, or where none is within it, the gains nearest the tolerance that meet the limit);
 4. load IAE <= baseline.load_tolerance x the load optimum (tuning.load_experiment; tuning.load_design's search);
 5. among those, the least setpoint ISE (tuning.load_design.SetpointDesign): where the load search used the identified
-   local models, over the gains and b within the load tolerance, searched on the models and verified on the FMU
-   (`_on_models`); on the FMU path, b alone where it meets the overshoot limit (a search of the gains there costs a
+   local models, over the gains and b within the load tolerance, and, where the plant has a SIMC/AMIGO model, with
+   load IAE no worse than those rules reach at the same Ms (tuning.classical_rules), searched on the models and
+   verified on the FMU (`_on_models`); on the FMU path, b alone where it meets the overshoot limit (a search of the gains there costs a
    differential evolution of FMU setpoint episodes);
 6. std(u) <= deploy.max_noise_gain and std(u_k - u_(k-1)) <= deploy.max_noise_increment from the measurement
    noise, fractions of the control span: preferences.
@@ -48,9 +49,10 @@ from prlpid_fmi.metrics import compute_metrics
 from prlpid_fmi.progress import QUIET, Steps
 from prlpid_fmi.robustness.margins import margins_of, setpoint_range_points
 from prlpid_fmi.robustness.status import meets_limit
+from prlpid_fmi.tuning.classical_rules import load_bound
 from prlpid_fmi.tuning.fixed_pid import FixedPid, detune_over, setpoint_pid
 from prlpid_fmi.tuning.load_design import MODEL_TOLERANCE, LoadDesign, SetpointDesign, setpoint_weight
-from prlpid_fmi.tuning.load_experiment import approach, open_core, parameter_samples, start_measurement
+from prlpid_fmi.tuning.load_experiment import DIVERGED_COST, approach, open_core, parameter_samples, start_measurement
 from prlpid_fmi.tuning.search_pool import search_workers
 
 RANGE_HOLD = 4  # the range episode holds each setpoint this many x training.setpoint_hold_steps samples
@@ -449,8 +451,10 @@ class Designer:
         violation) are verified and kept the same way, the load tolerance given up (requirement 3 ranks above 4). Returns (the record of fixed_pid.json's
         "setpoint_refined" or "traded_for_overshoot"'s "on_models", (vector with b, the b table) or None)."""
         baseline, deploy, seeds, progress = self.baseline, self.deploy, self.seeds, self.progress
+        trading = not math.isfinite(ise_to_beat)  # no b met the overshoot limit: the load tolerance may yield to it
+        bound = None if trading else self._rule_bound(design, design.filters(vector))
         trade = SetpointDesign(design, self.model_record["predicted_load_cost"], baseline.load_tolerance,
-                               deploy.max_overshoot, seeds, on_models=True)
+                               deploy.max_overshoot, seeds, on_models=True, rule_bound=bound)
         maxiter = max(MODEL_GENERATIONS * self.maxiter, MODEL_MIN_GENERATIONS)
         popsize = max(self.popsize, MODEL_MIN_POPSIZE)
         progress.step("least setpoint ISE within the load tolerance on the local models", trade.budget(maxiter, popsize))
@@ -467,8 +471,7 @@ class Designer:
         record = {"evaluations": int(second.nfev), "model_ise_ratio": model_ise / start_ise if start_ise > 0 else None,
                   "model_load_cost": model_load, "model_overshoot": model_overshoot, "feasible_on_models": feasible,
                   "nearest_on_models": nearest, "ISE_before": ise_to_beat if math.isfinite(ise_to_beat) else None,
-                  "kept": False}
-        trading = not math.isfinite(ise_to_beat)  # no b met the overshoot limit: the load tolerance may yield to it
+                  "classical_bound": bound is not None, "kept": False}
         if not (feasible or (trading and nearest)) or not (trading or model_ise <= start_ise):
             return record, None
         x = np.asarray(second.x)
@@ -487,6 +490,19 @@ class Designer:
                 return record, None
         record["kept"] = True
         return record, (np.append(x[:-1], 2.0 * b - 1.0), rows)
+
+    @staticmethod
+    def _rule_bound(design: LoadDesign, tf: list[float]):
+        """Ms -> the load cost that SIMC or AMIGO reach at that Ms on the design's local models (tuning.
+        classical_rules, the rules from the middle operating point's model, with measurement filter tf and within the
+        noise limits), or None where no rule applies (unstable, oscillatory)."""
+        def assess(pid: tuple[float, float, float]):
+            gains = ([pid[0]], [pid[1]], [pid[2]], None)
+            if not design.meets_noise_limits(gains, tf):
+                return None
+            load = design.model_load_response(gains, tf)[0]
+            return None if load >= DIVERGED_COST else (design.limit_values(gains, tf)[0], load)
+        return load_bound(design.models[len(design.models) // 2], assess)
 
     def _setpoint_response(self, config: TuningConfig, gains: tuple, structure: tuple) -> tuple[float, float]:
         """(ISE, worst overshoot [%]) of the training episodes the design chose b on (noise free)."""

@@ -260,7 +260,19 @@ class LoadDesign(OutcomeCache):
     def constraint_values(self, vector) -> np.ndarray:
         """[max Ms - limit, max noise share - max_noise_gain, max increment share - max_noise_increment] over points
         and loops (<= 0: feasible)."""
-        gains, tf = self.gains(vector), self.filters(vector)
+        ms, noise, increment = self.limit_values(self.gains(vector), self.filters(vector))
+        limit = self.limit if self.limit is not None else math.inf
+        extra = increment - self.max_increment if math.isfinite(self.max_increment) else -1.0
+        return np.array([ms - limit, noise - self.max_noise, extra])
+
+    def meets_noise_limits(self, gains: tuple, tf: list[float]) -> bool:
+        """std(u) and std(u_k - u_(k-1)) from the measurement noise within their limits at every point and loop."""
+        _, noise, increment = self.limit_values(gains, tf)
+        return noise <= self.max_noise and (increment <= self.max_increment or not math.isfinite(self.max_increment))
+
+    def limit_values(self, gains: tuple, tf: list[float]) -> tuple[float, float, float]:
+        """(max Ms, max std(u) share, max std(u_k - u_(k-1)) share) of the measurement noise over the points and loops
+        with a measured response (shares of the loop's control span; 0 without noise)."""
         ms, noise, increment = 0.0, 0.0, 0.0
         sigma = self.config.measurement_noise_std
         for plants in self.plants:
@@ -273,9 +285,7 @@ class LoadDesign(OutcomeCache):
                     std_u, std_du = plant.noise_gains(C)
                     noise = max(noise, sigma * std_u / self.spans[i])
                     increment = max(increment, sigma * std_du / self.spans[i])
-        limit = self.limit if self.limit is not None else math.inf
-        extra = increment - self.max_increment if math.isfinite(self.max_increment) else -1.0
-        return np.array([ms - limit, noise - self.max_noise, extra])
+        return ms, noise, increment
 
     def estimates(self, gains: tuple, tf: list[float]) -> list[dict]:
         """Per point: {"point", "Ms", "noise_gain"} estimated from the measured plant responses (None: none)."""
@@ -615,15 +625,18 @@ def _worst_overshoot(r: np.ndarray, y: np.ndarray) -> float:
 
 class SetpointDesign(OutcomeCache):
     """Step 4 (module docstring): (Kp, Ti, Td[, Tf], b) minimising the setpoint ISE subject to Ms and noise as in
-    step 2, J_load <= load_tolerance x the step-2 optimum and overshoot <= max_overshoot. Used when no b in B_GRID
+    step 2, J_load <= load_tolerance x the step-2 optimum (with rule_bound, and at most what the classical rules
+    reach at the candidate's Ms) and overshoot <= max_overshoot. Used when no b in B_GRID
     meets the overshoot limit with the step-2 gains, with the setpoint responses simulated on the FMU's training
     episodes; and, with on_models, where a b meets it, for the least setpoint ISE within the load tolerance
     (tuning.design_rule, requirement 5) with the unit setpoint step simulated on the design's local models
     (`model_setpoint_response`). The vector is the load design's plus one entry for b."""
 
     def __init__(self, design: LoadDesign, best_load: float, load_tolerance: float, max_overshoot: float,
-                 seeds: list[int], on_models: bool = False):
+                 seeds: list[int], on_models: bool = False, rule_bound=None):
         self.design = design
+        self.rule_bound = rule_bound  # Ms -> the load cost the classical rules reach at that Ms (with on_models;
+        #                               tuning.classical_rules.load_bound), or None
         self.best_load, self.load_tolerance, self.max_overshoot_fraction = best_load, load_tolerance, max_overshoot
         self.load_limit = load_tolerance * best_load if math.isfinite(load_tolerance) else math.inf  # inf: no limit
         self.max_overshoot = 100.0 * max_overshoot
@@ -677,8 +690,17 @@ class SetpointDesign(OutcomeCache):
         if simulated is None:
             return np.concatenate([cheap, [1.0 + float(np.max(cheap)), 1.0]])
         load, _, overshoot = simulated
-        return np.concatenate([cheap, [load / self.load_limit - 1.0, overshoot / max(self.max_overshoot, 1e-9) - 1.0
+        return np.concatenate([cheap, [load / self.vector_load_limit(vector) - 1.0,
+                                       overshoot / max(self.max_overshoot, 1e-9) - 1.0
                                        if math.isfinite(overshoot) else DIVERGED_COST]])
+
+    def vector_load_limit(self, vector) -> float:
+        """The load limit of a vector: load_limit, and with a rule bound at most what the classical rules reach at the
+        vector's Ms."""
+        if self.rule_bound is None:
+            return self.load_limit
+        d = self.design
+        return min(self.load_limit, self.rule_bound(d.limit_values(d.gains(vector[:-1]), d.filters(vector[:-1]))[0]))
 
     def cost(self, vector) -> float:
         _, ise, _ = self.evaluate(vector)

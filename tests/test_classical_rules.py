@@ -1,0 +1,88 @@
+"""tuning.classical_rules against hand-computed truths: the tangent-method FOPDT of 1/(s + 1)^2 and of a delayed lag,
+the ramp asymptote of 1/(s (s + 1)), AMIGO's and SIMC's published formulas, and the bound's interpolation."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from scipy.signal import cont2discrete
+
+from prlpid_fmi.robustness.local_model import LocalModel
+from prlpid_fmi.tuning.classical_rules import fopdt, integrating, load_bound, rules
+
+TS = 0.02
+
+
+def model(num, den, Ts=TS, delay_samples=0) -> LocalModel:
+    """The ZOH discretisation of num/den (descending powers of s) as a LocalModel in powers of q = z^-1, with
+    delay_samples more samples of dead time."""
+    b, a, _ = cont2discrete((num, den), Ts, method="zoh")
+    b, a = np.ravel(b), np.ravel(a)
+    b = np.concatenate([np.zeros(len(a) - len(b)), b])  # same length as a: b[0] = 0 for a strictly proper plant
+    return LocalModel(np.concatenate([np.zeros(delay_samples), b / a[0]]), a / a[0], Ts, (0.0,), 0.0)
+
+
+def test_tangent_method_on_a_double_lag_by_hand():
+    """1/(s + 1)^2: y = 1 - (1 + t) e^-t is steepest at t = 1 (slope 1/e, y = 1 - 2/e), so the tangent crosses zero at
+    L = 1 - (1 - 2/e) e = 3 - e; y(t63) = 1 - 1/e at (1 + t) e^-t = 1/e, t63 = 2.1462; T = t63 - L; plus Ts/2 for
+    the hold."""
+    K, T, L = fopdt(model([1.0], [1.0, 2.0, 1.0]))
+    L_hand = 3.0 - math.e
+    t63 = 2.146193220620583  # the root of (1 + t) e^-t = e^-1 (by hand: Newton from 2)
+    assert K == pytest.approx(1.0, abs=1e-3)
+    assert L == pytest.approx(L_hand + TS / 2, abs=TS)
+    assert T == pytest.approx(t63 - L_hand - TS / 2, abs=TS)
+
+
+def test_a_delayed_lag_is_read_back_and_the_rules_are_the_published_formulas():
+    """2 e^(-0.5 s) / (3 s + 1), the delay a whole number of samples: the tangent is steepest at t = 0.5, so L = 0.5
+    (+ Ts/2), T = 3, K = 2; AMIGO (Astrom & Hagglund 2004) and SIMC (Skogestad 2003, tc = L) from those by hand."""
+    K, T, L = fopdt(model([2.0], [3.0, 1.0], delay_samples=25))
+    assert (K, T, L) == pytest.approx((2.0, 3.0, 0.5 + TS / 2), abs=TS)
+    amigo = rules(model([2.0], [3.0, 1.0], delay_samples=25))["AMIGO"](1.0)
+    assert amigo == pytest.approx(((0.2 + 0.45 * T / L) / K, (0.4 * L + 0.8 * T) / (L + 0.1 * T) * L,
+                                   0.5 * L * T / (0.3 * L + T)), rel=1e-9)
+    simc = rules(model([2.0], [3.0, 1.0], delay_samples=25))["SIMC"](1.0)
+    assert simc == pytest.approx((T / (K * 2 * L), min(T, 8 * L), 0.0), rel=1e-9)
+
+
+def test_an_integrator_with_a_lag_is_read_by_its_ramp_asymptote():
+    """-0.5 / (s (s + 1)): the ramp's asymptote is -0.5 (t - 1): kv = -0.5, L = 1 (+ Ts/2); AMIGO's integrating PID
+    0.45 / (kv L), 8 L, 0.5 L with the sign of kv."""
+    m = model([-0.5], [1.0, 1.0, 0.0])
+    assert fopdt(m) is None
+    kv, L = integrating(m)
+    assert (kv, L) == pytest.approx((-0.5, 1.0 + TS / 2), abs=2e-3)
+    Kp, Ti, Td = rules(m)["AMIGO"](1.0)
+    assert (Kp, Ti, Td) == pytest.approx((0.45 / (kv * L), 8 * L, 0.5 * L), rel=1e-9)
+    assert Kp < 0
+
+
+@pytest.mark.parametrize("den", [[1.0, -1.0], [1.0, 0.4, 4.0], [1.0, 0.0, 0.0]])
+def test_no_rule_for_unstable_oscillatory_or_double_integrating_models(den):
+    assert rules(model([1.0], den)) == {}
+
+
+def test_the_bound_is_the_least_load_at_or_below_each_ms_interpolated():
+    """A made-up sweep of AMIGO's knob k where Ms = 1.2 + 0.5 ln(k + 1) rises and the load 10 / k falls, SIMC's
+    points refused by `assess` (a noise limit): the bound at Ms m is the least load over Ms <= m, linear between the
+    sweep's points, inf below the least Ms."""
+    m = model([2.0], [3.0, 1.0], delay_samples=25)
+    K, T, L = fopdt(m)
+    amigo_kp = (0.2 + 0.45 * T / L) / K
+
+    def assess(pid):
+        if pid[2] == 0.0:  # SIMC's PI
+            return None
+        k = pid[0] / amigo_kp
+        return 1.2 + 0.5 * math.log(k + 1.0), 10.0 / k
+    bound = load_bound(m, assess)
+    from prlpid_fmi.tuning.classical_rules import KNOBS
+    ms = 1.2 + 0.5 * np.log(KNOBS + 1.0)
+    assert bound(1.0) == math.inf
+    assert bound(ms[0]) == pytest.approx(10.0 / KNOBS[0])
+    mid = 0.5 * (ms[10] + ms[11])
+    assert bound(mid) == pytest.approx(0.5 * (10.0 / KNOBS[10] + 10.0 / KNOBS[11]))
+    assert bound(10.0) == pytest.approx(10.0 / KNOBS[-1])
+    assert load_bound(model([1.0], [1.0, -1.0]), assess) is None
