@@ -66,15 +66,15 @@ def test_no_rule_for_unstable_oscillatory_or_double_integrating_models(den):
 
 def test_the_bound_is_the_least_load_at_or_below_each_ms_interpolated():
     """A made-up sweep of AMIGO's knob k where Ms = 1.2 + 0.5 ln(k + 1) rises and the load 10 / k falls, SIMC's
-    points refused by `assess` (a noise limit): the bound at Ms m is the least load over Ms <= m, linear between the
-    sweep's points, inf below the least Ms."""
+    points all dominated (load 100 at Ms interleaved with AMIGO's): the bound at Ms m is AMIGO's least load over
+    Ms <= m, linear between its sweep's points, inf below its least Ms; SIMC's points change nothing."""
     m = model([2.0], [3.0, 1.0], delay_samples=25)
     K, T, L = fopdt(m)
     amigo_kp = (0.2 + 0.45 * T / L) / K
 
     def assess(pid):
         if pid[2] == 0.0:  # SIMC's PI
-            return None
+            return 1.2 + 0.5 * math.log(pid[0] / amigo_kp + 1.0) + 1e-3, 100.0
         k = pid[0] / amigo_kp
         return 1.2 + 0.5 * math.log(k + 1.0), 10.0 / k
     bound = load_bound(m, assess)
@@ -86,3 +86,4 @@ def test_the_bound_is_the_least_load_at_or_below_each_ms_interpolated():
     assert bound(mid) == pytest.approx(0.5 * (10.0 / KNOBS[10] + 10.0 / KNOBS[11]))
     assert bound(10.0) == pytest.approx(10.0 / KNOBS[-1])
     assert load_bound(model([1.0], [1.0, -1.0]), assess) is None
+    assert load_bound(m, lambda pid: None) is None  # every rule's gains refused

@@ -11,8 +11,8 @@ step response y_k (robustness.local_model: the ZOH discretisation, so y_k is the
 - one integrator: kv e^(-L s) / s from the ramp's asymptote (kv its slope, L where it crosses zero, + Ts/2);
   AMIGO Kp = knob x 0.45 / (kv L), Ti = 8 L, Td = 0.5 L; SIMC Kp = 1 / (kv (tc + L)), Ti = 4 (tc + L);
 - otherwise (unstable, oscillatory, several integrators): no rule, and no bound.
-Each rule is swept over KNOBS; `load_bound` turns the sweep into Ms -> the least load IAE a rule reaches at that Ms
-or below.
+Each rule is swept over KNOBS; `load_bound` turns each sweep into Ms -> the least load IAE the rule reaches at that
+Ms or below, and takes the least over the rules.
 """
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ from scipy.signal import lfilter
 
 from prlpid_fmi.robustness.local_model import LocalModel
 
-KNOBS = np.geomspace(0.05, 20.0, 48)  # AMIGO's Kp factor and SIMC's tc / L swept
+KNOBS = np.geomspace(0.05, 20.0, 96)  # AMIGO's Kp factor and SIMC's tc / L swept
 OSCILLATORY = 0.1  # |imag| / |s| of a pole above which the model is taken as oscillatory (no rule)
 STEP_SAMPLES = 200_000  # the longest step response computed for the fit [samples]
 
@@ -112,11 +112,13 @@ def rules(model: LocalModel) -> dict[str, Rule]:
 
 def load_bound(model: LocalModel, assess: Callable[[tuple[float, float, float]], tuple[float, float] | None]
                ) -> Callable[[float], float] | None:
-    """Ms -> the least load IAE that a rule (`rules`, swept over KNOBS) reaches with Ms at most that (linear between
-    the sweep's points on that envelope; inf below the least Ms of the sweep), or None without a rule. assess((Kp, Ti, Td)) -> (Ms, load IAE) of those gains on the
+    """Ms -> the least load IAE that a rule (`rules`, each swept over KNOBS) reaches with Ms at most that: per rule
+    the least load over its sweep's points with Ms <= m, linear in Ms between them (inf below its least Ms), then the
+    least over the rules; None without a rule. assess((Kp, Ti, Td)) -> (Ms, load IAE) of those gains on the
     design's models, or None where they break a limit other than Ms (noise) or destabilise the loop."""
-    found = []
+    curves = []
     for rule in rules(model).values():
+        found = []
         for k in KNOBS:
             gains = rule(float(k))
             if not all(math.isfinite(g) for g in gains) or gains[1] <= 0:
@@ -124,10 +126,9 @@ def load_bound(model: LocalModel, assess: Callable[[tuple[float, float, float]],
             point = assess(gains)
             if point is not None and all(math.isfinite(v) for v in point):
                 found.append(point)
-    if not found:
+        if found:
+            found.sort()
+            curves.append((np.array([p[0] for p in found]), np.minimum.accumulate(np.array([p[1] for p in found]))))
+    if not curves:
         return None
-    found.sort()
-    ms = np.array([p[0] for p in found])
-    least = np.minimum.accumulate(np.array([p[1] for p in found]))
-
-    return lambda m: float(np.interp(m, ms, least, left=math.inf))
+    return lambda m: min(float(np.interp(m, ms, least, left=math.inf)) for ms, least in curves)
