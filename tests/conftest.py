@@ -2,6 +2,7 @@ import os
 
 import pytest
 
+from prlpid_fmi import runcontext
 from prlpid_fmi.fmu import bundled_fmu, bundled_plant_names
 from prlpid_fmi.tuning.search_pool import WORKERS_ENV
 
@@ -10,6 +11,13 @@ from prlpid_fmi.tuning.search_pool import WORKERS_ENV
 os.environ.setdefault(WORKERS_ENV, "1")
 
 PLANTS = bundled_plant_names()
+
+
+@pytest.fixture
+def run_context():
+    """A fresh prlpid_fmi.runcontext for the test: no measurements or references kept, the process's own after it."""
+    with runcontext.opened() as run:
+        yield run
 
 
 @pytest.fixture(scope="session", params=[2, 3], ids=["fmi2", "fmi3"])

@@ -83,15 +83,12 @@ def test_a_fixed_pid_is_detuned_until_it_meets_the_limit_at_every_operating_poin
     assert fixed_pid.detune_over(CONFIG, start, [[0.0]], 2.0) == start  # already meets a mid-range-only limit
 
 
-def test_the_ms_of_other_gains_is_predicted_from_the_plant_response_measured_once(monkeypatch):
+def test_the_ms_of_other_gains_is_predicted_from_the_plant_response_measured_once(run_context):
     """robustness.margins.predicted_ms: after one measurement at a point, the Ms of other PIDs there follows from the
     measured plant response alone; checked against python-control's exact loop on 1/(s - 1), and a PID too weak to
     hold the unstable plant (Kp < 1) is predicted unstable (Nyquist), not given the small |S| it has on the circle."""
-    import prlpid_fmi.robustness.margins as margins
     from prlpid_fmi.robustness.margins import margins_of, predicted_ms
 
-    monkeypatch.setattr(margins, "_MEASURED", {})
-    monkeypatch.setattr(margins, "_REFERENCES", {})
     point = [0.5]
     assert predicted_ms(CONFIG, TOGETHER, point) is None  # nothing measured there yet
     margins_of(CONFIG, ([4.0], [1.0], [0.1], None), point)
@@ -104,8 +101,8 @@ def test_the_ms_of_other_gains_is_predicted_from_the_plant_response_measured_onc
 
 
 @pytest.mark.parametrize("start, keep_ti", [(TOGETHER, False), (AGGRESSIVE, True)])
-def test_detune_with_predictions_finds_what_measurements_alone_find_with_fewer_experiments(monkeypatch, start,
-                                                                                           keep_ti):
+def test_detune_with_predictions_finds_what_measurements_alone_find_with_fewer_experiments(monkeypatch, run_context,
+                                                                                           start, keep_ti):
     """detune decides its scan and bisection from predicted Ms where they lie clearly on one side of the limit and
     measures the rest and its result: the same gains as the search on measurements alone, from fewer experiments."""
     import prlpid_fmi.robustness.margins as margins
@@ -115,12 +112,11 @@ def test_detune_with_predictions_finds_what_measurements_alone_find_with_fewer_e
     measured = []
     real = margins.loop_margins
     monkeypatch.setattr(margins, "loop_margins", lambda *a, **k: measured.append(a[1:4]) or real(*a, **k))
-    monkeypatch.setattr(margins, "_MEASURED", {})
-    monkeypatch.setattr(margins, "_REFERENCES", {})
     fixed_pid.margins_of(CONFIG, start, point)  # the caller has measured the gains it detunes
     fast = fixed_pid.detune(CONFIG, start, point, 2.0, keep_ti=keep_ti)
     with_predictions = len(measured)
-    monkeypatch.setattr(margins, "_MEASURED", {})
+    run_context.measured.clear()
+    run_context.references.clear()
     monkeypatch.setattr(fixed_pid, "predicted_ms", lambda *a: None)
     slow = fixed_pid.detune(CONFIG, start, point, 2.0, keep_ti=keep_ti)
     assert fast == slow

@@ -3,7 +3,6 @@ bit for bit, and margins_of then decides what it decides without them (its plant
 import numpy as np
 import pytest
 
-from prlpid_fmi.robustness import margins
 from prlpid_fmi.robustness.margins import margins_of, measure_margins, measured_margins, predicted_ms
 from prlpid_fmi.scenario.load import load_scenario
 from prlpid_fmi.scenario.presets import scenario_path
@@ -15,9 +14,7 @@ GAINS = [([3.0], [1.0], [0.0], None), ([8.0], [0.3], [0.0], None), ([2.0], [2.0]
 
 
 @pytest.fixture
-def config(monkeypatch):
-    monkeypatch.setattr(margins, "_MEASURED", {})
-    monkeypatch.setattr(margins, "_REFERENCES", {})
+def config(run_context):
     return load_scenario(scenario_path("first_order")).tuning
 
 
@@ -27,7 +24,7 @@ def _same(a, b) -> bool:
         np.array_equal(a.plant_response, b.plant_response, equal_nan=True) and a.reliable == b.reliable
 
 
-def test_measured_ahead_on_two_processes_equals_measured_here(config, monkeypatch):
+def test_measured_ahead_on_two_processes_equals_measured_here(config, run_context, monkeypatch):
     from prlpid_fmi.tuning import margin_experiments
 
     sizes = []
@@ -43,7 +40,7 @@ def test_measured_ahead_on_two_processes_equals_measured_here(config, monkeypatc
     assert sorted({round(m.Ms, 1) for m in here})[0] < 2.0 and any(np.isinf(m.Ms) for m in here)
     # a duplicate is measured once; nothing is a reference before margins_of returns it
     assert measure_ahead(config, requests + requests[:2], workers=2) == len(requests)
-    assert sizes == [2] and margins._REFERENCES == {}
+    assert sizes == [2] and run_context.references == {}
     for (g, p), m in zip(requests, here):
         assert _same(measured_margins(config, g, p), m)
     assert measure_ahead(config, requests, workers=2) == 0 and sizes == [2]  # kept: nothing left, no pool
@@ -54,15 +51,15 @@ def test_one_process_measures_nothing_ahead(config):
     assert all(measured_margins(config, g, [0.0]) is None for g in GAINS)
 
 
-def test_references_are_the_first_returned_as_without_measuring_ahead(config, monkeypatch):
+def test_references_are_the_first_returned_as_without_measuring_ahead(config, run_context):
     """predicted_ms predicts from the first verified measurement margins_of returned at a point: measuring ahead
     in another order (here all four at once) leaves the same reference as asking one by one."""
     point = [0.0]
     for g in GAINS[1:]:  # one by one: the second PI's measurement becomes the reference
         margins_of(config, g, point)
     one_by_one = predicted_ms(config, GAINS[0], point)
-    monkeypatch.setattr(margins, "_MEASURED", {})
-    monkeypatch.setattr(margins, "_REFERENCES", {})
+    run_context.measured.clear()
+    run_context.references.clear()
     assert measure_ahead(config, [(g, point) for g in reversed(GAINS)], workers=2) == len(GAINS)
     assert predicted_ms(config, GAINS[0], point) is None  # no reference yet
     for g in GAINS[1:]:

@@ -6,7 +6,7 @@ integer increments per step, ~35 ns) and registers here; the thread wakes every 
 when a plant's counter has stood still on an odd value for its timeout, ends the process:
 
 - in the tool's own process: one line on stderr naming the FMU, the call and the time, what is kept
-  (`context`, e.g. the run directory and the `--resume` command), then os._exit(2) after flushing;
+  (the run context's run directory, prlpid_fmi.runcontext, and the `--resume` command), then os._exit(2) after flushing;
   files already written (fixed_pid.json, checkpoints, logs) stay, and `tune` leaves its `.active`
   marker, so `--resume` runs the plant in a worker process (plant.isolation: auto);
 - in a worker process (fmu.worker, loop.isolated): `reporter(line)` sends the line to the parent,
@@ -32,6 +32,8 @@ import time
 import weakref
 from collections import deque
 
+from prlpid_fmi import runcontext
+
 MIN_STEP_TIMEOUT_S = 10.0     # the measured default is never below this [s]
 STEP_TIMEOUT_FACTOR = 100.0   # default timeout = this x the median measured cost of a call
 HANG_EXIT = 86                # exit code of a worker the watchdog ended (worker.signal_name says "hung")
@@ -39,9 +41,7 @@ SIGNAL_GRACE_S = 2.0          # SIGTERM/SIGINT during a call: end the process wh
 _MAX_INTERVAL_S, _MIN_INTERVAL_S = 1.0, 0.02
 _COST_SAMPLES = 15
 
-context: dict = {}            # what the exit line says is kept: {"run_dir": Path} (set by `tune`)
 reporter = None               # in a worker: callable(line) that hands the line to the parent
-default_timeout_s: float | None = None   # a process-wide plant.step_timeout_s (the CLI's --step-timeout)
 
 
 _worker_process = False  # set by fmu.worker.become_worker (here, below both worker and plant: no import cycle)
@@ -72,8 +72,9 @@ def timeout_of(plant) -> tuple[float, str]:
     """(timeout [s], where it comes from) for a plant: its step_timeout_s, else the measured default."""
     if plant.step_timeout_s is not None:
         return float(plant.step_timeout_s), "plant.step_timeout_s"
-    if default_timeout_s is not None:
-        return float(default_timeout_s), "--step-timeout"
+    run_timeout = runcontext.current().step_timeout_s
+    if run_timeout is not None:
+        return float(run_timeout), "--step-timeout"
     watch = _state.watches.get(id(plant))
     costs = list(watch[1].costs) if watch else []
     measured = STEP_TIMEOUT_FACTOR * statistics.median(costs) if costs else 0.0
@@ -206,7 +207,7 @@ def _end(text: str, code: int) -> None:
             reporter(text)
         finally:
             os._exit(HANG_EXIT)
-    run_dir = context.get("run_dir")
+    run_dir = runcontext.current().run_dir
     if run_dir is not None:
         text += (f"; the run directory {run_dir} is kept with what finished; continue it with "
                  f"`prlpid-fmi tune {run_dir}/scenario.yaml --out {run_dir} --resume` (with plant.isolation: auto "

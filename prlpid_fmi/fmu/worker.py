@@ -13,6 +13,7 @@ import signal
 import tempfile
 from pathlib import Path
 
+from prlpid_fmi import runcontext
 from prlpid_fmi.errors import PlantError
 from prlpid_fmi.fmu import plant as plant_module
 from prlpid_fmi.fmu import watchdog
@@ -53,7 +54,7 @@ def become_worker(conn=None, crumb_path: str | None = None, step_timeout_s: floa
         watchdog.reporter = lambda line: conn.send(("hang", line))
     if crumb_path is not None:
         attach_crumb(crumb_path)
-    watchdog.default_timeout_s = step_timeout_s
+    runcontext.current().step_timeout_s = step_timeout_s  # this worker process's own context
     plant_module.FmuPlant.check_outputs = bool(check_outputs)
 
 

@@ -37,6 +37,7 @@ from typing import Sequence
 import control
 import numpy as np
 
+from prlpid_fmi import runcontext
 from prlpid_fmi.config import TuningConfig
 from prlpid_fmi.loop.core import pid_structure
 from prlpid_fmi.robustness.plant_response import MeasuredPlant
@@ -56,9 +57,6 @@ MIN_RESOLUTION_BIN = 32      # a peak or crossover below this bin gets a longer 
 REFINE_POINTS = 24           # bins added around each peak or crossover, at most
 CROSSING_RANGE = 20.0        # phase crossings with 1/20 < |L| < 20 count as points of interest
 DC_PEAK_GAP = 0.003          # an |S| peak at the lowest grid point may sit this far (relative) below |S(0)|
-MEASURED_LIMIT = 512         # margins_of keeps this many measurements per process
-_MEASURED: dict = {}         # margins_of's measurements: (config, FMU file, gains, point) -> Margins
-_REFERENCES: dict = {}       # predicted_ms's plants: (config, FMU file, point) -> (gains, MeasuredPlant)
 DISTORTION_LIMIT = 0.02      # relative response at non-excited bins above which the estimate is flagged
 
 
@@ -471,7 +469,7 @@ def margins_of(config: TuningConfig, gains: tuple, point: list[float]) -> Margin
     """Margins of constant gains (Kp, Ti, Td, coupling lists) at an operating point (setpoints per loop).
 
     The experiment is deterministic (identification: no noise, no disturbances), so each measurement is kept
-    for the life of the process, keyed by the config, the FMU file's size and time, the gains and the point:
+    in the run's context (prlpid_fmi.runcontext) for the life of the run, keyed by the config, the FMU file's size and time, the gains and the point:
     a table row measured while it is projected onto the Ms limit and again as evidence is measured once. The
     first measurement returned at a config, FMU and point that predicts others (`_predicts`) is also kept as that
     point's plant response, for `predicted_ms` (first returned, not first measured: measurements made ahead on other
@@ -482,11 +480,10 @@ def margins_of(config: TuningConfig, gains: tuple, point: list[float]) -> Margin
     if found is None:
         found = measure_margins(config, gains, point)
         keep_margins(config, gains, point, found)
-    if place not in _REFERENCES and _predicts(config, found):
-        if len(_REFERENCES) >= MEASURED_LIMIT:
-            _REFERENCES.pop(next(iter(_REFERENCES)))
-        _REFERENCES[place] = (gains, MeasuredPlant(found.frequencies_rad_s, found.plant_response,
-                                                   config.sample_time_s, tuple(point), ()))
+    run = runcontext.current()
+    if place not in run.references and _predicts(config, found):
+        run.keep(run.references, place, (gains, MeasuredPlant(found.frequencies_rad_s, found.plant_response,
+                                                              config.sample_time_s, tuple(point), ())))
     return found
 
 
@@ -502,14 +499,13 @@ def measurement_key(config: TuningConfig, gains: tuple, point) -> tuple:
 
 def measured_margins(config: TuningConfig, gains: tuple, point: list[float]) -> Margins | None:
     """What margins_of keeps for these gains and point, None when they were not measured (or no longer kept)."""
-    return _MEASURED.get(measurement_key(config, gains, point))
+    return runcontext.current().measured.get(measurement_key(config, gains, point))
 
 
 def keep_margins(config: TuningConfig, gains: tuple, point: list[float], margins: Margins) -> None:
     """Keep a measurement of these gains and point (measure_margins, here or in another process) for margins_of."""
-    if len(_MEASURED) >= MEASURED_LIMIT:
-        _MEASURED.pop(next(iter(_MEASURED)))  # the oldest
-    _MEASURED[measurement_key(config, gains, point)] = margins
+    run = runcontext.current()
+    run.keep(run.measured, measurement_key(config, gains, point), margins)
 
 
 def _place(config: TuningConfig, point) -> tuple:
@@ -535,7 +531,7 @@ def predicted_ms(config: TuningConfig, gains: tuple, point: list[float]) -> floa
     Nyquist winding of 1 + C P differs from the measured PID's (unstable). An estimate for deciding what to
     measure (tuning.fixed_pid.detune), never a margin to report: on a linear plant it is within 0.1 % of the
     measured Ms, while a nonlinear plant's response can differ with the controller."""
-    found = _REFERENCES.get(_place(config, point))
+    found = runcontext.current().references.get(_place(config, point))
     if found is None or len(gains[0]) != 1:
         return None
     reference, plant = found

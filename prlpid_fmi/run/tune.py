@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from prlpid_fmi import rundir as rd
+from prlpid_fmi import runcontext
 from prlpid_fmi.deliver.rule import Decision, Deployed
 from prlpid_fmi.errors import ArgumentError, Interrupted, PrlPidError
 from prlpid_fmi.report.markdown import (
@@ -72,30 +73,28 @@ def tune(scenario_path: str | Path, timesteps: int | None = None, seed: int | No
     if seed is not None and not 0 <= seed <= MAX_SEED:
         raise ArgumentError(f"{{seed}}: out of range (got {seed}; expected an integer from 0 to {MAX_SEED})")
     scenario = load_scenario(scenario_path)
-    from prlpid_fmi.fmu import watchdog
+    # this run's own context (prlpid_fmi.runcontext): its measurements, every FMU call's timeout, its directory
+    with runcontext.opened(step_timeout_s=scenario.tuning.step_timeout_s) as run:
+        if not resume:  # a loop that cannot be closed is refused before anything is written (probe.feasibility)
+            from prlpid_fmi.probe.feasibility import check_loops
 
-    watchdog.default_timeout_s = scenario.tuning.step_timeout_s  # every FMU call of this run (fmu.watchdog)
-    if not resume:  # a loop that cannot be closed is refused before anything is written (probe.feasibility)
-        from prlpid_fmi.probe.feasibility import check_loops
-
-        for note in check_loops(scenario.tuning, scenario.path or scenario_path):
-            warnings.warn(note, stacklevel=2)
-    run_dir, created = rd.prepare_run_dir(out, scenario.name, resume)
-    crashed = rd.mark_active(run_dir)
-    if on_run_dir is not None:
-        on_run_dir(run_dir)
-    watchdog.context["run_dir"] = run_dir  # what a hang's one line says is kept
-    try:
-        return _tune(scenario, Path(scenario_path), run_dir, timesteps, seed, resume, progress_bar, baseline,
-                     (crash or True) if crashed and resume else False)
-    except BaseException as exc:
-        if isinstance(exc, Interrupted):
-            exc.run_dir = run_dir
-        rd.discard_if_empty(run_dir, created)
-        raise
-    finally:
-        watchdog.context.pop("run_dir", None)
-        rd.mark_inactive(run_dir)
+            for note in check_loops(scenario.tuning, scenario.path or scenario_path):
+                warnings.warn(note, stacklevel=2)
+        run_dir, created = rd.prepare_run_dir(out, scenario.name, resume)
+        crashed = rd.mark_active(run_dir)
+        if on_run_dir is not None:
+            on_run_dir(run_dir)
+        run.run_dir = run_dir  # what a hang's one line says is kept
+        try:
+            return _tune(scenario, Path(scenario_path), run_dir, timesteps, seed, resume, progress_bar, baseline,
+                         (crash or True) if crashed and resume else False)
+        except BaseException as exc:
+            if isinstance(exc, Interrupted):
+                exc.run_dir = run_dir
+            rd.discard_if_empty(run_dir, created)
+            raise
+        finally:
+            rd.mark_inactive(run_dir)
 
 
 @dataclass

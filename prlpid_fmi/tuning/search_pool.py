@@ -20,7 +20,7 @@ from collections import deque
 from pathlib import Path
 from multiprocessing.connection import wait
 
-from prlpid_fmi.fmu import watchdog
+from prlpid_fmi import runcontext
 from prlpid_fmi.fmu.plant import FmuPlant, extracted_folders, reuse_extracted
 from prlpid_fmi.fmu.watchdog import in_worker
 from prlpid_fmi.fmu.worker import JOIN_TIMEOUT_S, become_worker, mp_context, note_crash, signal_name
@@ -102,7 +102,7 @@ class SearchPool:
             return
         ctx = mp_context()
         extracted = extracted_folders(fmus)
-        options = {"environ": dict(os.environ), "step_timeout_s": watchdog.default_timeout_s,
+        options = {"environ": dict(os.environ), "step_timeout_s": runcontext.current().step_timeout_s,
                    "check_outputs": FmuPlant.check_outputs}  # what this process's FMU calls run under
         for _ in range(workers - 1):
             parent, child = ctx.Pipe()
