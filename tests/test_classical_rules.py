@@ -3,6 +3,7 @@ the ramp asymptote of 1/(s (s + 1)), AMIGO's and SIMC's published formulas, and 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -87,3 +88,71 @@ def test_the_bound_is_the_least_load_at_or_below_each_ms_interpolated():
     assert bound(10.0) == pytest.approx(10.0 / KNOBS[-1])
     assert load_bound(model([1.0], [1.0, -1.0]), assess) is None
     assert load_bound(m, lambda pid: None) is None  # every rule's gains refused
+
+
+# -- the design rule's requirement 5 against AMIGO at equal Ms, computed here with python-control ---------------
+
+def _pid_z(Kp, Ti, Td, Tf, Ts):
+    """The tool's feedback law (control.pid) as a python-control transfer function: C = Kp (F (1 + Td (z - 1) / (Ts z))
+    + Ts z / (Ti (z - 1))), F the backward-Euler measurement filter Ts z / ((Tf + Ts) z - Tf) (1 without)."""
+    import control
+
+    z = control.tf([1.0, 0.0], [1.0], Ts)
+    F = Ts * z / ((Tf + Ts) * z - Tf) if Tf > 0 else 1
+    return Kp * (F * (1 + Td * (z - 1) / (Ts * z)) + Ts * z / (Ti * (z - 1)))
+
+
+def _loop_figures(P, C, Ts):
+    """(Ms on 4000 frequencies, IAE of a unit load step at the plant input over 300 s) of the loop P, C."""
+    import control
+
+    w = np.geomspace(1e-4, math.pi / Ts, 4000)
+    L = np.asarray(control.frequency_response(P * C, w).complex).ravel()
+    t = np.arange(int(300.0 / Ts)) * Ts
+    _, y = control.forced_response(control.feedback(P, C), t, np.ones_like(t))
+    return float(np.max(np.abs(1.0 / (1.0 + L)))), float(np.sum(np.abs(y)) * Ts)
+
+
+def test_the_setpoint_search_never_rejects_loads_worse_than_amigo_at_the_same_ms(tmp_path):
+    """e^(-s) / (s + 1)^2 (the zoo's sopdt_T1, LinearBatch FMU): the fixed PID the rule keeps after requirement 5 (the
+    least setpoint ISE within the load tolerance, searched on the local models) has a load IAE no worse than AMIGO's
+    PID, its Kp scaled to the same Ms, both computed here on the exact ZOH plant with python-control; AMIGO from the
+    analytic tangent-method FOPDT of the plant: L = 1 + (3 - e) + Ts/2, T = t63 - (3 - e), K = 1."""
+    import dataclasses
+
+    import control
+    import yaml
+
+    from prlpid_fmi.fmu import build_fmu
+    from prlpid_fmi.scenario.load import load_scenario
+    from prlpid_fmi.tuning import design_rule
+
+    zoo = Path(__file__).resolve().parents[1] / "benchmarks" / "zoo"
+    fmu = build_fmu("LinearBatch", out_dir=tmp_path, source_dir=zoo / "plants" / "LinearBatch")
+    scenario = yaml.safe_load((zoo / "scenarios" / "sopdt_T1.yaml").read_text())
+    scenario["plant"]["fmu"] = str(fmu)
+    (tmp_path / "sopdt.yaml").write_text(yaml.safe_dump(scenario))
+    config = load_scenario(tmp_path / "sopdt.yaml").tuning
+    result = design_rule.tune_fixed_pid(config, baseline=dataclasses.replace(design_rule.BaselineConfig(), workers=1),
+                                        seed=0, episodes=1, maxiter=6, popsize=6, max_sensitivity=2.0)
+    refined = result.report.details["setpoint_refined"]
+    assert refined["classical_bound"] and refined["kept"]  # the bound was in force and the search moved the gains
+
+    Ts = config.sample_time_s
+    P = control.sample_system(control.tf([1.0], [1.0, 2.0, 1.0]), Ts, method="zoh") * \
+        control.tf([1.0], [1.0] + [0.0] * round(1.0 / Ts), Ts)
+    g, tf = result.gains, result.structure[2][0]
+    ms, load = _loop_figures(P, _pid_z(g.Kp[0], g.Ti[0], g.Td[0], tf, Ts), Ts)
+    tangent = 3.0 - math.e
+    L, T = 1.0 + tangent + Ts / 2, 2.146193220620583 - tangent
+    amigo = ((0.2 + 0.45 * T / L), (0.4 * L + 0.8 * T) / (L + 0.1 * T) * L, 0.5 * L * T / (0.3 * L + T))
+    lo, hi = 0.2, 3.0  # AMIGO's Kp factor: Ms rises with it; bisection to the tool's Ms
+    for _ in range(30):
+        k = 0.5 * (lo + hi)
+        if _loop_figures(P, _pid_z(k * amigo[0], amigo[1], amigo[2], 0.0, Ts), Ts)[0] < ms:
+            lo = k
+        else:
+            hi = k
+    amigo_ms, amigo_load = _loop_figures(P, _pid_z(lo * amigo[0], amigo[1], amigo[2], 0.0, Ts), Ts)
+    assert amigo_ms == pytest.approx(ms, abs=2e-3)
+    assert load <= 1.01 * amigo_load

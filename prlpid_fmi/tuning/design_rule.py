@@ -51,7 +51,7 @@ from prlpid_fmi.robustness.margins import margins_of, setpoint_range_points
 from prlpid_fmi.robustness.status import meets_limit
 from prlpid_fmi.tuning.classical_rules import load_bound
 from prlpid_fmi.tuning.fixed_pid import FixedPid, detune_over, setpoint_pid
-from prlpid_fmi.tuning.load_design import MODEL_TOLERANCE, LoadDesign, SetpointDesign, setpoint_weight
+from prlpid_fmi.tuning.load_design import MODEL_TOLERANCE, LoadDesign, SetpointDesign, model_budget, setpoint_weight
 from prlpid_fmi.tuning.load_experiment import DIVERGED_COST, approach, open_core, parameter_samples, start_measurement
 from prlpid_fmi.tuning.search_pool import search_workers
 
@@ -61,8 +61,6 @@ RANGE_ORDER = (0, 1, 2, 1, 0)  # indices into (low, middle, high): up and down t
 SETTLING_BAND = 0.02  # a step is settled when |r - y| stays within this fraction of the step to the end of its hold
 RELAX_FACTORS = (2.0, 5.0, math.inf)  # factors on a noise limit the relaxation tries, in turn
 STABILISING_GENERATIONS = 6  # generations of the setpoint search that finds the PID the plant is measured with
-MODEL_GENERATIONS = 2  # the setpoint search on the local models runs this many x baseline.maxiter generations, ...
-MODEL_MIN_GENERATIONS, MODEL_MIN_POPSIZE = 20, 10  # ... and popsize, at least these (a model candidate costs ~0.1 ms)
 
 
 # -- typed results ------------------------------------------------------------------------------------------------
@@ -441,8 +439,7 @@ class Designer:
                    structure: tuple, ise_to_beat: float) -> tuple[dict, tuple | None]:
         """Requirements 3-5 on the local models (the load search used them): the least setpoint ISE within the load
         tolerance and the overshoot limit, searched on the models (SetpointDesign with on_models: a unit step, from the
-        load optimum with b = weight; MODEL_GENERATIONS x baseline.maxiter generations, MODEL_MIN_GENERATIONS and
-        MODEL_MIN_POPSIZE at least), then verified on the FMU: b
+        load optimum with b = weight; tuning.load_design.model_budget's generations and population), then verified on the FMU: b
         chosen again on the training episodes (`setpoint_weight`), kept only where its overshoot is within the limit,
         its ISE below `ise_to_beat` (the optimum's with its b) and the FMU's load cost within the tolerance of the
         optimum's, and, replacing an optimum that met the limits, where it settles the range episode (requirement 1).
@@ -455,8 +452,7 @@ class Designer:
         bound = None if trading else self._rule_bound(design, design.filters(vector))
         trade = SetpointDesign(design, self.model_record["predicted_load_cost"], baseline.load_tolerance,
                                deploy.max_overshoot, seeds, on_models=True, rule_bound=bound)
-        maxiter = max(MODEL_GENERATIONS * self.maxiter, MODEL_MIN_GENERATIONS)
-        popsize = max(self.popsize, MODEL_MIN_POPSIZE)
+        maxiter, popsize = model_budget(self.maxiter, self.popsize)
         progress.step("least setpoint ISE within the load tolerance on the local models", trade.budget(maxiter, popsize))
         try:
             second = trade.search(np.append(vector, 2.0 * weight - 1.0), self.seed, maxiter, popsize, progress=progress)

@@ -53,6 +53,8 @@ from prlpid_fmi.tuning.load_experiment import (DIVERGED_COST, load_config, load_
 from prlpid_fmi.tuning.search_pool import SearchPool, search_fmus, search_workers
 
 B_GRID = tuple(i / 20 for i in range(21))  # setpoint weights tried
+MODEL_GENERATIONS = 2  # a search on the local models runs this many x baseline.maxiter generations, ...
+MODEL_MIN_GENERATIONS, MODEL_MIN_POPSIZE = 20, 10  # ... and popsize, at least these (a model candidate costs ~0.1 ms)
 TF_RANGE = (0.1, 100.0)  # measurement filter search range [sample times], log
 FILTER_PROBES = 13  # Tf values over TF_RANGE the noise-increment relaxation test tries (relax_increment_limit)
 INIT_SPREAD = 0.15  # std of SetpointDesign's initial population around its start [search coordinates]
@@ -562,9 +564,10 @@ class LoadDesign(OutcomeCache):
                   "models": [m.as_dict() for m in self.models or []]}
         spent = 0
         if self.models is not None:
+            generations, population = model_budget(maxiter, popsize)
             progress.step("load design on the identified local models (differential evolution, then Nelder-Mead)",
-                          self.budget(maxiter, popsize))
-            result = self.search(seed, maxiter, popsize, progress=progress)
+                          self.budget(generations, population))
+            result = self.search(seed, generations, population, progress=progress)
             progress.step("load design: the identified models' choice verified on the FMU")
             check = self.validate_models(result.x)
             record.update(check)
@@ -754,6 +757,12 @@ class SetpointDesign(OutcomeCache):
             self.core.close()
         if self._owns_design:
             self.design.close()
+
+
+def model_budget(maxiter: int, popsize: int) -> tuple[int, int]:
+    """(generations, popsize) of a search on the local models for the FMU path's (maxiter, popsize): a model candidate
+    costs about a thousandth of an FMU simulation, so the search affords MODEL_GENERATIONS x as many generations."""
+    return max(MODEL_GENERATIONS * maxiter, MODEL_MIN_GENERATIONS), max(popsize, MODEL_MIN_POPSIZE)
 
 
 def setpoint_weight(config: TuningConfig, gains: tuple, structure: tuple[list, list, list], seeds: list[int],
