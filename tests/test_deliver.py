@@ -279,6 +279,10 @@ def test_the_design_section_names_the_limits_that_hold_the_design_and_what_was_k
     text = design_section(_design(setpoint_refined=refined), ["T"])
     assert ("gains searched on the identified local models for the least setpoint ISE replaced the load-optimal ones: "
             "setpoint ISE 0.75x theirs with their b, load IAE 1.1x the optimum, overshoot 4.2 % (both on the FMU).") in text
+    assert "SIMC" not in text
+    bounded = design_section(_design(setpoint_refined={**refined, "classical_bound": True}), ["T"])
+    assert ("overshoot 4.2 % (both on the FMU); its load IAE was held no worse than SIMC's or AMIGO's PID tuned to the "
+            "same Ms on the models.") in bounded
     assert "local models" not in design_section(_design(setpoint_refined={**refined, "kept": False}), ["T"])
 
 

@@ -275,7 +275,9 @@ def design_section(fixed: DesignResult, loop_names) -> str:
         lines.append(f"Within the load tolerance, gains searched on the identified local models for the least setpoint "
                      f"ISE replaced the load-optimal ones: setpoint ISE {number(refined['ISE'] / refined['ISE_before'], 3)}"
                      f"x theirs with their b, load IAE {number(refined['load_cost'] / design['load_optimum'], 3)}x the "
-                     f"optimum, overshoot {number(refined['Overshoot'], 3)} % (both on the FMU).")
+                     f"optimum, overshoot {number(refined['Overshoot'], 3)} % (both on the FMU)"
+                     + ("; its load IAE was held no worse than SIMC's or AMIGO's PID tuned to the same Ms on the "
+                        "models." if refined.get("classical_bound") else "."))
     followed = design.get("followed_setpoints")
     replaced = bool(followed and followed["source"])
     if traded and traded.get("nearest_load_tolerance"):
