@@ -121,3 +121,25 @@ def test_detune_with_predictions_finds_what_measurements_alone_find_with_fewer_e
     slow = fixed_pid.detune(CONFIG, start, point, 2.0, keep_ti=keep_ti)
     assert fast == slow
     assert with_predictions < len(measured) - 1  # the measurement-only count includes the start's measurement again
+
+
+def test_a_pid_too_weak_for_the_unstable_plant_costs_one_experiment_not_a_scan(monkeypatch, run_context):
+    """1/(s - 1) with Kp 0.6 < 1: no detuning (Kp / lambda, Ti and Td * lambda) holds the plant (python-control: every
+    loop of the scan unstable). With the plant response measured at the point before (another PID's experiment),
+    detune predicts that no k passes, measures the k of least predicted Ms, and returns None after that one
+    experiment instead of scanning on measurements."""
+    import prlpid_fmi.robustness.margins as margins
+    import prlpid_fmi.tuning.fixed_pid as fixed_pid
+
+    point = [0.5]
+    weak = ([0.6], [5.0], [0.0], None)
+    for k in fixed_pid.DETUNE_SCAN:  # Kp / lambda < 0.6 < 1: unstable whatever Ti (clipped into its range or not)
+        lam = DETUNE_STEP ** k
+        loop = pid_by_hand(0.6 / lam, 5.0 * lam, 0.0) * first_order_zoh(1.0)
+        assert np.any(np.abs(control.feedback(loop, 1).poles()) > 1.0)
+    fixed_pid.margins_of(CONFIG, ([4.0], [1.0], [0.1], None), point)  # a verified response at the point
+    measured = []
+    real = margins.loop_margins
+    monkeypatch.setattr(margins, "loop_margins", lambda *a, **k: measured.append(a[1:4]) or real(*a, **k))
+    assert fixed_pid.detune(CONFIG, weak, point, 2.0) is None
+    assert len(measured) == 1

@@ -142,26 +142,38 @@ def detune(config: TuningConfig, gains: tuple, point: list[float], limit: float,
     point (`_likely_meets`; one independent loop) and measure on the FMU only where the prediction lies near the
     limit, or where no response was measured there yet (the first verified measurement of the scan is then the
     point's response, and predicts the steps after it); the result is then measured. Where that measurement fails
-    the limit, or no k passes, the whole search runs again on measurements alone (the search before predictions):
-    same result whenever the predictions decide as the measurements would."""
+    the limit, the whole search runs again on measurements alone (the search before predictions): same result
+    whenever the predictions decide as the measurements would. Where no k is predicted to pass, the scan's k of least
+    predicted Ms is measured: failing too, None (a PID too weak for an unstable plant, which detuning only weakens,
+    costs one experiment, not a scan); passing, the search on measurements alone."""
     plant = config if plant is None else plant
     found = _detune(config, gains, point, limit, keep_ti, plant, _likely_meets)
     if found is not None and _meets(plant, found, point, limit):
         return found
+    if found is None:  # predicted: no k passes; the most promising k measured, and where it fails too, none
+        predicted = [(predicted_ms(plant, _detuned(config, gains, k, keep_ti), point), k) for k in DETUNE_SCAN]
+        if all(ms is not None for ms, _ in predicted):
+            _, k = min(predicted)
+            if not _meets(plant, _detuned(config, gains, k, keep_ti), point, limit):
+                return None
     return _detune(config, gains, point, limit, keep_ti, plant, _meets)
+
+
+def _detuned(config: TuningConfig, gains: tuple, k: float, keep_ti: bool) -> tuple:
+    """gains detuned by lambda = DETUNE_STEP**k (`detune`), clipped into config's gain ranges."""
+    Kp, Ti, Td, coupling = gains
+    lam = DETUNE_STEP ** k
+    ti_factor = 0.0 if keep_ti else 1.0
+    return ([max(x / lam, l.Kp.low) for x, l in zip(Kp, config.loops)],
+            [min(x * lam ** ti_factor, l.Ti.high) for x, l in zip(Ti, config.loops)],
+            [min(x * lam ** ti_factor, max(l.Td.high, x)) for x, l in zip(Td, config.loops)], coupling)
 
 
 def _detune(config: TuningConfig, gains: tuple, point: list[float], limit: float, keep_ti: bool, plant: TuningConfig,
             meets) -> tuple | None:
     """`detune`'s scan and bisection with meets(plant, gains, point, limit) deciding each step."""
-    Kp, Ti, Td, coupling = gains
-    ti_factor = 0.0 if keep_ti else 1.0
-
     def detuned(k):
-        lam = DETUNE_STEP ** k
-        return ([max(x / lam, l.Kp.low) for x, l in zip(Kp, config.loops)],
-                [min(x * lam ** ti_factor, l.Ti.high) for x, l in zip(Ti, config.loops)],
-                [min(x * lam ** ti_factor, max(l.Td.high, x)) for x, l in zip(Td, config.loops)], coupling)
+        return _detuned(config, gains, k, keep_ti)
 
     low = 0.0  # k known to fail (the gains themselves)
     for k in DETUNE_SCAN:
