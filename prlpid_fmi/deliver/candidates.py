@@ -19,7 +19,7 @@ from prlpid_fmi.deliver.rule import meets
 from prlpid_fmi.errors import PrlPidError
 from prlpid_fmi.loop.evaluation import Policy
 from prlpid_fmi.loop.gains import Gains
-from prlpid_fmi.robustness.margins import margins_of, operating_point
+from prlpid_fmi.robustness.margins import margins_of, operating_point, predicted_ms
 from prlpid_fmi.tuning.margin_experiments import measure_ahead
 from prlpid_fmi.tuning.schedule.classical import robust_between
 from prlpid_fmi.tuning.schedule.extraction import extract
@@ -29,8 +29,8 @@ from prlpid_fmi.tuning.schedule.table import GainSchedule
 AUTO_CANDIDATES = ("setpoint", "error")  # what auto compares
 
 
-def robust_schedule(schedule: GainSchedule, config, limit: float, workers: int | None = None
-                    ) -> tuple[GainSchedule, list[str]]:
+def robust_schedule(schedule: GainSchedule, config, limit: float, workers: int | None = None,
+                    reference: tuple | None = None) -> tuple[GainSchedule, list[str]]:
     """The schedule with every row whose Ms exceeds `limit` detuned (tuning.fixed_pid.detune) until it meets it.
 
     The agent's reward does not see robustness, so the gains it settles on can leave the Ms limit that
@@ -42,9 +42,11 @@ def robust_schedule(schedule: GainSchedule, config, limit: float, workers: int |
     at its own setpoint, then halfway between neighbours with the interpolated gains (tuning.schedule.classical.robust_between), where
     the deliverable checks them too. Error tables: each row at every point of range_points, detuned at its worst
     failing point until it meets the limit at all of them. Other variables: unchanged. The rows' first checks are
-    measured ahead on `workers` processes (baseline.workers: tuning.margin_experiments).
+    measured ahead on `workers` processes (baseline.workers: tuning.margin_experiments). reference: gains (Kp, Ti,
+    Td, coupling lists; the fixed PID) measured at a failing row's point before it is detuned where no plant response
+    was measured there yet, so that detune predicts its scan from it instead of measuring every step.
     """
-    from prlpid_fmi.tuning.fixed_pid import detune
+    from prlpid_fmi.tuning.fixed_pid import clearly_within, detune
 
     loop = error_loop(schedule)
     if not schedule.variable.startswith("setpoint") and loop is None:
@@ -53,17 +55,22 @@ def robust_schedule(schedule: GainSchedule, config, limit: float, workers: int |
 
     def points_of(b):
         return [operating_point(config, b)] if loop is None else range_points(config, loop)
-    measure_ahead(config, [(schedule.row(j), p) for j, b in enumerate(schedule.breakpoints) for p in points_of(b)],
-                  workers)
+    # a row predicted clearly within the limit at a point passes there without an experiment (the evidence of the
+    # table that is assessed measures it); the others are measured ahead
+    measure_ahead(config, [(schedule.row(j), p) for j, b in enumerate(schedule.breakpoints) for p in points_of(b)
+                           if not clearly_within(config, schedule.row(j), p, limit)], workers)
     for j, b in enumerate(schedule.breakpoints):
         points = points_of(b)
         row, first = schedule.row(j), None
         for _ in points:  # each pass detunes at the worst failing point; that usually settles the others too
-            failing = [(m.Ms, p) for m, p in ((margins_of(config, row, p), p) for p in points) if not meets(m, limit)]
+            failing = [(m.Ms, p) for m, p in ((margins_of(config, row, p), p) for p in points
+                                              if not clearly_within(config, row, p, limit)) if not meets(m, limit)]
             if not failing:
                 break
             ms, point = max(failing, key=lambda x: x[0])
             first = ms if first is None else first
+            if reference is not None and predicted_ms(config, row, point) is None:
+                margins_of(config, reference, point)  # the point's plant response (where verified) for detune
             fixed = detune(config, row, point, limit)
             if fixed is None:
                 break
@@ -115,7 +122,8 @@ def deliverable_schedule(policy: Policy, scenario, seed: int, anchor: Gains | No
         if schedule.excluded:
             note = ("The closed loop diverged at setpoint(s) " + ", ".join(f"{v:g}" for v in schedule.excluded)
                     + ": left out of the schedule.\n")
-        schedule, detuned = robust_schedule(schedule, config, limit, scenario.baseline.workers)
+        schedule, detuned = robust_schedule(schedule, config, limit, scenario.baseline.workers,
+                                            anchor.values() if isinstance(anchor, Gains) else None)
         if detuned:
             note += (f"Rows of the gain schedule ({schedule.variable}) detuned (Kp / lambda, Ti and Td * lambda) to meet "
                      f"Ms <= {limit:g}: " + "; ".join(detuned) + ".\n")

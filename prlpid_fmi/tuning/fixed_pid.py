@@ -128,6 +128,13 @@ def _likely_meets(config: TuningConfig, gains: tuple, point: list[float], limit:
     return _meets(config, gains, point, limit)
 
 
+def clearly_within(config: TuningConfig, gains: tuple, point: list[float], limit: float) -> bool:
+    """Ms predicted (robustness.margins.predicted_ms) more than PREDICTION_MARGIN (relative) below the limit at the
+    point: a search may pass such gains without an experiment; a verdict measures them."""
+    ms = predicted_ms(config, gains, point)
+    return ms is not None and ms < (1.0 - PREDICTION_MARGIN) * limit
+
+
 def detune(config: TuningConfig, gains: tuple, point: list[float], limit: float,
            keep_ti: bool = False, plant: TuningConfig | None = None) -> tuple | None:
     """`gains` detuned (Kp / lambda, Ti * lambda and Td * lambda, or Ti and Td kept with keep_ti, lambda =
