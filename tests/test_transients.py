@@ -275,3 +275,28 @@ def test_a_setpoint_table_is_made_robust_between_its_breakpoints_too():
     kp, ti, td = (float(g[0]) for g in robust.gains_at(0.0)[:3])
     assert sensitivity_peak(1.0, kp, ti, td) <= 2.8 * 1.01
     assert len(notes) == 1 and "rows -1 and 1" in notes[0]
+
+
+def test_a_row_predicted_clearly_within_the_limit_costs_no_experiment(monkeypatch, run_context):
+    """1/(s - 1), an error table whose middle row has Ms 1.26 by python-control (limit 2) and outer rows above it:
+    with the plant's response measured at each operating point before (another PID's experiments), robust_schedule
+    passes the middle row on its predicted Ms without an experiment and still detunes the outer rows onto the limit."""
+    from test_load_design import sensitivity_peak
+
+    import prlpid_fmi.robustness.margins as margins
+
+    limit, middle = 2.0, (4.0, 2.0, 0.0)
+    assert sensitivity_peak(1.0, *middle) < 0.9 * limit and sensitivity_peak(1.0, 12.0, 0.2, 0.0) > limit
+    table = error_table([-0.5, 0.0, 0.5], Kp=[12.0, middle[0], 12.0], Ti=[0.2, middle[1], 0.2], Td=[0.0] * 3,
+                        config=TRAINING)
+    points = range_points(TRAINING, 0)
+    for p in points:
+        margins_of(TRAINING, ([3.0], [1.0], [0.0], None), p)  # a verified response at every point
+    measured = []
+    real = margins.loop_margins
+    monkeypatch.setattr(margins, "loop_margins", lambda *a, **k: measured.append(a[1:4]) or real(*a, **k))
+    projected, notes = robust_schedule(table, TRAINING, limit)
+    assert ([4.0], [2.0], [0.0]) not in measured  # the middle row: predicted, not measured
+    assert projected.Kp[1, 0] == 4.0 and len(notes) == 2
+    for j in (0, 2):
+        assert sensitivity_peak(1.0, projected.Kp[j, 0], projected.Ti[j, 0], 0.0) <= limit * 1.01
