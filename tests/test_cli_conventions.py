@@ -361,19 +361,20 @@ def test_tune_progress_goes_to_stderr_and_never_passes_the_target(tmp_path, caps
     assert training[-1].startswith("prlpid-fmi: training: 200 steps in ")
     assert all(int(line.split(": ")[2].split("/")[0].replace(",", "")) <= 200 for line in training[:-1])
     from prlpid_fmi.tuning.design_rule import STABILISING_GENERATIONS
-    from prlpid_fmi.tuning.load_design import POLISH_PER_GENERATION
+    from prlpid_fmi.tuning.load_design import model_budget, polish_evaluations
 
     # the fixed-PID search step by step, each count against its own budget with the small baseline (maxiter 1,
     # popsize 2) over (Kp, Ti, Td): the stabilising setpoint search (generations + 1) * popsize * 3 evaluations,
-    # the load search's DE (1 + 1) * 2 * 3 and its polish POLISH_PER_GENERATION * (1 + 1) * 3 at most (a token search,
-    # a token polish); the experiments and the
+    # the load search on the models with model_budget(1, 2) = (G, P): DE (G + 1) * P * 3 and its polish
+    # polish_evaluations(G) * 3 at most; the experiments and the
     # Ms checks as steps with their durations
     search = [line[len("prlpid-fmi: fixed-PID search: "):] for line in err.splitlines()
               if line.startswith("prlpid-fmi: fixed-PID search: ")]
+    G, P = model_budget(1, 2)
     budgets = {"stabilising PID (setpoint search)": (STABILISING_GENERATIONS + 1) * 2 * 3,
                # baseline.design_model identified (the default): the load search on the local models
                "load design on the identified local models (differential evolution, then Nelder-Mead)":
-                   (1 + 1) * 2 * 3 + POLISH_PER_GENERATION * 2 * 3}
+                   (G + 1) * P * 3 + polish_evaluations(G) * 3}
     for name, budget in budgets.items():
         counts = [line.split(": ", 1)[1] for line in search if line.startswith(name + ": ")]
         assert counts[0] == f"0/{budget:,} evaluations (0 %)", counts

@@ -51,7 +51,8 @@ from prlpid_fmi.robustness.margins import margins_of, setpoint_range_points
 from prlpid_fmi.robustness.status import meets_limit
 from prlpid_fmi.tuning.classical_rules import load_bound
 from prlpid_fmi.tuning.fixed_pid import FixedPid, detune_over, setpoint_pid
-from prlpid_fmi.tuning.load_design import MODEL_TOLERANCE, LoadDesign, SetpointDesign, model_budget, setpoint_weight
+from prlpid_fmi.tuning.load_design import (MODEL_TOLERANCE, SETPOINT_MODEL_MINIMUM, LoadDesign, SetpointDesign,
+                                           model_budget, setpoint_weight)
 from prlpid_fmi.tuning.load_experiment import DIVERGED_COST, approach, open_core, parameter_samples, start_measurement
 from prlpid_fmi.tuning.search_pool import search_workers
 
@@ -439,7 +440,8 @@ class Designer:
                    structure: tuple, ise_to_beat: float) -> tuple[dict, tuple | None]:
         """Requirements 3-5 on the local models (the load search used them): the least setpoint ISE within the load
         tolerance and the overshoot limit, searched on the models (SetpointDesign with on_models: a unit step, from the
-        load optimum with b = weight; tuning.load_design.model_budget's generations and population), then verified on the FMU: b
+        load optimum with b = weight; tuning.load_design.model_budget's generations and population, at least
+        SETPOINT_MODEL_MINIMUM), then verified on the FMU: b
         chosen again on the training episodes (`setpoint_weight`), kept only where its overshoot is within the limit,
         its ISE below `ise_to_beat` (the optimum's with its b) and the FMU's load cost within the tolerance of the
         optimum's, and, replacing an optimum that met the limits, where it settles the range episode (requirement 1).
@@ -452,7 +454,7 @@ class Designer:
         bound = None if trading else self._rule_bound(design, design.filters(vector))
         trade = SetpointDesign(design, self.model_record["predicted_load_cost"], baseline.load_tolerance,
                                deploy.max_overshoot, seeds, on_models=True, rule_bound=bound)
-        maxiter, popsize = model_budget(self.maxiter, self.popsize)
+        maxiter, popsize = model_budget(self.maxiter, self.popsize, SETPOINT_MODEL_MINIMUM)
         progress.step("least setpoint ISE within the load tolerance on the local models", trade.budget(maxiter, popsize))
         try:
             second = trade.search(np.append(vector, 2.0 * weight - 1.0), self.seed, maxiter, popsize, progress=progress)

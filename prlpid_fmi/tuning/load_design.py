@@ -55,6 +55,7 @@ from prlpid_fmi.tuning.search_pool import SearchPool, search_fmus, search_worker
 B_GRID = tuple(i / 20 for i in range(21))  # setpoint weights tried
 MODEL_GENERATIONS = 2  # a search on the local models runs this many x baseline.maxiter generations, ...
 MODEL_MIN_GENERATIONS, MODEL_MIN_POPSIZE = 20, 10  # ... and popsize, at least these (a model candidate costs ~0.1 ms)
+SETPOINT_MODEL_MINIMUM = (30, 15)  # the setpoint search on the models at least (its 5 parameters, no Kp-interval scans)
 TF_RANGE = (0.1, 100.0)  # measurement filter search range [sample times], log
 FILTER_PROBES = 13  # Tf values over TF_RANGE the noise-increment relaxation test tries (relax_increment_limit)
 INIT_SPREAD = 0.15  # std of SetpointDesign's initial population around its start [search coordinates]
@@ -759,10 +760,12 @@ class SetpointDesign(OutcomeCache):
             self.design.close()
 
 
-def model_budget(maxiter: int, popsize: int) -> tuple[int, int]:
+def model_budget(maxiter: int, popsize: int, minimum: tuple[int, int] = (MODEL_MIN_GENERATIONS, MODEL_MIN_POPSIZE)
+                 ) -> tuple[int, int]:
     """(generations, popsize) of a search on the local models for the FMU path's (maxiter, popsize): a model candidate
-    costs about a thousandth of an FMU simulation, so the search affords MODEL_GENERATIONS x as many generations."""
-    return max(MODEL_GENERATIONS * maxiter, MODEL_MIN_GENERATIONS), max(popsize, MODEL_MIN_POPSIZE)
+    costs about a thousandth of an FMU simulation, so the search affords MODEL_GENERATIONS x as many generations, and
+    at least `minimum` (the load search's; SETPOINT_MODEL_MINIMUM for the setpoint search)."""
+    return max(MODEL_GENERATIONS * maxiter, minimum[0]), max(popsize, minimum[1])
 
 
 def setpoint_weight(config: TuningConfig, gains: tuple, structure: tuple[list, list, list], seeds: list[int],
