@@ -37,9 +37,9 @@ Rule = Callable[[float], tuple[float, float, float]]
 def step_response(model: LocalModel) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
     """(t [s], y, the continuous poles [1/s]) of the model's unit step response between its samples: the continuous
     plant behind the ZOH model (the matrix logarithm of its augmented transition [[A, B], [0, 1]] over Ts), on a grid
-    of Ts / FINE (coarser where SETTLE + 2 x order slowest time constants need more than MAX_POINTS), its whole samples of dead
-    time as a shift; None where the logarithm is not real (a pole on the negative real axis: no continuous plant) or
-    the plant is unstable."""
+    of Ts / FINE (coarser where SETTLE + 2 x order slowest time constants need more than MAX_POINTS), its whole
+    samples of dead time as a shift; None where the logarithm is not real (a pole on the negative real axis: no
+    continuous plant) or the plant is unstable."""
     Ts = model.sample_time_s
     lead = int(np.argmax(np.abs(model.numerator) > 0))  # one zero from the hold, the rest dead time
     delay = max(lead - 1, 0) * Ts
