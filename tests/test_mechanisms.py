@@ -25,7 +25,7 @@ from prlpid_fmi.probe.open_loop import probe_outputs
 from prlpid_fmi.scenario.draft import init_scenario
 
 DATA = Path(__file__).parent / "data" / "pythonfmu"
-ZERO = {name: 0.0 for name in ("b0", "b1", "b2", "a0", "a1", "a2", "a3", "L")}
+ZERO = {name: 0.0 for name in ("b0", "b1", "b2", "a0", "a1", "a2", "a3", "L", "x2_0")}
 G, X0, V0 = 9.81, 0.01, 5.0
 
 
@@ -170,3 +170,42 @@ def test_inverse_response_gain_ranges_contain_an_independent_design(fmus):
     c = control.tf([kp * ti * td * 1.1, kp * (ti + 0.1 * td), kp], [0.1 * ti * td, ti, 0])
     settling = control.step_info(control.feedback(c * control.tf([-10.0, 2.0], [450.0, 45.0, 1.0]), 1))["SettlingTime"]
     assert doc["training"]["setpoint_hold_steps"] * doc["plant"]["sample_time"] >= settling
+
+
+def test_a_lag_the_first_grid_misses_is_re_probed_before_the_sample_time_is_chosen(fmus):
+    """1000/(s (0.005 s + 1)) looks like a pure integrator on the probe's first 0.1 s grid, and the actuator's
+    range alone would allow a closed loop in microseconds. init re-probes on a finer grid, finds the 5 ms lag
+    (the model's pole within 5 %) and designs on it: at most a fifth of the lag, and a sample time below 1e-4 s
+    only with the line saying why."""
+    parameters = {**ZERO, "b0": 1000.0, "a2": 0.005, "a1": 1.0}
+    results = probe_outputs(fmus["TransferFunction"], start_values=parameters)
+    first = results["y"].response("u")
+    assert first.kind == "integrating"
+    loop = propose_loop(*choose_loop(results))
+    assert "re-probed" in loop.why["sample_time"] and "integrator with lag" in loop.why["sample_time"]
+    assert 1e-5 <= loop.sample_time_s <= 0.005 / 5
+    assert loop.sample_time_s >= 1e-4 or "below 0.0001 s because" in loop.why["sample_time"]
+    tau2 = float(loop.why["gains"].split("τ2 = ")[1].split(" s")[0])
+    assert tau2 == pytest.approx(0.005, rel=0.05)
+
+
+def test_a_pure_integrator_at_every_grid_bounds_the_loop_by_the_finest_grid_probed(fmus):
+    """1000/s shows no lag on any grid: the closed-loop time constant is bounded by twice the finest grid the
+    re-probe measured (faster dynamics are unknown), so the sample time says why it is below 1e-4 s."""
+    results = probe_outputs(fmus["TransferFunction"], start_values={**ZERO, "b0": 1000.0, "a1": 1.0})
+    loop = propose_loop(*choose_loop(results))
+    assert "re-probed" in loop.why["sample_time"] and "showed no lag or delay" in loop.why["sample_time"]
+    assert loop.sample_time_s >= 1e-5
+
+
+def test_an_integrating_plant_started_off_equilibrium_is_operated_where_its_free_response_settles(fmus):
+    """1/(s (s + 1)) started with its second state at 2 coasts from y = 0 to y = 2 (x1(∞) = x2(0) τ) with the
+    input at its start value 0: that value holds the output there, so the trim input is 0 (not the input that
+    would hold the transient's start) and the setpoint range is centred on 2."""
+    results = probe_outputs(fmus["TransferFunction"], start_values={**ZERO, "b0": 1.0, "a2": 1.0, "a1": 1.0,
+                                                                    "x2_0": 2.0})
+    loop = propose_loop(*choose_loop(results))
+    assert loop.trim_input == 0.0
+    lo, hi = loop.setpoint_range
+    assert (lo + hi) / 2 == pytest.approx(2.0, rel=0.01)
+    assert "where its free response settles" in loop.why["setpoint_range"]

@@ -284,8 +284,25 @@ def _require_holdable(r: StepResponse, sweep: Optional[Sweep], result: ProbeResu
                          "inside the limits holds it at a setpoint")
 
 
+def settled_free_response(r: StepResponse) -> Optional[float]:
+    """Where an integrating output's trim run (the input held at its start value) comes to rest, when it moved
+    and its last third is flat (within 1 % of its travel: a drifting integrator moves a third of it there): the FMU starts off equilibrium (a wheel released
+    onto its tyre), so the start value is a transient, not the operating point. None otherwise."""
+    y = np.asarray(r.trim, dtype=float)
+    if r.kind != "integrating" or len(y) < 12 or not np.all(np.isfinite(y)):
+        return None
+    travel = float(np.ptp(y))
+    tail = y[-len(y) // 3:]
+    if travel <= 0 or float(np.ptp(tail)) > 0.01 * travel:
+        return None
+    return float(tail[-1])
+
+
 def _trim_input(r: StepResponse) -> float:
-    """The input that holds the output at its start value, from the trim run's drift and the fitted model."""
+    """The input that holds the output at its start value, from the trim run's drift and the fitted model (an
+    integrating output whose free response settles: the start value holds it where it settles)."""
+    if settled_free_response(r) is not None:
+        return _round(r.u0, 4)
     s0 = _initial_slope(r)
     if r.kind == "stable":
         u_trim = r.u0 - s0 * r.time_constant_s / r.gain
@@ -312,8 +329,11 @@ def _u_limits(r: StepResponse, v, u_trim: float, result: ProbeResult, why: dict)
         lo = max(lo, v.min)
     if v.max is not None:
         hi = min(hi, v.max)
+    rest = settled_free_response(r)
+    held = (f"holds {result.output} where its free response settles, {rest:.4g}" if rest is not None else
+            f"holds {result.output} = {result.y0:.4g}")
     why["u_limits"] = (f"ADJUST to the actuator: ±{_round(reach)} around the start value {r.u0:g} (the trim input "
-                       f"{u_trim:g} holds {result.output} = {result.y0:.4g}, probe)")
+                       f"{u_trim:g} {held}, probe)")
     return (_round(lo), _round(hi))
 
 
@@ -341,10 +361,15 @@ def _setpoint_range(r: StepResponse, out, u_trim: float, u_limits, result: Probe
             lo_seen, hi_seen = sweep.reach
             sp = [max(sp[0], lo_seen), min(sp[1], hi_seen)] if sp[0] < hi_seen and sp[1] > lo_seen else sp
     else:
-        span = abs(out.nominal) if out.nominal else max(abs(y0), 1.0)
-        sp = [y0, y0 + span]
+        rest = settled_free_response(r)
+        base = y0 if rest is None else rest
+        span = abs(out.nominal) if out.nominal else max(abs(base), 1.0)
+        sp = [base, base + span] if rest is None else [base - span / 2, base + span / 2]
         why["setpoint_range"] = (f"an integrating plant holds any {result.output} while the trim input {u_trim:g} is "
-                                 f"inside u_limits; ADJUST (span: {'nominal value' if out.nominal else 'start value'})")
+                                 f"inside u_limits; ADJUST (span: "
+                                 f"{'nominal value' if out.nominal else 'start value' if rest is None else 'its magnitude'}"
+                                 + (f", around {rest:.4g} where its free response settles: the FMU starts off "
+                                    f"equilibrium at {y0:.4g})" if rest is not None else ")"))
     if out.min is not None:
         sp[0] = max(sp[0], out.min)
     if out.max is not None:
@@ -421,9 +446,25 @@ def _snap_floor(ts: float, floor: Optional[float], why: dict, needs: str) -> flo
     return ts
 
 
+REPROBE_FACTOR = 10             # τc this many times below the probe's step: the model is extrapolated, probe finer
+REPROBE_DECADES = 3             # the finer probe starts at most this many decades below the probe's step
+
+
+def _finer_probe(r: StepResponse, result: ProbeResult, tau_c: float, fmu_step_s: Optional[float]) -> StepResponse:
+    """The step response of r's input re-measured from a grid near τc (s), not finer than the FMU's own step nor
+    REPROBE_DECADES below r's grid; the probe's usual grid search (`probe_input`) goes on from there."""
+    from prlpid_fmi.probe.open_loop import probe_input
+
+    dt = snap_sample_time(max(tau_c / 2, r.sample_time_s / 10 ** REPROBE_DECADES, fmu_step_s or 0.0))
+    return probe_input(result.fmu, r.input, result.output, result.inputs, result.u0, result.parameters, dt, result.y0)
+
+
 def _design(r: StepResponse, u_trim: float, u_limits, sp, result: ProbeResult, why: dict,
-            fmu_step_s: Optional[float] = None) -> Design:
-    """The design each identified mechanism calls for (module docstring), every number's reason in `why`."""
+            fmu_step_s: Optional[float] = None, refine: bool = True) -> Design:
+    """The design each identified mechanism calls for (module docstring), every number's reason in `why`.
+    refine: an integrator whose τc falls far below the probe's step (no lag or delay resolved there) is
+    re-probed on a finer grid (`_finer_probe`) and designed from that; without a lag there, τc is bounded by
+    twice the finest step that showed none."""
     headroom = max(u_limits[1] - u_trim, u_trim - u_limits[0], 1e-300)
     step = max(TYPICAL_STEP * (sp[1] - sp[0]), 1e-300)
     model = r.model
@@ -465,6 +506,20 @@ def _design(r: StepResponse, u_trim: float, u_limits, sp, result: ProbeResult, w
     tau_c = max(theta, t_act if math.isfinite(t_act) else 0.0, floor)
     if tau_c <= 0:
         tau_c = 10 * (fmu_step_s or MIN_SAMPLE_TIME_S)
+    resolved = ""
+    if refine and m >= 1 and not lags and theta == 0 and tau_c * REPROBE_FACTOR < r.sample_time_s:
+        fine = _finer_probe(r, result, tau_c, fmu_step_s)
+        seen = (f"re-probed on a {fine.sample_time_s:g} s grid because τc = {tau_c:.3g} s lies below the probe's "
+                f"{r.sample_time_s:g} s step")
+        if fine.kind == "integrating" and fine.mechanism != r.mechanism:
+            design = _design(fine, u_trim, u_limits, sp, result, why, fmu_step_s, refine=False)
+            why["sample_time"] = f"{seen}: {fine.mechanism}; " + why["sample_time"]
+            why["gains"] += f" (from the {fine.sample_time_s:g} s re-probe)"
+            return design
+        if 2 * fine.sample_time_s > tau_c:
+            tau_c = 2 * fine.sample_time_s
+            resolved = (f"; {seen}, which showed no lag or delay: τc bounded at twice that grid, "
+                        f"{tau_c:.3g} s, as faster dynamics are not known")
     tau2 = lags[-1] if (m == 0 and len(lags) == 2) or (m == 1 and lags) else 0.0
     limits = [(tau_c / 5, "τc/5")] + (
         [(tau2 / 4, f"a quarter of the lag τ2 = {tau2:.3g} s the derivative acts on")] if tau2 > 0 else [])
@@ -472,7 +527,7 @@ def _design(r: StepResponse, u_trim: float, u_limits, sp, result: ProbeResult, w
     actuator = (f"{t_act:.3g} s for the bandwidth the actuator's range allows" if math.isfinite(t_act) else
                 "no bound from the actuator: by the probe's local gain its headroom moves less than a typical step")
     why["sample_time"] = (f"{limit:.3g} s, {reason}: τc = {tau_c:.3g} s = max(effective delay θ = {theta:.3g} s, "
-                          f"{actuator}" + (f", τ1/4 = {floor:.3g} s" if floor else "") + ") (probe)")
+                          f"{actuator}" + (f", τ1/4 = {floor:.3g} s" if floor else "") + ") (probe)" + resolved)
     ts = _snap_floor(limit, fmu_step_s, why, f"the loop's closed-loop time constant is {tau_c:.3g} s")
     tc = tau_c + theta
     if m == 0:

@@ -2,7 +2,8 @@
 
 Its kind is set by its parameters (the highest nonzero a_i gives the order; a0 = 0 an integrator, a0 = a1 = 0
 a double integrator, a zero b1/b0 < 0 an inverse response, a0 < 0 an unstable pole, L a transport delay; order
-0 is a static gain b0/a0). Controllable canonical form, stepped exactly for an input held piecewise constant (the zero-order-hold
+0 is a static gain b0/a0; x2_0, the second state's start value, starts an order >= 2 plant off equilibrium: for
+1/(s (s + 1)) the free response settles at x2_0). Controllable canonical form, stepped exactly for an input held piecewise constant (the zero-order-hold
 transition matrix, split where the delayed input changes inside a step); before t = 0 the input was 0.
 """
 import math
@@ -19,13 +20,14 @@ class TransferFunction(Fmi2Slave):
         self.b0, self.b1, self.b2 = 1.0, 0.0, 0.0
         self.a0, self.a1, self.a2, self.a3 = 1.0, 1.0, 0.0, 0.0
         self.L = 0.0
+        self.x2_0 = 0.0
         self.u = 0.0
         self.y = 0.0
         self._x = None
         self._cache = {}
         self._u_start = 0.0          # the input before t = 0 (its start value)
         self._history = []          # (time from which the input holds, value)
-        for name in ("b0", "b1", "b2", "a0", "a1", "a2", "a3", "L"):
+        for name in ("b0", "b1", "b2", "a0", "a1", "a2", "a3", "L", "x2_0"):
             self.register_variable(Real(name, causality=Fmi2Causality.parameter, variability=Fmi2Variability.tunable))
         self.register_variable(Real("u", causality=Fmi2Causality.input))
         self.register_variable(Real("y", causality=Fmi2Causality.output))
@@ -73,6 +75,8 @@ class TransferFunction(Fmi2Slave):
         n, a, b = self._system()
         if self._x is None:
             self._x = [0.0] * n
+            if n >= 2:
+                self._x[1] = self.x2_0
             self._history = [(-math.inf, self._u_start)]
         self._history.append((current_time + self.L, self.u))
         end = current_time + step_size
