@@ -264,7 +264,7 @@ def main():
     fixed = tune_fixed_pid(scenario.tuning, seed=scenario.agent.seed, max_sensitivity=max_sensitivity(scenario),
                            baseline=baseline, deploy=scenario.deploy)
     wall = time.perf_counter() - start
-    design = fixed.report.details if fixed.report is not None else {}
+    design = fixed.report.details.as_json() if fixed.report is not None else {}
     record = design.get("design_model") or {}
     print(json.dumps({"wall": wall, "result": repr((fixed.gains.values(), fixed.structure, fixed.cost,
                                                     fixed.evaluations)),

@@ -18,8 +18,8 @@ from prlpid_fmi.loop.gains import gains_from_values
 from prlpid_fmi.progress import QUIET
 from prlpid_fmi.scenario.presets import preset
 from prlpid_fmi.tuning import design_rule
-from prlpid_fmi.tuning.design_rule import (RANGE_HOLD, RANGE_ORDER, RELAX_FACTORS, Candidate, Following, NoiseLimits,
-                                           Relaxation, following, priority, relaxations)
+from prlpid_fmi.tuning.design_rule import (RANGE_HOLD, RANGE_ORDER, RELAX_FACTORS, Candidate, DesignDetails, Following,
+                                           NoiseLimits, Relaxation, following, priority, relaxations)
 
 TS = 0.1  # first_order: 1/(s - 1), Ts 0.1 s, setpoint range [-1, 1], setpoint_hold_steps 100
 STRICT = ([1.05], [50.0], [0.0], None)  # what a strict noise limit leaves: barely stabilising, almost no integral
@@ -66,8 +66,8 @@ def test_the_range_episode_on_the_fmu_agrees_with_an_independent_recursion():
 
 def _candidate(gains, relaxed=(), *, unsettled=0, diverged=False, ms_met=True, overshoot=1.0, load=1.0, ise=1.0,
                active=()):
-    details = {"objective": "load", "load_cost": load, "load_optimum": 1.0, "estimates": [],
-               "active_limits": [{"limit": a} for a in active], "noise": {"std_u": 0.0, "std_du": 0.0}}
+    details = DesignDetails(load_cost=load, load_optimum=1.0, active_limits=[{"limit": a} for a in active],
+                            noise={"std_u": 0.0, "std_du": 0.0})
     c = Candidate(np.zeros(3), gains, ([1.0], [0.0], [0.0]), details, NoiseLimits(0.02, 0.005, True), relaxed,
                   ms_met, overshoot, ise, load)
     c.following = Following(4, unsettled, 0, diverged, overshoot, ise)

@@ -244,13 +244,13 @@ def _margin(value: float) -> str:
 def design_section(fixed: DesignResult, loop_names) -> str:
     """How the fixed PID was designed (its design report and structure), in words and one table."""
     report = fixed.report
-    design = report.details if report is not None else {}
-    if design.get("objective") != "load":
+    if report is None or report.details.objective != "load":
         return ""
+    design = report.details
     b, c, tf = fixed.structure
     lines = ["## How the fixed PID was designed", "",
              "Kp, Ti, Td (and the measurement filter Tf) minimise the IAE of a load step at the plant input "
-             f"({design['load_step']:.0%} of the control span) at the low end, middle and high end of the setpoint "
+             f"({design.load_step:.0%} of the control span) at the low end, middle and high end of the setpoint "
              "range, subject to the Ms and noise limits; then the setpoint weight b shapes the setpoint response "
              "(tuning.design_rule; docs/architecture.md).", "",
              "| loop | Kp | Ti [s] | Td [s] | b | c | Tf [s] |", "|---|---|---|---|---|---|---|"]
@@ -259,49 +259,48 @@ def design_section(fixed: DesignResult, loop_names) -> str:
         lines.append(f"| {name} | {number(g.Kp[i], 4)} | {number(g.Ti[i], 4)} | {number(g.Td[i], 4)} | "
                      f"{number(b[i], 3)} | {number(c[i], 3)} | {number(tf[i], 4)} |")
     lines += ["", f"Load IAE per unit load (mean over the points) [output units·s per input unit]: "
-                  f"{number(design['load_cost'], 4)}; the search's optimum without the overshoot limit: "
-                  f"{number(design['load_optimum'], 4)}."]
-    held = _active_limits(design.get("active_limits") or [], loop_names,
-                          [e["point"] for e in design.get("estimates") or []])
+                  f"{number(design.load_cost, 4)}; the search's optimum without the overshoot limit: "
+                  f"{number(design.load_optimum, 4)}."]
+    held = _active_limits(design.active_limits, loop_names, [e["point"] for e in design.estimates])
     if held:
         lines += ["", held]
-    traded = design.get("traded_for_overshoot")
+    traded = design.traded_for_overshoot
     if traded and traded["feasible"]:
         lines.append(f"No setpoint weight kept the overshoot within the limit with the load-optimal gains, so the gains "
-                     f"gave up load rejection ({number(traded['load_cost'] / design['load_optimum'], 3)}x the optimum) "
+                     f"gave up load rejection ({number(traded['load_cost'] / design.load_optimum, 3)}x the optimum) "
                      f"for an overshoot of {number(traded['Overshoot'], 3)} %.")
-    refined = design.get("setpoint_refined")
+    refined = design.setpoint_refined
     if refined and refined["kept"]:
         lines.append(f"Within the load tolerance, gains searched on the identified local models for the least setpoint "
                      f"ISE replaced the load-optimal ones: setpoint ISE {number(refined['ISE'] / refined['ISE_before'], 3)}"
-                     f"x theirs with their b, load IAE {number(refined['load_cost'] / design['load_optimum'], 3)}x the "
+                     f"x theirs with their b, load IAE {number(refined['load_cost'] / design.load_optimum, 3)}x the "
                      f"optimum, overshoot {number(refined['Overshoot'], 3)} % (both on the FMU)"
                      + ("; its load IAE was held no worse than SIMC's or AMIGO's PID tuned to the same Ms on the "
                         "models." if refined.get("classical_bound") else "."))
-    followed = design.get("followed_setpoints")
+    followed = design.followed_setpoints
     replaced = bool(followed and followed["source"])
     if traded and traded.get("nearest_load_tolerance"):
         lines.append("No setpoint weight kept the overshoot within the limit with the load-optimal gains, and no gains "
                      "within the load tolerance (baseline.load_tolerance) did: the gains nearest it that meet the "
-                     f"overshoot limit are kept, load IAE {number(traded['load_cost'] / design['load_optimum'], 3)}x "
+                     f"overshoot limit are kept, load IAE {number(traded['load_cost'] / design.load_optimum, 3)}x "
                      f"the optimum, overshoot {number(traded['Overshoot'], 3)} % (the overshoot limit ranks above the "
                      "load tolerance).")
     elif traded and not traded["feasible"]:  # the load optimum stays, with the b of least overshoot
-        best = (f"its best: load IAE {number(traded['load_cost'] / design['load_optimum'], 3)}x the optimum, overshoot "
+        best = (f"its best: load IAE {number(traded['load_cost'] / design.load_optimum, 3)}x the optimum, overshoot "
                 f"{number(traded['Overshoot'], 3)} %" if math.isfinite(traded["Overshoot"]) else
                 "the setpoint episodes of its best candidate diverged")
         lines.append("No setpoint weight kept the overshoot within the limit with the load-optimal gains, and the search "
                      f"for gains that would, within the load tolerance, found none ({best})"
                      + ("." if replaced else ": the load-optimal gains are kept, with the setpoint weight of least "
                         f"overshoot (b = {number(b[0], 3)})."))
-    weights = design.get("setpoint_weights") or []
+    weights = design.setpoint_weights
     if weights and not any(math.isfinite(w["ISE"]) for w in weights):
         lines.append(("With the load-optimal gains" if followed else "With these gains") + " the loop diverged on every "
                      "setpoint episode of the training distribution the setpoint weight is chosen on, whatever b"
                      + (": those setpoint steps are larger than the loop holds, so b was not chosen on its setpoint "
                         "response (the first b of the grid is kept)." if not followed else "."))
     if followed:
-        lines.append(_followed_sentence(followed, design["load_optimum"]))
+        lines.append(_followed_sentence(followed, design.load_optimum))
     lines += _rule_sentences(report)
     return "\n".join(lines) + "\n"
 

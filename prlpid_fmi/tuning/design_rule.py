@@ -114,20 +114,60 @@ class Requirement:
 
 
 @dataclass(frozen=True)
+class DesignDetails:
+    """The load design's own record (fixed_pid.json "design" keys besides the rule's): the load cost and optimum
+    [output units s per input unit], the load step [fraction of the control span], the trades and refinements
+    (tuning.load_design's records: traded_for_overshoot, followed_setpoints, setpoint_refined; None where not
+    made), the Ms and noise estimates per point, the limits that held the design, the setpoint weights tried,
+    the stabilising PID's gains, the noise shares, the design model's record, and every candidate the rule ranked."""
+
+    objective: str = "load"
+    load_cost: float = math.nan
+    load_optimum: float | None = None
+    load_step: float = math.nan
+    traded_for_overshoot: dict | None = None
+    followed_setpoints: dict | None = None
+    setpoint_refined: dict | None = None
+    estimates: list = dataclasses.field(default_factory=list)
+    active_limits: list = dataclasses.field(default_factory=list)
+    setpoint_weights: list = dataclasses.field(default_factory=list)
+    stabilising_gains: dict | None = None
+    feasible: bool = True
+    fell_back_to_setpoint_search: bool = False
+    noise_increment_limit_relaxed: bool = False
+    noise: dict | None = None
+    design_model: dict = dataclasses.field(default_factory=dict)
+    candidates: list = dataclasses.field(default_factory=list)
+
+    @property
+    def held_by(self) -> set:
+        """The names of the limits that held the design (LoadDesign.active_limits)."""
+        return {a["limit"] for a in self.active_limits}
+
+    def as_json(self) -> dict:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_json(cls, design: dict) -> "DesignDetails":
+        """The record of a fixed_pid.json "design" (keys it does not know, from older files, are left out)."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        return cls(**{k: v for k, v in design.items() if k in names and v is not None})
+
+
+@dataclass(frozen=True)
 class DesignReport:
     """Which requirement bound the design (`bound`, one of the `Requirement` names), what was relaxed, each
-    requirement's measured value, requirement 1 on the range episode, and the search's own record (`details`:
-    estimates per point, the setpoint weights tried, the trades; fixed_pid.json's "design" keys)."""
+    requirement's measured value, requirement 1 on the range episode, and the search's own record (`details`)."""
 
     bound: str
     relaxed: tuple[Relaxation, ...]
     requirements: tuple[Requirement, ...]
     following: Following | None  # None only in a fixed_pid.json written before the rule by priority
-    details: dict
+    details: DesignDetails
 
     def as_json(self) -> dict:
         """fixed_pid.json's "design": the search's record plus "bound", "relaxed", "requirements", "following"."""
-        return {**self.details, "bound": self.bound,
+        return {**self.details.as_json(), "bound": self.bound,
                 "relaxed": [dataclasses.asdict(r) for r in self.relaxed],
                 "requirements": [dataclasses.asdict(r) for r in self.requirements],
                 "following": dataclasses.asdict(self.following) if self.following is not None else None}
@@ -136,13 +176,12 @@ class DesignReport:
     def from_json(cls, design: dict) -> "DesignReport":
         """The report of fixed_pid.json's "design" (as_json's form; a file written before the rule has only the
         search's record: no bound, relaxations, requirements or following)."""
-        rule = ("bound", "relaxed", "requirements", "following")
         following = design.get("following")
         return cls(bound=design.get("bound") or "",
                    relaxed=tuple(Relaxation(**r) for r in design.get("relaxed") or ()),
                    requirements=tuple(Requirement(**r) for r in design.get("requirements") or ()),
                    following=Following(**following) if following else None,
-                   details={k: v for k, v in design.items() if k not in rule})
+                   details=DesignDetails.from_json(design))
 
 
 @dataclass(frozen=True)
@@ -192,7 +231,7 @@ class Candidate:
     vector: np.ndarray
     gains: tuple
     structure: tuple
-    details: dict
+    details: DesignDetails
     limits: NoiseLimits
     relaxed: tuple
     ms_met: bool
@@ -366,15 +405,15 @@ class Designer:
                              for plant in (checked, *parameter_samples(checked)) for p in points)
         cost = design.load_cost(gains, tf)
         ise, overshoot = self._setpoint_response(config, gains, structure)
-        details = {"objective": "load", "load_cost": cost, "load_optimum": self.load_optimum,
-                   "load_step": baseline.load_step, "traded_for_overshoot": traded, "followed_setpoints": followed,
-                   "setpoint_refined": refined,
-                   "estimates": design.estimates(gains, tf), "active_limits": design.active_limits(gains, tf),
-                   "setpoint_weights": choices, "stabilising_gains": self.first.gains.as_dict(),
-                   "feasible": bool(getattr(result, "constr_violation", 0) <= 0),
-                   "fell_back_to_setpoint_search": fallback is not None,
-                   "noise_increment_limit_relaxed": design.increment_relaxed,
-                   "noise": noise_shares(design, gains, tf), "design_model": self.model_record}
+        details = DesignDetails(
+            load_cost=cost, load_optimum=self.load_optimum, load_step=baseline.load_step, traded_for_overshoot=traded,
+            followed_setpoints=followed, setpoint_refined=refined, estimates=design.estimates(gains, tf),
+            active_limits=design.active_limits(gains, tf), setpoint_weights=choices,
+            stabilising_gains=self.first.gains.as_dict(),
+            feasible=bool(getattr(result, "constr_violation", 0) <= 0),
+            fell_back_to_setpoint_search=fallback is not None,
+            noise_increment_limit_relaxed=design.increment_relaxed, noise=noise_shares(design, gains, tf),
+            design_model=self.model_record)
         if design.increment_relaxed:  # no Kp met it with Ms for the stabilising PID's Ti, Td (LoadDesign.prepare)
             relaxed = tuple(r for r in relaxed if r.limit != "max_noise_increment") + (
                 Relaxation("max_noise_increment", self.deploy.max_noise_increment, math.inf),)
@@ -523,19 +562,14 @@ class Designer:
         weight, rows = setpoint_weight(config, gains, first.structure, self.seeds, self.deploy.max_overshoot)
         best = next(r for r in rows if r["b"] == weight)
         structure = ([weight] * config.n_loops, list(c), list(tf))
-        details = {"objective": "load", "load_cost": load, "load_optimum": self.load_optimum,
-                   "load_step": self.baseline.load_step, "traded_for_overshoot": None,
-                   "followed_setpoints": {"source": "stabilising PID", "load_optimal_diverged": True,
-                                          "load_cost": load, "ISE": best["ISE"],
-                                          "Overshoot": best["Overshoot"],
-                                          "feasible": best["Overshoot"] <= 100.0 * self.deploy.max_overshoot,
-                                          "evaluations": 0},
-                   "estimates": [], "active_limits": [], "setpoint_weights": rows,
-                   "stabilising_gains": first.gains.as_dict(), "feasible": True,
-                   "fell_back_to_setpoint_search": False, "noise_increment_limit_relaxed": False,
-                   "design_model": self.model_record}
+        details = DesignDetails(
+            load_cost=load, load_optimum=self.load_optimum, load_step=self.baseline.load_step,
+            followed_setpoints={"source": "stabilising PID", "load_optimal_diverged": True, "load_cost": load,
+                                "ISE": best["ISE"], "Overshoot": best["Overshoot"],
+                                "feasible": best["Overshoot"] <= 100.0 * self.deploy.max_overshoot, "evaluations": 0},
+            setpoint_weights=rows, stabilising_gains=first.gains.as_dict(), design_model=self.model_record)
         return Candidate(np.asarray(first.action), gains, structure, details, limits, (), True, best["Overshoot"],
-                         best["ISE"], details["load_cost"])
+                         best["ISE"], details.load_cost)
 
 
 def noise_shares(design: LoadDesign, gains: tuple, tf: list[float]) -> dict:
@@ -577,9 +611,9 @@ def requirements(candidate: Candidate, deploy: DeployConfig, max_sensitivity: fl
                  load_tolerance: float) -> tuple[Requirement, ...]:
     """Each requirement's measured value (module docstring's numbering; noise against the limits requested)."""
     f, d = candidate.following, candidate.details
-    ms = [e["Ms"] for e in d.get("estimates") or [] if e.get("Ms") is not None]
-    ratio = d["load_cost"] / d["load_optimum"] if d.get("load_optimum") else math.nan
-    noise = d.get("noise") or {}
+    ms = [e["Ms"] for e in d.estimates if e.get("Ms") is not None]
+    ratio = d.load_cost / d.load_optimum if d.load_optimum else math.nan
+    noise = d.noise or {}
     out = [Requirement(1, "follows and settles the setpoint steps", float(f.unsettled), 0.0, bool(f.settles)),
            Requirement(2, "Ms", float(max(ms)) if ms else math.nan, max_sensitivity, bool(candidate.ms_met)),
            Requirement(3, "overshoot [%]", float(candidate.overshoot), 100.0 * deploy.max_overshoot,
@@ -605,11 +639,11 @@ def bound_by(candidate: Candidate, reqs: tuple[Requirement, ...]) -> str:
     if candidate.relaxed:
         return reqs[0].name
     d = candidate.details
-    active = {a["limit"] for a in d.get("active_limits") or []}
+    active = d.held_by
     if "max_sensitivity" in active:
         return reqs[1].name
-    traded = d.get("traded_for_overshoot")
-    if (traded and traded.get("feasible")) or (d.get("followed_setpoints") or {}).get("source"):
+    traded = d.traded_for_overshoot
+    if (traded and traded.get("feasible")) or (d.followed_setpoints or {}).get("source"):
         return reqs[2].name
     if active & {"max_noise_gain", "max_noise_increment"}:
         return reqs[5].name if "max_noise_gain" in active else reqs[6].name
@@ -624,7 +658,7 @@ def design_load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int
     candidates = [designer.design_under(requested)]
     progress.step("setpoint steps across the setpoint range (requirement 1)")
     candidates[0].following = following(config, candidates[0].gains, candidates[0].structure)
-    held = {a["limit"] for a in candidates[0].details["active_limits"]} & {"max_noise_gain", "max_noise_increment"}
+    held = candidates[0].details.held_by & {"max_noise_gain", "max_noise_increment"}
     if not candidates[0].following.settles and config.measurement_noise_std > 0 and held:
         for limits, relaxed in relaxations(config, deploy, held):
             candidate = designer.design_under(limits, relaxed)
@@ -639,12 +673,12 @@ def design_load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int
         candidates.append(candidate)
     kept = min(candidates, key=lambda c: priority(c, deploy, load_limit))
     reqs = requirements(kept, deploy, max_sensitivity, baseline.load_tolerance)
-    details = {**kept.details, "candidates": [
+    details = dataclasses.replace(kept.details, candidates=[
         {"relaxed": [dataclasses.asdict(r) for r in c.relaxed], "following": dataclasses.asdict(c.following),
          "load_cost": float(c.load_cost), "ISE": float(c.ise), "Overshoot": float(c.overshoot),
          "ms_met": bool(c.ms_met),
          "gains": {k: np.asarray(v).tolist() for k, v in gains_from_values(*c.gains).as_dict().items()},
-         "kept": c is kept} for c in candidates]}
+         "kept": c is kept} for c in candidates])
     report = DesignReport(bound_by(kept, reqs), tuple(kept.relaxed), reqs, kept.following, details)
     return DesignResult(kept.vector, gains_from_values(*kept.gains), kept.load_cost, designer.evaluations,
                         kept.structure, report)
