@@ -210,3 +210,36 @@ def test_the_deliverable_checks_the_fixed_pid_on_the_monte_carlo_draws_of_the_de
     plain = assess_fixed(dc.replace(scenario, tuning=dc.replace(scenario.tuning, randomize={})),
                          gains_from_values([Kp], [Ti], [Td], None))
     assert not plain.problems(limit)
+
+
+@pytest.mark.parametrize("Ti, Td", [(2.0, 0.0), (0.6, 0.1), (3.0, 0.1), (8.0, 0.05), (1.5, 0.3)])
+def test_the_kp_interval_from_the_exact_ms_intervals_is_the_scans(Ti, Td, monkeypatch):
+    """Without measurement noise kp_interval checks each scanned Kp against the exact Ms intervals
+    (MeasuredPlant.ms_forbidden) and their stability once per interval: the same interval as the scan that
+    evaluates Ms and the Nyquist winding at every Kp, on 1/(s - 1) at Ts = 0.1 s with its ZOH response measured
+    exactly; and python-control's Ms at both ends is within the limit (Td = 0.3 s: no Kp meets it)."""
+    import control as ct
+
+    from prlpid_fmi.robustness.margins import pid_frequency_response
+    from prlpid_fmi.robustness.plant_response import MeasuredPlant
+    from prlpid_fmi.scenario.presets import preset
+    from prlpid_fmi.tuning import load_design
+
+    ts, a = 0.1, math.exp(0.1)
+    w = np.geomspace(1e-3, math.pi / ts, 400)
+    plant = MeasuredPlant(w, (a - 1) / (np.exp(1j * w * ts) - a), ts, (0.0,), (0.0,))
+    design = load_design.LoadDesign(preset("first_order"), 0.1, 2.0, math.inf, 4.0, math.inf)
+    design.plants, design.points = [[plant]], [[0.0]]
+    design.reference = [[plant.winding(lambda omega: pid_frequency_response(2.0, 2.0, 0.0, ts, omega))]]
+    exact = design.kp_interval(0, Ti, Td, 0.0)
+    design._intervals.clear()
+    monkeypatch.setattr(load_design, "_exact_ok", lambda *args: None)
+    assert design.kp_interval(0, Ti, Td, 0.0) == exact
+    if Td == 0.3:  # a derivative this large on a 0.1 s sample: no Kp keeps Ms <= 2 (both say so)
+        assert exact is None
+        return
+    z = ct.tf([1, 0], [1], ts)
+    for k in exact[1:]:
+        C = k * (1 + (ts / Ti) * z / (z - 1) + Td * (z - 1) / (ts * z))
+        L = np.asarray((C * (a - 1) / (z - a))(np.exp(1j * plant.grid()[0] * ts))).ravel()
+        assert np.max(np.abs(1 / (1 + L))) <= 2.0 * (1 + 1e-4)

@@ -83,12 +83,25 @@ class MeasuredPlant:
         w, P = self.grid()
         return float(np.diff(np.unwrap(np.angle(1.0 + controller(w) * P))[[0, -1]])[0])
 
+    def ms_forbidden(self, shape, limit: float) -> np.ndarray:
+        """The open intervals of K > 0, shape (n, 2), where the PID K * shape(w) has |1 + C P| < 1/limit at some grid
+        frequency (Ms > limit there; `scan`'s Ms on the same grid): per frequency the roots of the quadratic
+        |g|^2 K^2 + 2 Re(g) K + 1 - 1/limit^2 = 0, g = shape(w) P(w), where both are positive. limit > 1; shape: a
+        function of w or its values on `grid`'s frequencies."""
+        w, P = self.grid()
+        g = (shape(w) if callable(shape) else shape) * P
+        a, b, c = g.real ** 2 + g.imag ** 2, 2.0 * g.real, 1.0 - 1.0 / limit ** 2
+        disc = b * b - 4.0 * a * c
+        m = (a > 0) & (b < 0) & (disc > 0)  # real roots, both positive (product c/a > 0, sum -b/a > 0)
+        q = 0.5 * (np.sqrt(disc[m]) - b[m])  # the larger root times a, without cancellation
+        return np.column_stack([c / q, q / a[m]])
+
     def scan(self, gains: np.ndarray, shape, noise: bool = True) -> tuple:
         """(Ms, noise gain, winding, increment noise gain) of the PIDs K * shape(w) for every K in `gains` (m,) at
         once: shape(w) is the feedback response of the PID with Kp = 1 (Kp scales C as a whole). Arrays of shape
-        (m,); the noise gains None unless `noise`."""
+        (m,); the noise gains None unless `noise`. shape: a function of w or its values on `grid`'s frequencies."""
         w, P = self.grid()
-        G = shape(w)
+        G = shape(w) if callable(shape) else shape
         K = np.asarray(gains, float)[:, None]
         R = 1.0 + K * (G * P)[None, :]  # 1 + C P, (m, K)
         with np.errstate(divide="ignore"):

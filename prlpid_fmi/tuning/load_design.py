@@ -9,8 +9,8 @@ and the setpoint search within a load limit. tuning.design_rule orders them; tun
    <= deploy.max_noise_increment x the span, all from the plant's frequency response measured at that point
    (robustness.plant_response; measured once, with a stabilising PID; stability by Nyquist: the same winding as
    that PID's). Every candidate meets them by construction: Ti, Td (Tf) are searched, and Kp as a position inside
-   the interval of Kp that meets the limits for them (`LoadDesign.kp_interval`, a vectorised scan: Kp scales C as
-   a whole). A loop whose u reverses on more than MAX_CHATTER of the load experiment's samples (a saturating limit
+   the interval of Kp that meets the limits for them (`LoadDesign.kp_interval`, a scan: Kp scales C as a whole, so
+   Ms <= limit is a quadratic inequality in Kp per frequency, solved once per Ti, Td, Tf). A loop whose u reverses on more than MAX_CHATTER of the load experiment's samples (a saturating limit
    cycle, which the linear Ms cannot see) has its cost raised (CHATTER_PENALTY). With training.randomize set, the
    limits hold on the Monte-Carlo parameter draws too. A point without a verified estimate (robustness.status)
    gives no constraint; the Ms check on the FMU (tuning.fixed_pid.detune_over) covers it. Where no Kp meets the
@@ -66,6 +66,7 @@ ACTIVE_TOLERANCE = 0.01  # an estimate this close (relative) to its limit holds 
 CHATTER_PENALTY = 10.0  # the load cost grows by this x the chatter above MAX_CHATTER (relative to it)
 KP_SCAN = 48  # |Kp| values scanned for the interval that meets the limits
 KP_REFINE = 24  # |Kp| values on the finer grid at each end of that interval
+STABILITY_CHECKS = 5  # |Kp| values along an interval that meets the Ms limit, checked for stability
 MODEL_FIT_LIMIT = 0.05  # RMS relative misfit of a local model to its measured response above which it is not used
 MODEL_TOLERANCE = 0.10  # |FMU - model| / FMU load cost of the search's result above which the search reruns on the FMU
 
@@ -128,6 +129,58 @@ class OutcomeCache:
         for (key, _), value in zip(new, pool.map("new_outcome", [v for _, v in new])):
             self._remember(key, value)
         return vectors
+
+
+def _scanned_interval(ok, sign: float, lo: float, hi: float):
+    """LoadDesign.kp_interval by a scan: KP_SCAN log-spaced |Kp| in [lo, hi] through ok (|Kp| (m,) -> passes (m,)),
+    the passing run with the largest |Kp|, its ends refined on a finer grid (KP_REFINE); None when none passes."""
+    grid = np.geomspace(lo, hi, KP_SCAN)
+    good = ok(grid)
+    if not good.any():
+        return None
+    j_hi = int(np.flatnonzero(good)[-1])
+    j_lo = j_hi
+    while j_lo > 0 and good[j_lo - 1]:
+        j_lo -= 1
+    low, high = grid[j_lo], grid[j_hi]
+    if j_lo > 0:  # the edges once more, on a finer grid between the last failing and first passing |Kp|
+        fine = np.geomspace(grid[j_lo - 1], grid[j_lo], KP_REFINE)
+        low = fine[int(np.argmax(ok(fine)))]
+    if j_hi + 1 < KP_SCAN:
+        fine = np.geomspace(grid[j_hi], grid[j_hi + 1], KP_REFINE)
+        passing = np.flatnonzero(ok(fine))
+        high = fine[int(passing[-1])] if passing.size else grid[j_hi]
+    return sign, float(low), float(max(high, low))
+
+
+def _exact_ok(plants, shape, sign: float, lo: float, hi: float, limit: float):
+    """Without measurement noise, `ok` of LoadDesign.kp_interval from the exact |Kp| intervals in [lo, hi] where Ms <=
+    limit at every plant response on its grid (MeasuredPlant.ms_forbidden), each checked once for stability at
+    STABILITY_CHECKS |Kp| along it (Nyquist against the reference winding: constant along such an interval, as the
+    curve crosses -1 only where Ms is infinite): |Kp| (m,) -> passes (m,). None where the grid's winding still
+    varies along one (then the scan decides)."""
+    shapes = [shape(plant.grid()[0]) for plant, _ in plants]  # the PID with Kp = 1 on each response's grid
+    forbidden = np.concatenate([plant.ms_forbidden(sign * g, limit) for (plant, _), g in zip(plants, shapes)])
+    forbidden = forbidden[(forbidden[:, 1] > lo) & (forbidden[:, 0] < hi)]
+    forbidden = forbidden[np.argsort(forbidden[:, 0])]
+    ends = np.maximum.accumulate(forbidden[:, 1]) if len(forbidden) else forbidden[:, 1]
+    starts = np.concatenate([[lo], np.maximum(ends, lo)])      # an allowed piece starts where the covered run ends
+    stops = np.concatenate([np.minimum(forbidden[:, 0], hi), [hi]])   # and stops where the next interval starts
+    kept = []
+    for a, b in zip(starts, stops):
+        if not b >= a:
+            continue
+        k = sign * np.geomspace(a, b, STABILITY_CHECKS)
+        stable = np.all([np.abs(plant.scan(k, g, noise=False)[2] - reference) < 0.5 * math.pi
+                         for (plant, reference), g in zip(plants, shapes)], axis=0)
+        if stable.any() and not stable.all():
+            return None
+        if stable.all():
+            kept.append((a, b))
+    if not kept:
+        return lambda mags: np.zeros(len(mags), bool)
+    low, high = np.array(kept).T
+    return lambda mags: np.any((mags[:, None] >= low[None, :]) & (mags[:, None] <= high[None, :]), axis=1)
 
 
 class LoadDesign(OutcomeCache):
@@ -194,9 +247,10 @@ class LoadDesign(OutcomeCache):
 
     def kp_interval(self, loop: int, Ti: float, Td: float, tf: float):
         """(sign, |Kp| low, |Kp| high) of the Kp range where loop `loop` meets Ms <= limit and the noise bound at every
-        point, for these Ti, Td, Tf: a scan of KP_SCAN log-spaced |Kp| over the widened range (robustness.
-        plant_response.MeasuredPlant.scan, Nyquist stability included), the feasible run with the largest |Kp|, its
-        ends refined on a finer grid (KP_REFINE); None when no Kp meets them. The whole range where nothing was measured."""
+        point, for these Ti, Td, Tf: a scan of KP_SCAN log-spaced |Kp| over the widened range, the feasible run with
+        the largest |Kp|, its ends refined on a finer grid (`_scanned_interval`); each |Kp| checked against the exact
+        Ms intervals without measurement noise (`_exact_ok`), else by robustness.plant_response.MeasuredPlant.scan
+        (Nyquist stability included); None when no Kp meets them. The whole range where nothing was measured."""
         r = self.search_config.loops[loop].Kp
         sign = -1.0 if r.high <= 0 else 1.0
         lo, hi = (abs(r.high), abs(r.low)) if sign < 0 else (r.low if r.low > 0 else r.high * 1e-3, r.high)
@@ -222,23 +276,8 @@ class LoadDesign(OutcomeCache):
                     good &= sigma * increments / self.spans[loop] <= self.max_increment
             return good
 
-        grid = np.geomspace(lo, hi, KP_SCAN)
-        good = ok(grid)
-        found = None
-        if good.any():
-            j_hi = int(np.flatnonzero(good)[-1])
-            j_lo = j_hi
-            while j_lo > 0 and good[j_lo - 1]:
-                j_lo -= 1
-            low, high = grid[j_lo], grid[j_hi]
-            if j_lo > 0:  # the edges once more, on a finer grid between the last failing and first passing |Kp|
-                fine = np.geomspace(grid[j_lo - 1], grid[j_lo], KP_REFINE)
-                low = fine[int(np.argmax(ok(fine)))]
-            if j_hi + 1 < KP_SCAN:
-                fine = np.geomspace(grid[j_hi], grid[j_hi + 1], KP_REFINE)
-                passing = np.flatnonzero(ok(fine))
-                high = fine[int(passing[-1])] if passing.size else grid[j_hi]
-            found = (sign, float(low), float(max(high, low)))
+        exact = _exact_ok(plants, shape, sign, lo, hi, limit) if sigma == 0 and 1.0 < limit < math.inf else None
+        found = _scanned_interval(exact or ok, sign, lo, hi)
         if len(self._intervals) > 65536:
             self._intervals.clear()
         self._intervals[key] = found
