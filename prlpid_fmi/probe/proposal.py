@@ -286,8 +286,9 @@ def _require_holdable(r: StepResponse, sweep: Optional[Sweep], result: ProbeResu
 
 def settled_free_response(r: StepResponse) -> Optional[float]:
     """Where an integrating output's trim run (the input held at its start value) comes to rest, when it moved
-    and its last third is flat (within 1 % of its travel: a drifting integrator moves a third of it there): the FMU starts off equilibrium (a wheel released
-    onto its tyre), so the start value is a transient, not the operating point. None otherwise."""
+    and its last third is flat (within 1 % of its travel: a drifting integrator moves a third of it there): the FMU
+    starts off equilibrium (a wheel released onto its tyre), so the start value is a transient, not the operating
+    point. None otherwise."""
     y = np.asarray(r.trim, dtype=float)
     if r.kind != "integrating" or len(y) < 12 or not np.all(np.isfinite(y)):
         return None
@@ -365,11 +366,11 @@ def _setpoint_range(r: StepResponse, out, u_trim: float, u_limits, result: Probe
         base = y0 if rest is None else rest
         span = abs(out.nominal) if out.nominal else max(abs(base), 1.0)
         sp = [base, base + span] if rest is None else [base - span / 2, base + span / 2]
+        spanned = "nominal value" if out.nominal else "start value" if rest is None else "its magnitude"
+        around = (f", around {rest:.4g} where its free response settles: the FMU starts off equilibrium at {y0:.4g}"
+                  if rest is not None else "")
         why["setpoint_range"] = (f"an integrating plant holds any {result.output} while the trim input {u_trim:g} is "
-                                 f"inside u_limits; ADJUST (span: "
-                                 f"{'nominal value' if out.nominal else 'start value' if rest is None else 'its magnitude'}"
-                                 + (f", around {rest:.4g} where its free response settles: the FMU starts off "
-                                    f"equilibrium at {y0:.4g})" if rest is not None else ")"))
+                                 f"inside u_limits; ADJUST (span: {spanned}{around})")
     if out.min is not None:
         sp[0] = max(sp[0], out.min)
     if out.max is not None:

@@ -10,9 +10,9 @@ and the setpoint search within a load limit. tuning.design_rule orders them; tun
    (robustness.plant_response; measured once, with a stabilising PID; stability by Nyquist: the same winding as
    that PID's). Every candidate meets them by construction: Ti, Td (Tf) are searched, and Kp as a position inside
    the interval of Kp that meets the limits for them (`LoadDesign.kp_interval`, a scan: Kp scales C as a whole, so
-   Ms <= limit is a quadratic inequality in Kp per frequency, solved once per Ti, Td, Tf). A loop whose u reverses on more than MAX_CHATTER of the load experiment's samples (a saturating limit
-   cycle, which the linear Ms cannot see) has its cost raised (CHATTER_PENALTY). With training.randomize set, the
-   limits hold on the Monte-Carlo parameter draws too. A point without a verified estimate (robustness.status)
+   Ms <= limit is a quadratic inequality in Kp per frequency, solved once per Ti, Td, Tf). A loop whose u reverses
+   on more than MAX_CHATTER of the load experiment's samples (a saturating limit cycle, which the linear Ms cannot
+   see) has its cost raised (CHATTER_PENALTY). With training.randomize set, the limits hold on the Monte-Carlo parameter draws too. A point without a verified estimate (robustness.status)
    gives no constraint; the Ms check on the FMU (tuning.fixed_pid.detune_over) covers it. Where no Kp meets the
    noise-increment limit with Ms for the stabilising PID's Ti, Td and any filter, the limit is dropped
    (`relax_increment_limit`).
