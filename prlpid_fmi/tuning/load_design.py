@@ -14,8 +14,8 @@ and the setpoint search within a load limit. tuning.design_rule orders them; tun
    on more than MAX_CHATTER of the load experiment's samples (a saturating limit cycle, which the linear Ms cannot
    see) has its cost raised (CHATTER_PENALTY). With training.randomize set, the limits hold on the Monte-Carlo
    parameter draws too. A point without a verified estimate (robustness.status) gives no constraint; the Ms check
-   on the FMU (tuning.fixed_pid.detune_over) covers it. Where no Kp meets the noise-increment limit with Ms for the stabilising PID's Ti, Td and any filter, the limit is dropped
-   (`relax_increment_limit`).
+   on the FMU (tuning.fixed_pid.detune_over) covers it. Where no Kp meets the noise-increment limit with Ms for the
+   stabilising PID's Ti, Td and any filter, the limit is dropped (`relax_increment_limit`).
    With baseline.design_model "identified" (one loop, uncoupled), the search scores its candidates on local models
    instead (`identify_models`: robustness.local_model fitted to the response measured at each point; the load
    response per unit load by lfilter, the chatter of the PID output's response): microseconds of numpy instead of
