@@ -345,3 +345,33 @@ def test_where_no_gains_within_the_load_tolerance_meet_the_overshoot_limit_the_n
                                                       result.structure[0][0])
     assert overshoot <= 5.3 and ms <= 2.02
     assert load_iae > 1.01 * result.report.details.load_optimum
+
+
+def test_the_quadrotors_loop_models_are_its_double_integrators_and_predict_the_fmu_with_coupling():
+    """Three loops (the quadrotor, linear about rest: P_j = 1 / (I_j s^2)): measured with an uncoupled PID, each loop's
+    local model is the ZOH discretisation of its double integrator (1 % over the measured frequencies); for a coupled
+    PID the load IAE on the models (robustness.loop_models' closed loop of the three) equals the FMU's load experiment
+    within 5 %, and so does each loop's Ms with the coupled loops closed (models_ms) the margin experiment on the FMU."""
+    from prlpid_fmi.robustness.margins import margins_of
+
+    config = preset("quadrotor")
+    design = LoadDesign(config, 0.1, 2.0, math.inf, 4.0, design_model="identified")
+    try:
+        design.prepare(([1.5] * 3, [8.0] * 3, [0.8] * 3, [0.0] * 6))
+        assert design.models is not None, design.model_note
+        for models, plants in zip(design.models, design.plants):
+            for model, plant, inertia in zip(models, plants, (0.4, 0.4, 0.8)):
+                w = plant.frequencies_rad_s[:-1]  # the Nyquist frequency: the ZOH's zero
+                b, a = zoh([1.0], [inertia, 0.0, 0.0], 0.1)
+                q = np.exp(-1j * w * 0.1)
+                exact = np.polyval(b[::-1], q) / np.polyval(a[::-1], q)
+                assert np.max(np.abs(model.response(w) / exact - 1.0)) < 0.01
+        gains = ([1.2, 1.0, 1.5], [10.0, 12.0, 15.0], [0.7, 0.8, 1.0], [0.1, -0.1, 0.05, 0.1, -0.05, 0.1])
+        tf = list(design.tf)
+        model, _ = design.model_load_response(gains, tf)
+        fmu, _ = design.load_response(gains, tf)
+        assert model == pytest.approx(fmu, rel=0.05)
+        measured = max(margins_of(config, gains, p).Ms for p in design.points)
+        assert design.models_ms(gains, tf) == pytest.approx(measured, rel=0.05)
+    finally:
+        design.close()

@@ -39,6 +39,7 @@ MAX_ORDER = 4  # highest order tried
 FIT_TOLERANCE = 0.02  # RMS relative error at which the lowest order is taken
 SK_ITERATIONS = 20  # Sanathanan-Koerner re-weightings
 MAX_DELAY = 40  # extra samples of dead time tried where no order fits without
+ZERO_RESPONSE = 1e-12  # |P| at most this x the largest |P| measured: a zero of the plant, left out of the fit
 HIGH_ORDER = 8  # orders MAX_ORDER + 1 .. HIGH_ORDER (no dead time) are tried last, where nothing above fits
 
 
@@ -92,12 +93,16 @@ def _fit(omega: np.ndarray, P: np.ndarray, Ts: float, n: int) -> tuple[np.ndarra
 def identify(plant: MeasuredPlant, max_order: int = MAX_ORDER, tolerance: float = FIT_TOLERANCE,
              max_delay: int = MAX_DELAY, high_order: int = HIGH_ORDER) -> LocalModel:
     """The LocalModel of a measured response (module docstring): the lowest order with fit_error <= tolerance; where
-    no order meets it, the lowest order and then the least dead time of 1..max_delay extra samples that does (the
+    no order meets it (frequencies where |P| <= ZERO_RESPONSE x its largest left out), the lowest order and then the least dead time of 1..max_delay extra samples that does (the
     numerator's leading zeros: q^d B(q) / A(q), fitted to P e^{j w Ts d}); where none does, the lowest order of
     max_order + 1..high_order without dead time (a high-order lag); else the model with the least fit_error."""
     omega = np.asarray(plant.frequencies_rad_s, float)
     P = np.asarray(plant.response, complex)
-    if len(omega) < 2 or not np.all(np.isfinite(P)) or np.any(P == 0):
+    # a zero of the plant on the grid (a double integrator's ZOH at the Nyquist frequency), measured as rounding
+    # noise, is left out: the fit weighs relative errors
+    nonzero = np.abs(P) > ZERO_RESPONSE * np.max(np.abs(P), initial=0.0)
+    omega, P = omega[nonzero], P[nonzero]
+    if len(omega) < 2 or not np.all(np.isfinite(P)):
         raise ValueError("a local model needs a finite, nonzero response at two frequencies or more")
     Ts = float(plant.sample_time_s)
     best = None

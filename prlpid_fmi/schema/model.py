@@ -764,8 +764,8 @@ class BaselineModel(Section):
         "identified", description="identified: the load search evaluates its candidates on a local linear model per "
                                   "operating point, fitted to the frequency response measured there, and the chosen "
                                   "gains are verified on the FMU (the search reruns on the FMU where the two load "
-                                  "IAEs differ by more than 10 % or the FMU's loop chatters; always with several "
-                                  "loops); fmu: every candidate simulated on the FMU")
+                                  "IAEs differ by more than 10 % or the FMU's loop chatters; with several loops, one model "
+                                  "per loop, connected through their PIDs); fmu: every candidate simulated on the FMU")
 
 
 ClassicalSchedule = AutoOrFlag  # deploy.classical_schedule (prlpid_fmi.tuning.schedule.classical)

@@ -12,11 +12,11 @@ baseline.objective "load" (the default) keeps, in this order:
 3. overshoot <= deploy.max_overshoot (the setpoint weight b, then, where no b meets it, gains traded for it within
    the load tolerance, or where none is within it, the gains nearest the tolerance that meet the limit);
 4. load IAE <= baseline.load_tolerance x the load optimum (tuning.load_experiment; tuning.load_design's search);
-5. among those, the least setpoint ISE (tuning.load_design.SetpointDesign): where the load search used the identified
-   local models, over the gains and b within the load tolerance, and, where the plant has a SIMC/AMIGO model, with
-   load IAE no worse than those rules reach at the same Ms (tuning.classical_rules), searched on the models and
-   verified on the FMU (`_on_models`); on the FMU path, b alone where it meets the overshoot limit (a search of the gains there costs a
-   differential evolution of FMU setpoint episodes);
+5. among those, the least setpoint ISE (tuning.load_design.SetpointDesign): where the load search of one loop used
+   the identified local models, over the gains and b within the load tolerance, and, where the plant has a SIMC/AMIGO
+   model, with load IAE no worse than those rules reach at the same Ms (tuning.classical_rules), searched on the
+   models and verified on the FMU (`_on_models`); else b alone where it meets the overshoot limit (a search of the
+   gains there costs a differential evolution of FMU setpoint episodes);
 6. std(u) <= deploy.max_noise_gain and std(u_k - u_(k-1)) <= deploy.max_noise_increment from the measurement
    noise, fractions of the control span: preferences.
 
@@ -358,7 +358,7 @@ class Designer:
                     vector = second
                     gains, tf = design.gains(vector[:-1]), design.filters(vector[:-1])
                     b = [SetpointDesign.weight(vector)] * config.n_loops
-            elif design.models is not None and 1.0 < baseline.load_tolerance < math.inf:
+            elif design.models is not None and config.n_loops == 1 and 1.0 < baseline.load_tolerance < math.inf:
                 before = next(r for r in choices if r["b"] == weight)["ISE"]
                 refined, found = self._on_models(config, design, vector, weight, best_load, (b, c, tf), before)
                 if found is not None:
@@ -431,7 +431,7 @@ class Designer:
         again on the FMU (design_model's "setpoint_search")."""
         baseline, deploy, seed = self.baseline, self.deploy, self.seed
         record = None
-        if design.models is not None:
+        if design.models is not None and config.n_loops == 1:
             record, found = self._on_models(config, design, vector, weight, best_load, structure, math.inf)
             if found is not None:
                 self.model_record["setpoint_search"] = "identified"
@@ -466,7 +466,7 @@ class Designer:
             measured = design.load_cost(design.gains(x[:-1]), design.filters(x[:-1]))
             error = abs(measured - load) / measured if measured > 0 else math.inf
             found.update({"load_cost": measured, "load_cost_model": load, "validation_error": error})
-            if error <= MODEL_TOLERANCE:
+            if error <= MODEL_TOLERANCE or min(measured, load) >= DIVERGED_COST:  # both diverge: the models agree
                 self.model_record["setpoint_search"] = "identified"
                 return found, x
             self.model_record["setpoint_search"] = "fmu"
@@ -539,7 +539,7 @@ class Designer:
                 return None
             load = design.model_load_response(gains, tf)[0]
             return None if load >= DIVERGED_COST else (design.limit_values(gains, tf)[0], load)
-        return load_bound(design.models[len(design.models) // 2], assess)
+        return load_bound(design.models[len(design.models) // 2][0], assess)
 
     def _setpoint_response(self, config: TuningConfig, gains: tuple, structure: tuple) -> tuple[float, float]:
         """(ISE, worst overshoot [%]) of the training episodes the design chose b on (noise free)."""

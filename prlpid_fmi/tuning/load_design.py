@@ -16,10 +16,10 @@ and the setpoint search within a load limit. tuning.design_rule orders them; tun
    parameter draws too. A point without a verified estimate (robustness.status) gives no constraint; the Ms check
    on the FMU (tuning.fixed_pid.detune_over) covers it. Where no Kp meets the noise-increment limit with Ms for the
    stabilising PID's Ti, Td and any filter, the limit is dropped (`relax_increment_limit`).
-   With baseline.design_model "identified" (one loop, uncoupled), the search scores its candidates on local models
-   instead (`identify_models`: robustness.local_model fitted to the response measured at each point; the load
-   response per unit load by lfilter, the chatter of the PID output's response): microseconds of numpy instead of
-   an FMU simulation. The choice is verified on the FMU (`validate_models`) and the search reruns on
+   With baseline.design_model "identified", the search scores its candidates on local models instead
+   (`identify_models`: robustness.local_model fitted to each loop's response measured at each point; the load
+   response per unit load by lfilter, with several loops by robustness.loop_models' closed loop on the loops' models;
+   the chatter of the PID output's response): microseconds of numpy instead of an FMU simulation. The choice is verified on the FMU (`validate_models`) and the search reruns on
    the FMU (`use_fmu`) where the two differ by more than MODEL_TOLERANCE (`search_verified`). The setpoint search's
    load cost follows the same path (`search_load_cost`; tuning.design_rule verifies its result on the FMU too).
 2. b (`setpoint_weight`): on noise-free training episodes (setpoint steps), the b in B_GRID with the lowest ISE
@@ -39,6 +39,7 @@ import numpy as np
 from scipy.optimize import NonlinearConstraint, differential_evolution, minimize
 
 from prlpid_fmi.config import GainRange, TuningConfig
+from prlpid_fmi.control.pid import coupling_matrix
 from prlpid_fmi.loop.actions import ActionMap
 from prlpid_fmi.loop.core import LoopCore, control_scales, pid_structure
 from prlpid_fmi.loop.evaluation import gains_rollout
@@ -47,6 +48,10 @@ from prlpid_fmi.progress import QUIET, Steps, batch_counted, counted
 from prlpid_fmi.robustness.local_model import (closed_loop_stable, feedback_polynomials, identify, load_responses,
                                               reference_polynomial)
 from prlpid_fmi.robustness.local_model import setpoint_response as model_step_response
+from prlpid_fmi.robustness.loop_models import closed_loop as loop_closed_loop
+from prlpid_fmi.robustness.loop_models import loop_plants
+from prlpid_fmi.robustness.loop_models import stable as loop_stable
+from prlpid_fmi.robustness.loop_models import step_responses
 from prlpid_fmi.robustness.margins import pid_frequency_response, setpoint_range_points
 from prlpid_fmi.tuning.load_experiment import (DIVERGED_COST, load_config, load_iae, open_core, parameter_samples,
                                                plant_responses, signed_loads, start_measurement)
@@ -197,7 +202,8 @@ class LoadDesign(OutcomeCache):
                  widen: float, max_noise_increment: float = math.inf, workers: int = 1, design_model: str = "fmu"):
         self.config = dataclasses.replace(config, forecast_horizon=0)
         self.design_model = design_model  # "identified": the search's load cost on local models (`identify_models`)
-        self.models: list | None = None  # per nominal point: its LocalModel (one loop), while the search uses them
+        self.models: list | None = None  # per nominal point: a LocalModel per loop, while the search uses them
+        self.loop_models: list | None = None  # the same with several loops, kept for their Ms (`models_ms`)
         self.model_note = ""  # why the local models are not used ("" where they are or were not asked for)
         self.workers = int(workers)  # processes `search` evaluates on (tuning.search_pool)
         self.args = (config, load_step, max_sensitivity, max_noise_gain, widen, max_noise_increment)
@@ -301,9 +307,13 @@ class LoadDesign(OutcomeCache):
     # -- constraints -------------------------------------------------------------------------------------------
     def constraint_values(self, vector) -> np.ndarray:
         """[max Ms - limit, max noise share - max_noise_gain, max increment share - max_noise_increment] over points
-        and loops (<= 0: feasible)."""
-        ms, noise, increment = self.limit_values(self.gains(vector), self.filters(vector))
+        and loops (<= 0: feasible); with several loops' local models, Ms also with the candidate's other loops closed
+        (`models_ms`)."""
+        gains, tf = self.gains(vector), self.filters(vector)
+        ms, noise, increment = self.limit_values(gains, tf)
         limit = self.limit if self.limit is not None else math.inf
+        if self.loop_models is not None and self.limit is not None:
+            ms = max(ms, min(self.models_ms(gains, tf), DIVERGED_COST))  # unstable on the models: inf
         extra = increment - self.max_increment if math.isfinite(self.max_increment) else -1.0
         return np.array([ms - limit, noise - self.max_noise, extra])
 
@@ -395,7 +405,7 @@ class LoadDesign(OutcomeCache):
         """What `prepare` measured and decided (picklable): a replica (`replica`) evaluates exactly as this design."""
         return {"plants": self.plants, "reference": self.reference, "max_increment": self.max_increment,
                 "increment_relaxed": self.increment_relaxed, "loads": self.loads, "start": self.start,
-                "models": self.models, "model_note": self.model_note}
+                "models": self.models, "loop_models": self.loop_models, "model_note": self.model_note}
 
     @classmethod
     def replica(cls, args: tuple, prepared: dict) -> "LoadDesign":
@@ -472,8 +482,12 @@ class LoadDesign(OutcomeCache):
 
     def new_outcome(self, vector) -> tuple[float, float] | None:
         """load_response of a vector (model_load_response while `models` are used), None when a loop has no Kp
-        interval for it (not simulated); `outcome` keeps it."""
+        interval for it or, with several loops' models, its Ms on them exceeds the limit (`models_ms`; not
+        simulated); `outcome` keeps it."""
         if not self.feasible(vector):
+            return None
+        if self.loop_models is not None and self.limit is not None and \
+                self.models_ms(self.gains(vector), self.filters(vector)) > self.limit:
             return None
         if self.models is not None:
             return self.model_load_response(self.gains(vector), self.filters(vector))
@@ -481,38 +495,52 @@ class LoadDesign(OutcomeCache):
 
     # -- the load cost on local models -------------------------------------------------------------------------
     def identify_models(self) -> None:
-        """With design_model "identified": a LocalModel (robustness.local_model.identify) per nominal operating point
-        from its measured response, used by the search (`models`), or the reason it cannot be (`model_note`): several
-        loops or the coupled PID, a point without a verified response, a fit worse than MODEL_FIT_LIMIT."""
-        self.models, self.model_note = None, ""
+        """With design_model "identified": per nominal operating point, a LocalModel (robustness.local_model.identify)
+        per loop from its measured response, used by the search (`models`), or the reason they cannot be
+        (`model_note`): a point without a verified response, a fit worse than MODEL_FIT_LIMIT."""
+        self.models, self.loop_models, self.model_note = None, None, ""
         if self.design_model != "identified":
-            return
-        if self.config.n_loops != 1 or self.config.coupled:
-            self.model_note = "several loops: the load cost is simulated on the FMU"
             return
         models = []
         for p, plants in zip(self.points, self.plants):
             if plants is None:
                 self.model_note = f"no verified frequency response at the operating point {list(p)}"
                 return
-            model = identify(plants[0])
-            if not model.fit_error <= MODEL_FIT_LIMIT:
-                self.model_note = (f"the local model at {list(p)} misses the measured response by "
-                                   f"{100 * model.fit_error:.1f} % RMS (limit {100 * MODEL_FIT_LIMIT:.0f} %)")
-                return
-            models.append(model)
+            fitted = tuple(identify(plant) for plant in plants)
+            for i, model in enumerate(fitted):
+                if not model.fit_error <= MODEL_FIT_LIMIT:
+                    where = f"the local model at {list(p)}" + (f" of loop {i + 1}" if len(fitted) > 1 else "")
+                    self.model_note = (f"{where} misses the measured response by {100 * model.fit_error:.1f} % RMS "
+                                       f"(limit {100 * MODEL_FIT_LIMIT:.0f} %)")
+                    return
+            models.append(fitted)
         self.models = models
+        if self.config.n_loops > 1 or self.config.coupled:
+            self.loop_models = models
+
+    def model_records(self) -> list[dict]:
+        """The local models as fixed_pid.json records: LocalModel.as_dict per point (and "loop", 0-based, with
+        several loops)."""
+        if self.models is None:
+            return []
+        if self.config.n_loops == 1:
+            return [loops[0].as_dict() for loops in self.models]
+        return [{**model.as_dict(), "loop": i} for loops in self.models for i, model in enumerate(loops)]
 
     def model_load_response(self, gains: tuple, tf: list[float]) -> tuple[float, float]:
-        """(J_load, worst chatter) as load_response defines them, on the local models (one loop): the load response
+        """(J_load, worst chatter) as load_response defines them, on the local models: one loop, the load response
         of robustness.local_model.load_responses over the load experiment's samples after the load, per unit load;
-        chatter of the PID output's response to the point's load. A closed loop unstable on a model: DIVERGED_COST."""
+        several loops (or the coupled PID), the closed loop of robustness.loop_models on diag(the loops' models)
+        with the experiment's loads one loop after another by superposition. Chatter of the PID outputs' responses
+        to the point's loads. A closed loop unstable on a model: DIVERGED_COST."""
         c = self.config
+        if c.n_loops > 1 or c.coupled:
+            return self._loops_load_response(gains, tf)
         Kp, Ti, Td, _ = gains
         Nc, Dc = feedback_polynomials(Kp[0], Ti[0], Td[0], c.sample_time_s, c.derivative_filter_N, tf[0],
                                       c.measurement_filter_order)
         total, chatter = 0.0, 0.0
-        for model, loads in zip(self.models, self.loads):
+        for (model,), loads in zip(self.models, self.loads):
             if not closed_loop_stable(model, Nc, Dc):
                 return DIVERGED_COST, 0.0
             dy, du = load_responses(model, Nc, Dc, c.setpoint_hold_steps)
@@ -520,6 +548,50 @@ class LoadDesign(OutcomeCache):
             total += iae
             chatter = max(chatter, chatter_fraction(abs(loads[0]) * du, self.spans[0]))
         return total / len(self.models), chatter
+
+    def _loops_load_response(self, gains: tuple, tf: list[float]) -> tuple[float, float]:
+        """model_load_response with several loops: loop i loaded with loads[i] from hold * i samples after the first
+        load (tuning.load_experiment.load_config), J_load = Ts sum_k sum_i |y_i,k| / |d_i| / n."""
+        c = self.config
+        n, hold = c.n_loops, c.setpoint_hold_steps
+        total, chatter = 0.0, 0.0
+        for models, loads in zip(self.models, self.loads):
+            A, B, Y, U = loop_closed_loop(list(models), *self._loop_args(gains, tf))
+            if not loop_stable(A):
+                return DIVERGED_COST, 0.0
+            dy, du = step_responses(A, B, Y, U, n * hold)
+            y, u = np.zeros((n * hold, n)), np.zeros((n * hold, n))
+            for i, load in enumerate(loads):
+                y[i * hold:] += load * dy[:(n - i) * hold, :, i]
+                u[i * hold:] += load * du[:(n - i) * hold, :, i]
+            total += float(np.sum(np.abs(y) / np.abs(np.asarray(loads))[None, :]) * c.sample_time_s) / n
+            chatter = max(chatter, max(chatter_fraction(u[:, i], self.spans[i]) for i in range(n)))
+        return total / len(self.models), chatter
+
+    def _loop_args(self, gains: tuple, tf: list[float]) -> tuple:
+        """The arguments after the models of robustness.loop_models.closed_loop and loop_plants for these gains."""
+        c = self.config
+        Kp, Ti, Td, coupling = gains
+        matrix = coupling_matrix(coupling) if c.coupled else None
+        return Kp, Ti, Td, c.sample_time_s, c.derivative_filter_N, tf, c.measurement_filter_order, matrix
+
+    def _loops_ms(self, models: tuple, plants: list, gains: tuple, tf: list[float]) -> float:
+        """The largest Ms over the loops at one point on the models: each loop's effective plant with the candidate's
+        other loops closed (robustness.loop_models.loop_plants) and its own PID, at the frequencies measured there."""
+        w = plants[0].frequencies_rad_s
+        P = loop_plants(list(models), *self._loop_args(gains, tf), w)
+        return max(float(np.max(np.abs(1.0 / (1.0 + self.controller(gains, tf, i)(w) * P[i]))))
+                   for i in range(len(plants)))
+
+    def models_ms(self, gains: tuple, tf: list[float]) -> float:
+        """The largest Ms on the local models over the nominal points and loops, each loop with the candidate's
+        other loops closed (`_loops_ms`); inf where the closed loop is unstable on a model."""
+        worst = 0.0
+        for models, plants in zip(self.loop_models, self.plants):
+            if not loop_stable(loop_closed_loop(list(models), *self._loop_args(gains, tf))[0]):
+                return math.inf
+            worst = max(worst, self._loops_ms(models, plants, gains, tf))
+        return worst
 
     def model_setpoint_response(self, gains: tuple, tf: list[float], b: float) -> tuple[float, float]:
         """(ISE, worst overshoot [% of the step]) of a unit setpoint step on the local models (one loop, setpoint
@@ -531,7 +603,7 @@ class LoadDesign(OutcomeCache):
         Nc, Dc = feedback_polynomials(Kp[0], Ti[0], Td[0], *args)
         Nr = reference_polynomial(Kp[0], Ti[0], Td[0], c.sample_time_s, b, self.c[0], *args[1:])
         ise, overshoot = 0.0, 0.0
-        for model in self.models:
+        for (model,) in self.models:
             if not closed_loop_stable(model, Nc, Dc):
                 return math.inf, math.inf
             y = model_step_response(model, Nc, Dc, Nr, c.setpoint_hold_steps)
@@ -552,7 +624,8 @@ class LoadDesign(OutcomeCache):
                 "agrees": bool(error <= MODEL_TOLERANCE and chatter <= MAX_CHATTER and measured < DIVERGED_COST)}
 
     def use_fmu(self) -> None:
-        """The search's load cost on the FMU from here on (the local models dropped, their outcomes forgotten)."""
+        """The search's load cost on the FMU from here on (the local models dropped, their outcomes forgotten; several
+        loops' models still bound Ms: `loop_models`)."""
         self.models = None
         self._seen.clear()
 
@@ -601,7 +674,7 @@ class LoadDesign(OutcomeCache):
         Returns (scipy's result, nfev the evaluations of both searches; the record of fixed_pid.json's
         "design_model": {"requested", "path" ("identified" | "fmu"), "note", "models", and validate_models' keys})."""
         record = {"requested": self.design_model, "path": "fmu", "note": self.model_note,
-                  "models": [m.as_dict() for m in self.models or []]}
+                  "models": self.model_records()}
         spent = 0
         if self.models is not None:
             generations, population = model_budget(maxiter, popsize)
