@@ -92,10 +92,11 @@ def _fit(omega: np.ndarray, P: np.ndarray, Ts: float, n: int) -> tuple[np.ndarra
 
 def identify(plant: MeasuredPlant, max_order: int = MAX_ORDER, tolerance: float = FIT_TOLERANCE,
              max_delay: int = MAX_DELAY, high_order: int = HIGH_ORDER) -> LocalModel:
-    """The LocalModel of a measured response (module docstring): the lowest order with fit_error <= tolerance; where
-    no order meets it (frequencies where |P| <= ZERO_RESPONSE x its largest left out), the lowest order and then the least dead time of 1..max_delay extra samples that does (the
-    numerator's leading zeros: q^d B(q) / A(q), fitted to P e^{j w Ts d}); where none does, the lowest order of
-    max_order + 1..high_order without dead time (a high-order lag); else the model with the least fit_error."""
+    """The LocalModel of a measured response (module docstring; frequencies where |P| <= ZERO_RESPONSE x its largest
+    left out): the lowest order with fit_error <= tolerance; where no order meets it, the lowest order and then the
+    least dead time of 1..max_delay extra samples that does (the numerator's leading zeros: q^d B(q) / A(q), fitted to
+    P e^{j w Ts d}); where none does, the lowest order of max_order + 1..high_order without dead time (a high-order
+    lag); else the model with the least fit_error."""
     omega = np.asarray(plant.frequencies_rad_s, float)
     P = np.asarray(plant.response, complex)
     # a zero of the plant on the grid (a double integrator's ZOH at the Nyquist frequency), measured as rounding
