@@ -6,8 +6,8 @@ pythonfmu (tests/data/pythonfmu/), and whether the single PID init centres its r
 Per plant: the mechanism the probe names, the loop init chooses, its sample time, the centre of its Kp, Ti and
 Td ranges (the design) and the ranges, the setpoint hold, and the design's closed loop on the FMU itself,
 run on the scenario's own evaluation (its two setpoint steps): settled when the last 10 samples of each step
-are within 2 % of the step (as tests/test_probe.py judges a tuned PID). Nothing here is asserted: it is a
-measurement (tests/test_mechanisms.py asserts the identification and the choices).
+are within 2 % of the step (as tests/test_open_loop.py judges a tuned PID). Nothing here is asserted: it is a
+measurement (tests/test_proposal.py asserts the identification and the choices).
 """
 from __future__ import annotations
 

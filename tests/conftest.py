@@ -38,10 +38,9 @@ def fmu(name: str, version: int = 2):
 # clean-clone CI run on 2 cores). The files go longest first (seconds summed per file in a `--durations=0` run, the
 # machine otherwise idle), so the two workers end together; the rest follow in collection order.
 FIRST = ("test_end_to_end.py", "test_faults.py", "test_sweep.py", "test_packaging.py", "test_third_party_fmus.py",
-         "test_probe.py", "test_pid_law_spec.py", "test_fmu_faults_exporters.py", "test_anchored.py", "test_deploy.py",
-         "test_cli_conventions.py", "test_load_design.py", "test_cli.py", "test_classical_schedule.py",
-         "test_training.py", "test_transients.py", "test_search_pool.py", "test_nonlinear_plants.py",
-         "test_fmi_interfaces.py")
+         "test_open_loop.py", "test_pid_law_spec.py", "test_fmu_faults_exporters.py", "test_actions_anchored.py",
+         "test_formats.py", "test_cli_conventions.py", "test_load_design.py", "test_cli.py", "test_classical.py",
+         "test_agent.py", "test_candidates.py", "test_search_pool.py", "test_nonlinear_plants.py", "test_adapters.py")
 
 
 def pytest_collection_modifyitems(config, items):

@@ -1,5 +1,5 @@
 """A frozen copy of prlpid_fmi/control/pid.py as it was before the 2-DOF law (commit 2860126): the reference
-that the new law with b = c = 1 and Tf = 0 must reproduce bit for bit (tests/test_two_dof_pid.py). Do not edit.
+that the new law with b = c = 1 and Tf = 0 must reproduce bit for bit (tests/test_pid_two_dof.py). Do not edit.
 
 Positional PID of paper eq. 2 and the cross-axis coupled MIMO PID of eq. 26-27.
 

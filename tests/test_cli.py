@@ -26,7 +26,7 @@ SMALL = {"agent": {"n_envs": 1, "n_steps": 128, "batch_size": 64, "checkpoint_ev
 
 # time_varying: its margin estimates are unreliable, and the fixed-PID search counts them
 # (conservatively), so a tiny-budget PID is detuned through a scan of margin experiments that takes
-# minutes; the detuning is tested in test_detune/test_transients/test_anchored
+# minutes; the detuning is tested in test_fixed_pid/test_candidates/test_actions_anchored
 TIME_VARYING = {"deploy": {"schedule_points": 3, "schedule_by": "setpoint", "max_sensitivity": 1e3}}
 
 

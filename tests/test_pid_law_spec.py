@@ -56,7 +56,7 @@ from pid_law_cases import CASES, INF, MUTATIONS, exact_u
 IDS = [case.name for case in CASES]
 BY_NAME = {case.name: case for case in CASES}
 REL = 1e-12
-# tests/test_deploy.py's flags: every warning is an error (a one-row table once tripped -Warray-bounds in the
+# tests/test_formats.py's flags: every warning is an error (a one-row table once tripped -Warray-bounds in the
 # interpolation branch of lookup(), which the template now leaves out for one row)
 GCC = ["gcc", "-std=c99", "-O2", "-Wall", "-Wextra", "-Wpedantic", "-Werror", "-ffp-contract=off"]
 STATIC_VALVE = Path(__file__).parent / "plants" / "StaticValve"
