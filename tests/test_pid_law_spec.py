@@ -28,7 +28,7 @@ near zero).
    `static_gain` is such a closed loop (its y are the previous u), and both forecasts must predict
    its u(0..n-1) from y(0). Only those cases (single loop, constant r and gains) are checked this
    way; the others are skipped with the reason. FMI 2.0 build only (forecast.c is the same code
-   under every FMI version, and tests/test_native_forecast.py compares native and FMI paths bit for
+   under every FMI version, and tests/test_native.py compares native and FMI paths bit for
    bit for both versions). The PID is preset (at y(0), from u_start) before the forecast is called,
    as LoopCore does; the forecast itself rolls out from the state it is given.
 

@@ -21,7 +21,7 @@ u_prev) -> float` on lists of n_loops floats (coupling: 6 floats or None):
   the prior *is* the plant (an FMU that cannot serialize its state or may be instantiated only once
   per process), a single-instance rollback: get the plant's own state, roll N steps, set it back.
 - NativeForecast (prlpid_fmi.loop.forecast.native): one C call for the bundled plants; bit for bit the
-  same result (tests/test_native_forecast.py).
+  same result (tests/test_native.py).
 
 `make_forecast` picks one.
 """
