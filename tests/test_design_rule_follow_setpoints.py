@@ -1,5 +1,5 @@
 """The fixed PID's search without the load limit (tuning.design_rule.follow_setpoints): where nothing within the load tolerance meets the
-overshoot limit, the setpoint ISE is minimised within the Ms, noise and overshoot limits without a load limit, and
+overshoot limit, the load IAE is minimised within the Ms, noise and overshoot limits without a load limit, and
 kept where it meets them all. A fixed PID must follow the setpoint episodes it is chosen on: where the load-optimal
 gains diverge on all of them whatever b, the search's best is kept where it follows them; where it does not, the
 stabilising PID with its best b; where that diverges too, nothing is replaced.
@@ -82,6 +82,14 @@ def test_the_search_without_a_load_limit_follows_the_episodes_within_the_limits(
         trade.close()
     assert (ise, overshoot) == pytest.approx((found["ISE"], found["Overshoot"]), rel=1e-12)
     assert found["load_cost"] == pytest.approx(load_design.load_cost(gains, tf), rel=1e-12)
+    # the least load IAE within the limits: well below what the least setpoint ISE's search finds with the same budget
+    ise_search = SetpointDesign(load_design, best_load, math.inf, DeployConfig().max_overshoot, SEEDS)
+    try:
+        other = ise_search.search(None, 0, 4, 5)
+        assert np.max(ise_search.constraint_values(other.x)) <= 0
+        assert found["load_cost"] < 0.9 * ise_search.evaluate(other.x)[0]
+    finally:
+        ise_search.close()
 
 
 def test_where_the_search_diverges_the_stabilising_pid_is_kept_and_where_it_diverges_too_nothing(design, monkeypatch):

@@ -712,14 +712,15 @@ def follows_setpoints(choices: list[dict], traded: dict | None) -> bool:
 def follow_setpoints(config: TuningConfig, design: LoadDesign, first: FixedPid, best_load: float, deploy: DeployConfig,
                      seeds: list[int], seed: int, maxiter: int, popsize: int, progress: Steps,
                      diverged: bool = True) -> tuple[dict, tuple | None]:
-    """Where no gains within the load tolerance met the overshoot limit: the setpoint ISE within the Ms, noise and
-    overshoot limits, without a load limit, searched over the whole box. Its best is kept where it meets every limit,
+    """Where no gains within the load tolerance met the overshoot limit: the least load cost within the Ms, noise and
+    overshoot limits (the rule's order: the overshoot limit before the load tolerance, nearest that), without a load
+    limit, searched over the whole box. Its best is kept where it meets every limit,
     or where the gains of the load search diverged on the episodes (`diverged`) and it follows them; where they
     diverged and it does not follow them either, the stabilising PID `first` with its best setpoint weight. Returns
     (what was found: {"source": "search" | "stabilising PID" | None, "load_optimal_diverged", "load_cost", "ISE",
     "Overshoot", "feasible", "evaluations"}, (vector, gains, (b, c, Tf)) to keep, or None: the gains stay)."""
-    follow = SetpointDesign(design, best_load, math.inf, deploy.max_overshoot, seeds)
-    progress.step("setpoint ISE within the overshoot limit without the load tolerance"
+    follow = SetpointDesign(design, best_load, math.inf, deploy.max_overshoot, seeds, objective="load")
+    progress.step("least load IAE within the overshoot limit, without the load tolerance"
                   + (" (the load-optimal gains diverge on the setpoint episodes)" if diverged else ""),
                   follow.budget(maxiter, popsize, whole_box=True))
     try:

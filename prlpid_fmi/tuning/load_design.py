@@ -748,11 +748,13 @@ class SetpointDesign(OutcomeCache):
     meets the overshoot limit with the step-2 gains, with the setpoint responses simulated on the FMU's training
     episodes; and, with on_models, where a b meets it, for the least setpoint ISE within the load tolerance
     (tuning.design_rule, requirement 5) with the unit setpoint step simulated on the design's local models
-    (`model_setpoint_response`). The vector is the load design's plus one entry for b."""
+    (`model_setpoint_response`). objective "load": the load cost is minimised instead of the setpoint ISE, within the
+    same limits (tuning.design_rule.follow_setpoints). The vector is the load design's plus one entry for b."""
 
     def __init__(self, design: LoadDesign, best_load: float, load_tolerance: float, max_overshoot: float,
-                 seeds: list[int], on_models: bool = False, rule_bound=None):
+                 seeds: list[int], on_models: bool = False, rule_bound=None, objective: str = "setpoint"):
         self.design = design
+        self.objective = objective  # "setpoint": the setpoint ISE is minimised; "load": the load cost
         self.rule_bound = rule_bound  # Ms -> the load cost the classical rules reach at that Ms (with on_models;
         #                               tuning.classical_rules.load_bound), or None
         self.best_load, self.load_tolerance, self.max_overshoot_fraction = best_load, load_tolerance, max_overshoot
@@ -821,8 +823,9 @@ class SetpointDesign(OutcomeCache):
         return min(self.load_limit, self.rule_bound(d.limit_values(d.gains(vector[:-1]), d.filters(vector[:-1]))[0]))
 
     def cost(self, vector) -> float:
-        _, ise, _ = self.evaluate(vector)
-        return ise if math.isfinite(ise) else DIVERGED_COST
+        load, ise, _ = self.evaluate(vector)
+        value = load if self.objective == "load" else ise
+        return min(value, DIVERGED_COST) if math.isfinite(value) else DIVERGED_COST
 
     def _batch(self, population: np.ndarray, pool: SearchPool | None, fn) -> list:
         if pool is None:
