@@ -343,8 +343,8 @@ def _followed_sentence(followed: dict, load_optimum: float) -> str:
     why = ("A fixed PID must follow the setpoint steps it is chosen on" if diverged else
            "deploy.max_overshoot is a limit of the deployed controller and baseline.load_tolerance a preference")
     if followed["source"] == "search":
-        return (f"{why}, so the load tolerance was dropped: these gains minimise the setpoint ISE of those episodes "
-                f"within the Ms and noise limits, with no bound on the load IAE ({result}"
+        return (f"{why}, so the load tolerance was dropped: these gains have the least load IAE that meets the "
+                f"overshoot limit on those episodes within the Ms and noise limits ({result}"
                 + (")." if followed["feasible"] else "; the overshoot limit could not be met).")
                 + " Load rejection is what it costs.")
     if followed["source"] == "stabilising PID":
