@@ -127,9 +127,23 @@ def identify(plant: MeasuredPlant, max_order: int = MAX_ORDER, tolerance: float 
     return best
 
 
-def _lowpass(T: float, Ts: float) -> tuple[np.ndarray, np.ndarray]:
-    """Backward-Euler first-order low pass x_k = (T x_{k-1} + Ts in_k) / (T + Ts) as (num, den) in q."""
-    return np.array([Ts / (T + Ts)]), np.array([1.0, -T / (T + Ts)])
+def measurement_filter(Tf: float, order: int, sample_time_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """control.pid's measurement filter F of Tf [s] as (num, den) in q: `order` backward-Euler sections
+    x_k = (T x_{k-1} + Ts in_k) / (T + Ts) of T = Tf / order each; Tf = 0: none (1 / 1)."""
+    Ts = float(sample_time_s)
+    num, den = np.array([1.0]), np.array([1.0])
+    if Tf > 0:
+        T = Tf / order
+        for _ in range(order):
+            num, den = np.polymul(num, np.array([Ts / (T + Ts)])), np.polymul(den, np.array([1.0, -T / (T + Ts)]))
+    return num, den
+
+
+def derivative_denominator(Td: float, derivative_filter_N: float | None, sample_time_s: float) -> np.ndarray:
+    """[Tdf + Ts, -Tdf], Tdf = Td / N (0 without a filter or Td): the backward-Euler derivative filter's denominator x
+    Ts in q, D = (1 - q) / ((Tdf + Ts) - Tdf q) e."""
+    Tdf = Td / derivative_filter_N if derivative_filter_N and Td != 0 else 0.0
+    return np.array([Tdf + float(sample_time_s), -Tdf])
 
 
 def feedback_polynomials(Kp: float, Ti: float, Td: float, sample_time_s: float,
@@ -139,13 +153,8 @@ def feedback_polynomials(Kp: float, Ti: float, Td: float, sample_time_s: float,
     C = Kp (F (1 + Td Fd (1 - q) / Ts) + Ts / (Ti (1 - q))), F the measurement filter (order 1: one backward-Euler
     section of Tf; order 2: two of Tf/2), Fd the derivative filter of Td/N. Ti = inf: no integral term."""
     Ts = float(sample_time_s)
-    num_f, den_f = np.array([1.0]), np.array([1.0])
-    if measurement_filter_s > 0:
-        section = _lowpass(measurement_filter_s / measurement_filter_order, Ts)
-        for _ in range(measurement_filter_order):
-            num_f, den_f = np.polymul(num_f, section[0]), np.polymul(den_f, section[1])
-    Tdf = Td / derivative_filter_N if derivative_filter_N and Td != 0 else 0.0
-    dd = np.array([Tdf + Ts, -Tdf])  # the derivative's denominator x Ts: D = (1 - q) / ((Tdf + Ts) - Tdf q) ed
+    num_f, den_f = measurement_filter(measurement_filter_s, measurement_filter_order, Ts)
+    dd = derivative_denominator(Td, derivative_filter_N, Ts)
     diff = np.array([1.0, -1.0])
     integral = math.isfinite(Ti)
     # common denominator den_f * dd (* (1 - q) with an integral term)
@@ -166,13 +175,8 @@ def reference_polynomial(Kp: float, Ti: float, Td: float, sample_time_s: float, 
     Cr = Kp (b + Ts / (Ti (1 - q)) + c Td Fd (1 - q) / Ts) (control.pid: the integral of the unfiltered error, the
     setpoint unfiltered; Ti = inf: no integral term)."""
     Ts = float(sample_time_s)
-    den_f = np.array([1.0])
-    if measurement_filter_s > 0:
-        section = _lowpass(measurement_filter_s / measurement_filter_order, Ts)[1]
-        for _ in range(measurement_filter_order):
-            den_f = np.polymul(den_f, section)
-    Tdf = Td / derivative_filter_N if derivative_filter_N and Td != 0 else 0.0
-    dd = np.array([Tdf + Ts, -Tdf])
+    den_f = measurement_filter(measurement_filter_s, measurement_filter_order, Ts)[1]
+    dd = derivative_denominator(Td, derivative_filter_N, Ts)
     diff = np.array([1.0, -1.0])
     base = np.polymul(den_f, dd)  # Dc without the integrator's (1 - q)
     num = b * base

@@ -9,8 +9,8 @@ coupled error of eq. 27 where the loops are coupled (control.pid.CoupledPID; unc
 
 F = diag(F_j) the measurement filters, Fd_i the derivative filter of Td_i / N, C the coupling matrix. Every block is
 realised in state space (observer canonical form of its polynomials in q = z^-1) and the blocks are connected into one
-closed-loop system x_{k+1} = A x_k + B d_k, y_k = Cy x_k, u_pid,k = Cu x_k + Du d_k with a step d at the plant inputs
-(the models are strictly proper: no algebraic loop). For one loop without coupling this is
+closed-loop system x_{k+1} = A x_k + B d_k, y_k = Y x_k, u_k = U x_k with a step d at the plant inputs (the models
+are strictly proper: no algebraic loop). For one loop without coupling this is
 robustness.local_model.load_responses' B Dc / (A Dc + B Nc).
 """
 from __future__ import annotations
@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from prlpid_fmi.robustness.local_model import LocalModel
+from prlpid_fmi.robustness.local_model import LocalModel, derivative_denominator, measurement_filter
 
 
 def _realise(num: np.ndarray, den: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -43,25 +43,9 @@ def _realise(num: np.ndarray, den: np.ndarray) -> tuple[np.ndarray, np.ndarray, 
     return A, B, C, np.array([[n[0]]])
 
 
-def _lowpass(T: float, Ts: float) -> tuple[np.ndarray, np.ndarray]:
-    """Backward-Euler first-order low pass (control.pid's measurement filter section) as (num, den) in q."""
-    return np.array([Ts / (T + Ts)]), np.array([1.0, -T / (T + Ts)])
-
-
-def _filter(tf: float, order: int, Ts: float) -> tuple[np.ndarray, np.ndarray]:
-    """The measurement filter F of Tf = tf [s] (order sections of tf / order; tf = 0: none) as (num, den) in q."""
-    num, den = np.array([1.0]), np.array([1.0])
-    if tf > 0:
-        section = _lowpass(tf / order, Ts)
-        for _ in range(order):
-            num, den = np.polymul(num, section[0]), np.polymul(den, section[1])
-    return num, den
-
-
 def _proportional_derivative(Kp: float, Td: float, Ts: float, N: float | None) -> tuple[np.ndarray, np.ndarray]:
     """Kp (1 + Td Fd (1 - q) / Ts), Fd the backward-Euler derivative filter of Td / N, as (num, den) in q."""
-    Tdf = Td / N if N and Td != 0 else 0.0
-    dd = np.array([Tdf + Ts, -Tdf])
+    dd = derivative_denominator(Td, N, Ts)
     return Kp * (dd + Td * np.array([1.0, -1.0])), dd
 
 
@@ -75,7 +59,7 @@ def closed_loop(models: list[LocalModel], Kp: list[float], Ti: list[float], Td: 
     n, Ts = len(models), float(sample_time_s)
     M = (np.zeros((n, n)) if coupling is None else np.asarray(coupling, float)) - np.eye(n)
     plants = [_realise(m.numerator, m.denominator) for m in models]
-    filters = [_realise(*_filter(tf[j], filter_order, Ts)) for j in range(n)]
+    filters = [_realise(*measurement_filter(tf[j], filter_order, Ts)) for j in range(n)]
     pds = [_realise(*_proportional_derivative(Kp[i], Td[i], Ts, derivative_filter_N)) for i in range(n)]
     integrals = [_realise(np.array([Kp[i] * Ts / Ti[i]]), np.array([1.0, -1.0])) if math.isfinite(Ti[i]) else
                  _realise(np.array([0.0]), np.array([1.0, 0.0])) for i in range(n)]  # the same size either way
@@ -160,7 +144,7 @@ def loop_plants(models: list[LocalModel], Kp: list[float], Ti: list[float], Td: 
         return np.polyval(np.asarray(num)[::-1], q) / np.polyval(np.asarray(den)[::-1], q)
 
     P = np.array([response(m.numerator, m.denominator) for m in models])  # (n, W)
-    F = np.array([response(*_filter(tf[j], filter_order, Ts)) for j in range(n)])
+    F = np.array([response(*measurement_filter(tf[j], filter_order, Ts)) for j in range(n)])
     PD = np.array([response(*_proportional_derivative(Kp[i], Td[i], Ts, derivative_filter_N)) for i in range(n)])
     I = np.array([response([Kp[i] * Ts / Ti[i]], [1.0, -1.0]) if math.isfinite(Ti[i]) else np.zeros(len(w))
                   for i in range(n)])
