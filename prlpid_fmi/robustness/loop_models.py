@@ -54,7 +54,7 @@ def closed_loop(models: list[LocalModel], Kp: list[float], Ti: list[float], Td: 
                 coupling: np.ndarray | None = None) -> tuple[np.ndarray, ...]:
     """(A, B, Y, U) of the module docstring's closed loop: states x (m,), loads d (n,) at the plant inputs,
     x_{k+1} = A x_k + B d_k, measurements y_k = Y x_k (n,), PID outputs u_k = U x_k (n,): no direct path from d, the
-    models being strictly proper. The same block sizes for any gains (a batch of candidates has one m).
+    models being strictly proper.
     coupling: the (n, n) matrix C of eq. 27 (zero diagonal) or None (uncoupled)."""
     n, Ts = len(models), float(sample_time_s)
     M = (np.zeros((n, n)) if coupling is None else np.asarray(coupling, float)) - np.eye(n)
@@ -62,7 +62,7 @@ def closed_loop(models: list[LocalModel], Kp: list[float], Ti: list[float], Td: 
     filters = [_realise(*measurement_filter(tf[j], filter_order, Ts)) for j in range(n)]
     pds = [_realise(*_proportional_derivative(Kp[i], Td[i], Ts, derivative_filter_N)) for i in range(n)]
     integrals = [_realise(np.array([Kp[i] * Ts / Ti[i]]), np.array([1.0, -1.0])) if math.isfinite(Ti[i]) else
-                 _realise(np.array([0.0]), np.array([1.0, 0.0])) for i in range(n)]  # the same size either way
+                 _realise(np.array([0.0]), np.array([1.0])) for i in range(n)]  # Ti = inf: no integral term
     blocks = [plants, filters, pds, integrals]
     sizes = [[b[0].shape[0] for b in group] for group in blocks]
     m = sum(sum(s) for s in sizes)
@@ -143,13 +143,13 @@ def loop_plants(models: list[LocalModel], Kp: list[float], Ti: list[float], Td: 
     def response(num, den):
         return np.polyval(np.asarray(num)[::-1], q) / np.polyval(np.asarray(den)[::-1], q)
 
-    P = np.array([response(m.numerator, m.denominator) for m in models])  # (n, W)
+    P = np.array([m.response(w) for m in models])  # (n, W)
     F = np.array([response(*measurement_filter(tf[j], filter_order, Ts)) for j in range(n)])
     PD = np.array([response(*_proportional_derivative(Kp[i], Td[i], Ts, derivative_filter_N)) for i in range(n)])
-    I = np.array([response([Kp[i] * Ts / Ti[i]], [1.0, -1.0]) if math.isfinite(Ti[i]) else np.zeros(len(w))
-                  for i in range(n)])
+    integral = np.array([response([Kp[i] * Ts / Ti[i]], [1.0, -1.0]) if math.isfinite(Ti[i]) else np.zeros(len(w))
+                         for i in range(n)])
     # u = G y, G_ij = PD_i M_ij F_j + I_i M_ij; with y = P u the closed loops: u = G P u
-    G = (PD.T[:, :, None] * M[None, :, :] * F.T[:, None, :]) + I.T[:, :, None] * M[None, :, :]  # (W, n, n)
+    G = (PD.T[:, :, None] * M[None, :, :] * F.T[:, None, :]) + integral.T[:, :, None] * M[None, :, :]  # (W, n, n)
     GP = G * P.T[:, None, :]
     out = np.empty((n, len(w)), complex)
     for i in range(n):
