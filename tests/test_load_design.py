@@ -8,6 +8,7 @@ sampled loop.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import control
@@ -243,3 +244,36 @@ def test_the_kp_interval_from_the_exact_ms_intervals_is_the_scans(Ti, Td, monkey
         C = k * (1 + (ts / Ti) * z / (z - 1) + Td * (z - 1) / (ts * z))
         L = np.asarray((C * (a - 1) / (z - a))(np.exp(1j * plant.grid()[0] * ts))).ravel()
         assert np.max(np.abs(1 / (1 + L))) <= 2.0 * (1 + 1e-4)
+
+
+def test_a_constant_coupling_leaves_the_offset_of_eq_27_so_the_fixed_pid_searches_hold_it_at_zero():
+    """Eq. 27's integral drives the coupled error (r - y) + C y to 0, so a constant coupling settles at
+    y = (I - C)^-1 r, not at r (the quadrotor's PID, 60 s at constant setpoints): why `search_map` holds the six
+    coefficients at 0. Its vectors have 3 entries per loop and map Kp, Ti, Td as the uncoupled ActionMap does."""
+    from prlpid_fmi.control.pid import coupling_matrix
+    from prlpid_fmi.loop.actions import ActionMap
+    from prlpid_fmi.loop.evaluation import constant_gains, gains_rollout
+    from prlpid_fmi.tuning.load_design import search_map
+
+    config = preset("quadrotor")
+    r = np.array([0.3, -0.2, 0.4])
+    coupling = [0.2, -0.1, 0.15, 0.1, -0.2, 0.05]
+    steps = 600
+    schedule = ((0, tuple(r)),)
+    settled = {}
+    for c in (coupling, [0.0] * 6):
+        traj = gains_rollout(constant_gains([2.0] * 3, [4.0] * 3, [0.8] * 3, c),
+                             dataclasses.replace(config, episode_steps=steps, setpoint_hold_steps=steps,
+                                                 measurement_noise_std=0.0, load_disturbance=0.0),
+                             seed=0, setpoint_schedule=schedule)
+        settled[tuple(c)] = traj.measurement[-1]
+    expected = np.linalg.solve(np.eye(3) - coupling_matrix(coupling), r)
+    assert np.max(np.abs(expected - r)) > 0.05  # the offset is there to see
+    np.testing.assert_allclose(settled[tuple(coupling)], expected, atol=1e-4)
+    np.testing.assert_allclose(settled[(0.0,) * 6], r, atol=1e-4)
+
+    mapped, plain = search_map(config), ActionMap(config.loops)
+    assert mapped.size == 9 == plain.size
+    vector = list(np.linspace(-0.9, 0.8, 9))
+    Kp, Ti, Td, c = mapped.values(vector)
+    assert c == [0.0] * 6 and (Kp, Ti, Td) == plain.values(vector)[:3]

@@ -348,8 +348,9 @@ def test_where_no_gains_within_the_load_tolerance_meet_the_overshoot_limit_the_n
 
 
 def test_the_quadrotors_loop_models_are_its_double_integrators_and_predict_the_fmu_with_coupling():
-    """Three loops (the quadrotor, linear about rest: P_j = 1 / (I_j s^2)): measured with an uncoupled PID, each loop's
-    local model is the ZOH discretisation of its double integrator (1 % over the measured frequencies); for a coupled
+    """Three loops (the quadrotor, linear about rest: P_j = 1 / (I_j s^2)): measured with a coupled PID, each loop's
+    local model is the ZOH discretisation of its double integrator (1 % over the measured frequencies: the loop's own
+    measurement's response, not the coupled error's effective plant); for another coupled
     PID the load IAE on the models (robustness.loop_models' closed loop of the three) equals the FMU's load experiment
     within 5 %, and so does each loop's Ms with the coupled loops closed (models_ms) the margin experiment on the FMU."""
     from prlpid_fmi.robustness.margins import margins_of
@@ -357,7 +358,9 @@ def test_the_quadrotors_loop_models_are_its_double_integrators_and_predict_the_f
     config = preset("quadrotor")
     design = LoadDesign(config, 0.1, 2.0, math.inf, 4.0, design_model="identified")
     try:
-        design.prepare(([1.5] * 3, [8.0] * 3, [0.8] * 3, [0.0] * 6))
+        # roll and pitch coupled to each other and to yaw, yaw to neither: the yaw rate stays 0 while roll or pitch is
+        # excited, so the gyroscopic terms q r, p r stay 0 and each experiment is linear
+        design.prepare(([1.5] * 3, [8.0] * 3, [0.8] * 3, [0.3, 0.2, -0.25, 0.15, 0.0, 0.0]))
         assert design.models is not None, design.model_note
         for models, plants in zip(design.models, design.plants):
             for model, plant, inertia in zip(models, plants, (0.4, 0.4, 0.8)):
@@ -373,5 +376,12 @@ def test_the_quadrotors_loop_models_are_its_double_integrators_and_predict_the_f
         assert model == pytest.approx(fmu, rel=0.05)
         measured = max(margins_of(config, gains, p).Ms for p in design.points)
         assert design.models_ms(gains, tf) == pytest.approx(measured, rel=0.05)
+        # decoupled PIDs (the fixed PID's) take each loop on its own model; a 1e-12 coupling takes the coupled
+        # state-space loop: both give the same load IAE, chatter and Ms
+        decoupled = (*gains[:3], [0.0] * 6)
+        barely = (*gains[:3], [1e-12] * 6)
+        assert design.model_load_response(decoupled, tf) == pytest.approx(design.model_load_response(barely, tf),
+                                                                           rel=1e-7, abs=1e-12)
+        assert design.models_ms(decoupled, tf) == pytest.approx(design.models_ms(barely, tf), rel=1e-9)
     finally:
         design.close()

@@ -36,13 +36,17 @@ PID_PARAMETERS = ("Kp", "Ti", "Td")
 class ActionMap:
     """Turns a (smoothed) action vector into Gains for the configured loops."""
 
-    def __init__(self, loops: tuple[LoopConfig, ...], coupled: bool = False, coupling_range: float = 0.5):
+    def __init__(self, loops: tuple[LoopConfig, ...], coupled: bool = False, coupling_range: float = 0.5,
+                 zero_coupling: bool = False):
+        """zero_coupling: a coupled PID whose six coefficients are held at 0, not in the action (size 3 * n_loops)."""
         self.loops = loops
         self.coupled = coupled
         self.coupling = GainRange(-coupling_range, coupling_range, "linear")
-        self.size = 3 * len(loops) + (6 if coupled else 0)
+        self.zero_coupling = coupled and zero_coupling
+        tuned = 6 if coupled and not self.zero_coupling else 0
+        self.size = 3 * len(loops) + tuned
 
-        ranges = [r for l in loops for r in (l.Kp, l.Ti, l.Td)] + [self.coupling] * (6 if coupled else 0)
+        ranges = [r for l in loops for r in (l.Kp, l.Ti, l.Td)] + [self.coupling] * tuned
         # per parameter: (is_log, low or log(low), span or log span, low, high)
         self._maps = [(r.scale == "log",) + ((math.log(r.low), math.log(r.high) - math.log(r.low))
                                              if r.scale == "log" else (r.low, r.high - r.low)) + (r.low, r.high)
@@ -58,12 +62,14 @@ class ActionMap:
             a = -1.0 if a < -1.0 else 1.0 if a > 1.0 else a
             frac = (a + 1.0) / 2.0
             out.append(math.exp(base + frac * span) if is_log else base + frac * span)
+        if self.zero_coupling:
+            out += [0.0] * 6
         return split_values(out, len(self.loops), self.coupled)
 
     def names(self, loop_names: list[str]) -> list[str]:
         """Column names of the mapped parameters, e.g. Kp[y], Ti[y], Td[y], c_rp, ..."""
         cols = [f"{p}[{name}]" for name in loop_names for p in PID_PARAMETERS]
-        if self.coupled:
+        if self.coupled and not self.zero_coupling:
             cols += ["c_rp", "c_ry", "c_pr", "c_py", "c_yr", "c_yp"]
         return cols
 

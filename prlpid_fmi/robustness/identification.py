@@ -14,7 +14,9 @@ delay included). No measurement noise and no scenario disturbances: the experime
 
 With several loops ("loop-at-a-time"), the other loops stay closed; the response reported for loop i
 is the *effective* plant its PID sees, (Y_i - sum_j c_ij Y_j) / U_i (the coupled error of eq. 27;
-c = 0 without coupling), so that L_i = C_i * P_i is loop i's loop transfer broken at its plant input.
+c = 0 without coupling), so that L_i = C_i * P_i is loop i's loop transfer broken at its plant input; its own
+measurement's response Y_i / U_i is reported beside it (the plant's diagonal element where the plant's inputs act on
+their own outputs, whatever the PID's coupling).
 """
 from __future__ import annotations
 
@@ -119,6 +121,7 @@ class PlantResponse:
     saturated: bool
     diverged: bool
     changes: tuple = ()  # the change between each pair of consecutive periods, in order
+    own_response: np.ndarray | None = None  # (K,) Y_i / U_i, the loop's own measurement (None: equal to response)
 
     @property
     def decaying(self) -> bool:
@@ -334,7 +337,7 @@ def measure_response(rig: ClosedLoopRig, loop: int, bins: Sequence[int], period:
         rig.restore()
         d = multisine(bins, period, amplitude)
         _, _, saturated, diverged = rig.simulate(loop, d[:wait])
-        estimates, change, changes, periods, distortion = [], math.inf, [], 0, math.nan
+        estimates, own, change, changes, periods, distortion = [], [], math.inf, [], 0, math.nan
         start = wait
         while not diverged:
             uu, yy, sat, diverged = rig.simulate(loop, np.roll(d, -(start % period)))
@@ -345,6 +348,7 @@ def measure_response(rig: ClosedLoopRig, loop: int, bins: Sequence[int], period:
             Y = np.fft.rfft(yy, axis=1)
             Y_eff = Y[loop] - coupling_row @ Y
             estimates.append(Y_eff[bins] / U[bins])
+            own.append(Y[loop][bins] / U[bins])
             periods += 1
             start += period
             excited_rms = np.sqrt(np.mean(np.abs(Y_eff[excited]) ** 2))
@@ -359,7 +363,9 @@ def measure_response(rig: ClosedLoopRig, loop: int, bins: Sequence[int], period:
             break
         amplitude /= 2  # a saturated unstable plant can escape: smaller is the cure for both
     response = estimates[-1] if estimates else np.full(len(bins), np.nan + 0j)
+    own_response = own[-1] if own else np.full(len(bins), np.nan + 0j)
     if period % 2 == 0 and bins[-1] == period // 2:
         response[-1] = response[-1].real  # exactly real at Nyquist for a real system
+        own_response[-1] = own_response[-1].real
     return PlantResponse(omega, response, period, periods, change, distortion, amplitude, saturated, diverged,
-                         tuple(changes))
+                         tuple(changes), own_response)

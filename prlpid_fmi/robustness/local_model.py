@@ -135,7 +135,7 @@ def measurement_filter(Tf: float, order: int, sample_time_s: float) -> tuple[np.
     if Tf > 0:
         T = Tf / order
         for _ in range(order):
-            num, den = np.polymul(num, np.array([Ts / (T + Ts)])), np.polymul(den, np.array([1.0, -T / (T + Ts)]))
+            num, den = np.convolve(num, np.array([Ts / (T + Ts)])), np.convolve(den, np.array([1.0, -T / (T + Ts)]))
     return num, den
 
 
@@ -158,13 +158,13 @@ def feedback_polynomials(Kp: float, Ti: float, Td: float, sample_time_s: float,
     diff = np.array([1.0, -1.0])
     integral = math.isfinite(Ti)
     # common denominator den_f * dd (* (1 - q) with an integral term)
-    num = np.polymul(num_f, dd)
+    num = np.convolve(num_f, dd)
     if Td != 0:
-        num = _add(num, Td * np.polymul(num_f, diff))
-    den = np.polymul(den_f, dd)
+        num = _add(num, Td * np.convolve(num_f, diff))
+    den = np.convolve(den_f, dd)
     if integral:
-        num = _add(np.polymul(num, diff), (Ts / Ti) * den)
-        den = np.polymul(den, diff)
+        num = _add(np.convolve(num, diff), (Ts / Ti) * den)
+        den = np.convolve(den, diff)
     return Kp * num, den
 
 
@@ -178,12 +178,12 @@ def reference_polynomial(Kp: float, Ti: float, Td: float, sample_time_s: float, 
     den_f = measurement_filter(measurement_filter_s, measurement_filter_order, Ts)[1]
     dd = derivative_denominator(Td, derivative_filter_N, Ts)
     diff = np.array([1.0, -1.0])
-    base = np.polymul(den_f, dd)  # Dc without the integrator's (1 - q)
+    base = np.convolve(den_f, dd)  # Dc without the integrator's (1 - q)
     num = b * base
     if c != 0 and Td != 0:
-        num = _add(num, c * Td * np.polymul(den_f, diff))
+        num = _add(num, c * Td * np.convolve(den_f, diff))
     if math.isfinite(Ti):
-        num = _add(np.polymul(num, diff), (Ts / Ti) * base)
+        num = _add(np.convolve(num, diff), (Ts / Ti) * base)
     return Kp * num
 
 

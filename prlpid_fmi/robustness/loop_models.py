@@ -1,7 +1,8 @@
 """The closed loop of several PID loops on their local models, in state space: load responses and stability.
 
-Each loop j has its local model P_j (robustness.local_model.LocalModel, identified from its response measured with
-the other loops closed); the plant is taken as diag(P_1 .. P_n): loop j's input moves only loop j's measurement. The
+Each loop j has its local model P_j (robustness.local_model.LocalModel, identified from its own measurement's response
+y_j / u_j measured with the other loops closed: robustness.identification); the plant is taken as diag(P_1 .. P_n):
+loop j's input moves only loop j's measurement, and the coupling is the controller's alone. The
 controller is control.pid's feedback law at a constant setpoint (output limits and anti-windup ignored), on the
 coupled error of eq. 27 where the loops are coupled (control.pid.CoupledPID; uncoupled: M = -I):
 

@@ -123,7 +123,8 @@ class Margins:
     controller_response (K,): C(e^{j w Ts}). amplitude: multisine peak [u units] used.
     reliable: False when the estimate or the margins should not be trusted, with the reason in note and
     its kinds in problems (PROBLEM_KINDS). loop: the loop's measured output name; per_loop: every loop's
-    Margins (several loops only).
+    Margins (several loops only); own_response (K,): the loop's own measurement over its plant input, y_i / u_i
+    with the other loops closed (None: equal to plant_response, as without coupling).
     """
 
     Ms: float
@@ -141,6 +142,7 @@ class Margins:
     loop: str
     per_loop: tuple = ()
     problems: tuple = ()  # kinds of the flags behind reliable = False: PROBLEM_KINDS
+    own_response: np.ndarray | None = None
 
     @property
     def gain_margin_db(self) -> float:
@@ -313,10 +315,11 @@ def _measure_loop(rig: ClosedLoopRig, loop: int, frequencies, amplitude: float, 
     return responses
 
 
-def _merged(responses: list[PlantResponse]) -> tuple[np.ndarray, np.ndarray]:
-    """All measured (frequencies [rad/s], responses), sorted by frequency."""
+def _merged(responses: list[PlantResponse], own: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """All measured (frequencies [rad/s], responses), sorted by frequency; own: the loop's own measurement's
+    responses (PlantResponse.own_response) instead."""
     omega = np.concatenate([r.frequencies_rad_s for r in responses])
-    P = np.concatenate([r.response for r in responses])
+    P = np.concatenate([r.own_response if own and r.own_response is not None else r.response for r in responses])
     order = np.argsort(omega)
     return omega[order], P[order]
 
@@ -334,8 +337,10 @@ def _loop_result(rig: ClosedLoopRig, loop: int, responses: list[PlantResponse]) 
     no_integrator = not math.isfinite(rig.Ti[loop]) and len(L) > 1 and abs(abs(L[1]) / abs(L[0]) - 1) < 0.1
     Ms, w_ms, gm, wpc, pm, wgc = margins_from_loop_response(omega, L, finite_dc_gain=no_integrator)
     problems = _problems(responses)
+    own = _merged(responses, own=True)[1] if rig.coupling is not None else None
     return Margins(Ms, w_ms, gm, wpc, pm, wgc, omega, P, C, amplitude, not problems,
-                   "; ".join(text for _, text in problems), name, problems=tuple(kind for kind, _ in problems))
+                   "; ".join(text for _, text in problems), name, problems=tuple(kind for kind, _ in problems),
+                   own_response=own)
 
 
 PROBLEM_KINDS = ("saturated", "lightly_damped", "varying", "distorted", "not_settled")  # Margins.problems

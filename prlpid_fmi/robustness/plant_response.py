@@ -35,13 +35,23 @@ INTERPOLATED_POINTS = 600  # log-spaced frequencies of the interpolated grid
 @dataclass(frozen=True, eq=False)
 class MeasuredPlant:
     """P at one operating point: frequencies_rad_s (K,) ascending, response (K,) complex; sample_time_s [s];
-    point: the setpoints per loop; control_signal: u there per loop (from the experiment's settling)."""
+    point: the setpoints per loop; control_signal: u there per loop (from the experiment's settling);
+    own_response (K,) complex: with several coupled loops, the loop's own measurement over its input (y_i / u_i,
+    robustness.margins.Margins.own_response), else None."""
 
     frequencies_rad_s: np.ndarray
     response: np.ndarray
     sample_time_s: float
     point: tuple
     control_signal: tuple
+    own_response: np.ndarray | None = None
+
+    def own(self) -> "MeasuredPlant":
+        """The loop's own measurement's response y_i / u_i as a MeasuredPlant (this one where it is the same)."""
+        if self.own_response is None:
+            return self
+        return MeasuredPlant(self.frequencies_rad_s, self.own_response, self.sample_time_s, self.point,
+                             self.control_signal)
 
     def grid(self) -> tuple[np.ndarray, np.ndarray]:
         """(w, P) on the interpolated grid: INTERPOLATED_POINTS log-spaced frequencies from the lowest to the
@@ -56,7 +66,7 @@ class MeasuredPlant:
         w0, P0 = self.frequencies_rad_s, self.response
         w = np.union1d(np.geomspace(w0[0], w0[-1], INTERPOLATED_POINTS), w0)
         logw = np.log(w0)
-        mag = np.interp(np.log(w), logw, np.log(np.abs(P0)))
+        mag = np.interp(np.log(w), logw, np.log(np.maximum(np.abs(P0), np.finfo(float).tiny)))  # |P| = 0: ZOH zeros
         phase = np.interp(np.log(w), logw, np.unwrap(np.angle(P0)))
         return w, np.exp(mag + 1j * phase)
 

@@ -3,9 +3,9 @@
 tuning.design_rule designs the fixed PID; it measures the plant with the PID this search finds in a few
 generations, and baseline.objective "setpoint" is this search alone:
 
-Constant Kp, Ti, Td (and coupling) are searched inside the scenario's gain ranges by differential
-evolution. The search vector lives in [-1, 1]^n and is mapped like the paper's absolute action map
-(geometric for log ranges), but the candidate gains drive the loop core directly (no action path).
+Constant Kp, Ti, Td (a coupled PID's coefficients held at 0: load_design.search_map) are searched inside the
+scenario's gain ranges by differential evolution. The search vector lives in [-1, 1]^n and is mapped like the paper's
+absolute action map (geometric for log ranges), but the candidate gains drive the loop core directly (no action path).
 Cost, mean over a few seeded training episodes (same setpoint ranges, noise, disturbances and
 parameter randomisation as training, forecast off), per loop in normalised units::
 
@@ -42,7 +42,7 @@ from prlpid_fmi.loop.isolated import make_core
 from prlpid_fmi.progress import Steps, batch_counted
 from prlpid_fmi.robustness.margins import margins_of, predicted_ms, setpoint_range_points
 from prlpid_fmi.robustness.status import meets_limit
-from prlpid_fmi.tuning.load_design import columns
+from prlpid_fmi.tuning.load_design import columns, search_map
 from prlpid_fmi.tuning.load_experiment import parameter_samples
 from prlpid_fmi.tuning.search_pool import SearchPool, search_fmus, search_workers
 
@@ -92,7 +92,7 @@ class SetpointSearch:
     seeded episodes `seeds`; a search worker builds its own (tuning.search_pool)."""
 
     def __init__(self, config: TuningConfig, seeds: list[int]):
-        self.gain_map = ActionMap(config.loops, config.coupled, config.coupling_range)
+        self.gain_map = search_map(config)
         self.seeds = seeds
         self.core = make_core(config)
 

@@ -110,6 +110,15 @@ def widened(config: TuningConfig, factor: float) -> TuningConfig:
     return dataclasses.replace(config, loops=loops)
 
 
+def search_map(config: TuningConfig, search_config: TuningConfig | None = None) -> ActionMap:
+    """The fixed-PID searches' map of [-1, 1]^n onto Kp, Ti, Td per loop over search_config's ranges (config's). A
+    coupled PID's six coefficients are held at 0: constant coefficients leave r - y = -C y wherever the other loops'
+    outputs are not 0 (eq. 27's integral drives the coupled error to 0), so no fixed coupled PID settles every
+    setpoint; the agent sets them sample by sample around 0."""
+    loops = (search_config or config).loops
+    return ActionMap(loops, config.coupled, config.coupling_range, zero_coupling=True)
+
+
 class OutcomeCache:
     """What a search evaluates, once per vector: `outcome(vector)` is `new_outcome(vector)` (the subclass's), kept for
     the objective, the constraints and the polish, which ask again; `evaluate_new(population, pool)` computes the
@@ -216,7 +225,7 @@ class LoadDesign(OutcomeCache):
         self.increment_relaxed = False  # set by prepare: the increment limit dropped (relax_increment_limit)
         self.points = setpoint_range_points(self.config)
         self.search_config = widened(self.config, widen)
-        self.gain_map = ActionMap(self.search_config.loops, config.coupled, config.coupling_range)
+        self.gain_map = search_map(config, self.search_config)
         self.b, self.c, self.tf = pid_structure(self.config)
         self.tune_filter = config.measurement_filter == "tuned" and config.measurement_noise_std > 0
         self.n = self.gain_map.size + (config.n_loops if self.tune_filter else 0)
@@ -498,7 +507,7 @@ class LoadDesign(OutcomeCache):
     # -- the load cost on local models -------------------------------------------------------------------------
     def identify_models(self) -> None:
         """With design_model "identified": per nominal operating point, a LocalModel (robustness.local_model.identify)
-        per loop from its measured response, used by the search (`models`), or the reason they cannot be
+        per loop from its own measurement's measured response (MeasuredPlant.own), used by the search (`models`), or the reason they cannot be
         (`model_note`): a point without a verified response, a fit worse than MODEL_FIT_LIMIT."""
         self.models, self.loop_models, self.model_note = None, None, ""
         if self.design_model != "identified":
@@ -508,7 +517,7 @@ class LoadDesign(OutcomeCache):
             if plants is None:
                 self.model_note = f"no verified frequency response at the operating point {list(p)}"
                 return
-            fitted = tuple(identify(plant) for plant in plants)
+            fitted = tuple(identify(plant.own()) for plant in plants)  # y_i / u_i: diag(P), not the coupled error's
             for i, model in enumerate(fitted):
                 if not model.fit_error <= MODEL_FIT_LIMIT:
                     where = f"the local model at {list(p)}" + (f" of loop {i + 1}" if len(fitted) > 1 else "")
@@ -538,9 +547,7 @@ class LoadDesign(OutcomeCache):
         c = self.config
         if c.n_loops > 1 or c.coupled:
             return self._loops_load_response(gains, tf)
-        Kp, Ti, Td, _ = gains
-        Nc, Dc = feedback_polynomials(Kp[0], Ti[0], Td[0], c.sample_time_s, c.derivative_filter_N, tf[0],
-                                      c.measurement_filter_order)
+        Nc, Dc = self._feedback(gains, tf, 0)
         total, chatter = 0.0, 0.0
         for (model,), loads in zip(self.models, self.loads):
             if not closed_loop_stable(model, Nc, Dc):
@@ -551,24 +558,50 @@ class LoadDesign(OutcomeCache):
             chatter = max(chatter, chatter_fraction(abs(loads[0]) * du, self.spans[0]))
         return total / len(self.models), chatter
 
+    def _decoupled(self, gains: tuple) -> bool:
+        """No coupling between the loops' PIDs (uncoupled, or every coefficient 0: the fixed PID's, search_map): on
+        diag(the models) each loop is then closed on its own model alone."""
+        return not self.config.coupled or not any(gains[3])
+
     def _loops_load_response(self, gains: tuple, tf: list[float]) -> tuple[float, float]:
         """model_load_response with several loops: loop i loaded with loads[i] from hold * i samples after the first
-        load (tuning.load_experiment.load_config), J_load = Ts sum_k sum_i |y_i,k| / |d_i| / n."""
+        load (tuning.load_experiment.load_config), J_load = Ts sum_k sum_i |y_i,k| / |d_i| / n. Decoupled PIDs: each
+        loop's own closed loop (robustness.local_model.load_responses), the same sums."""
         c = self.config
         n, hold = c.n_loops, c.setpoint_hold_steps
         total, chatter = 0.0, 0.0
+        decoupled = self._decoupled(gains)
         for models, loads in zip(self.models, self.loads):
-            A, B, Y, U = loop_closed_loop(list(models), *self._loop_args(gains, tf))
-            if not loop_stable(A):
-                return DIVERGED_COST, 0.0
-            dy, du = step_responses(A, B, Y, U, n * hold)
-            y, u = np.zeros((n * hold, n)), np.zeros((n * hold, n))
-            for i, load in enumerate(loads):
-                y[i * hold:] += load * dy[:(n - i) * hold, :, i]
-                u[i * hold:] += load * du[:(n - i) * hold, :, i]
-            total += float(np.sum(np.abs(y) / np.abs(np.asarray(loads))[None, :]) * c.sample_time_s) / n
+            u = np.zeros((n * hold, n))
+            if decoupled:
+                iae = 0.0
+                for i, (model, load) in enumerate(zip(models, loads)):
+                    Nc, Dc = self._feedback(gains, tf, i)
+                    if not closed_loop_stable(model, Nc, Dc):
+                        return DIVERGED_COST, 0.0
+                    dy, du = load_responses(model, Nc, Dc, (n - i) * hold)
+                    iae += float(np.sum(np.abs(dy)))
+                    u[i * hold:, i] = load * du
+                total += iae * c.sample_time_s / n
+            else:
+                A, B, Y, U = loop_closed_loop(list(models), *self._loop_args(gains, tf))
+                if not loop_stable(A):
+                    return DIVERGED_COST, 0.0
+                dy, du = step_responses(A, B, Y, U, n * hold)
+                y = np.zeros((n * hold, n))
+                for i, load in enumerate(loads):
+                    y[i * hold:] += load * dy[:(n - i) * hold, :, i]
+                    u[i * hold:] += load * du[:(n - i) * hold, :, i]
+                total += float(np.sum(np.abs(y) / np.abs(np.asarray(loads))[None, :]) * c.sample_time_s) / n
             chatter = max(chatter, max(chatter_fraction(u[:, i], self.spans[i]) for i in range(n)))
         return total / len(self.models), chatter
+
+    def _feedback(self, gains: tuple, tf: list[float], loop: int) -> tuple[np.ndarray, np.ndarray]:
+        """(Nc, Dc) of loop `loop`'s PID (robustness.local_model.feedback_polynomials)."""
+        c = self.config
+        Kp, Ti, Td, _ = gains
+        return feedback_polynomials(Kp[loop], Ti[loop], Td[loop], c.sample_time_s, c.derivative_filter_N, tf[loop],
+                                    c.measurement_filter_order)
 
     def _loop_args(self, gains: tuple, tf: list[float]) -> tuple:
         """The arguments after the models of robustness.loop_models.closed_loop and loop_plants for these gains."""
@@ -589,7 +622,15 @@ class LoadDesign(OutcomeCache):
         """The largest Ms on the local models over the nominal points and loops, each loop with the candidate's
         other loops closed (`_loops_ms`); inf where the closed loop is unstable on a model."""
         worst = 0.0
+        decoupled = self._decoupled(gains)
         for models, plants in zip(self.loop_models, self.plants):
+            if decoupled:  # each loop on its own model: P_i itself is its effective plant
+                if not all(closed_loop_stable(m, *self._feedback(gains, tf, i)) for i, m in enumerate(models)):
+                    return math.inf
+                w = plants[0].frequencies_rad_s
+                worst = max([worst] + [float(np.max(np.abs(1.0 / (1.0 + self.controller(gains, tf, i)(w) *
+                                                                   m.response(w))))) for i, m in enumerate(models)])
+                continue
             if not loop_stable(loop_closed_loop(list(models), *self._loop_args(gains, tf))[0]):
                 return math.inf
             worst = max(worst, self._loops_ms(models, plants, gains, tf))

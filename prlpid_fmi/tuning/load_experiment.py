@@ -42,8 +42,8 @@ def plant_responses(config: TuningConfig, gains: tuple, points: list[list[float]
                status(x) != Robustness.VERIFIED for x in loops):  # no linear response to design on
             out.append(None)
             continue
-        out.append([MeasuredPlant(x.frequencies_rad_s, x.plant_response, config.sample_time_s, tuple(p), ())
-                    for x in loops])
+        out.append([MeasuredPlant(x.frequencies_rad_s, x.plant_response, config.sample_time_s, tuple(p), (),
+                                  x.own_response) for x in loops])
     return out
 
 
