@@ -12,11 +12,11 @@ baseline.objective "load" (the default) keeps, in this order:
 3. overshoot <= deploy.max_overshoot (the setpoint weight b, then, where no b meets it, gains traded for it within
    the load tolerance, or where none is within it, the gains nearest the tolerance that meet the limit);
 4. load IAE <= baseline.load_tolerance x the load optimum (tuning.load_experiment; tuning.load_design's search);
-5. among those, the least setpoint ISE (tuning.load_design.SetpointDesign): where the load search of one loop used
-   the identified local models, over the gains and b within the load tolerance, and, where the plant has a SIMC/AMIGO
-   model, with load IAE no worse than those rules reach at the same Ms (tuning.classical_rules), searched on the
-   models and verified on the FMU (`_on_models`); else b alone where it meets the overshoot limit (a search of the
-   gains there costs a differential evolution of FMU setpoint episodes);
+5. among those, the least setpoint ISE (tuning.load_design.SetpointDesign): where the load search used the
+   identified local models, over the gains and b within the load tolerance, and, where one loop's plant has a
+   SIMC/AMIGO model, with load IAE no worse than those rules reach at the same Ms (tuning.classical_rules), searched
+   on the models and verified on the FMU (`_on_models`); else b alone where it meets the overshoot limit (a search of
+   the gains there costs a differential evolution of FMU setpoint episodes);
 6. std(u) <= deploy.max_noise_gain and std(u_k - u_(k-1)) <= deploy.max_noise_increment from the measurement
    noise, fractions of the control span: preferences.
 
@@ -358,7 +358,7 @@ class Designer:
                     vector = second
                     gains, tf = design.gains(vector[:-1]), design.filters(vector[:-1])
                     b = [SetpointDesign.weight(vector)] * config.n_loops
-            elif design.models is not None and config.n_loops == 1 and 1.0 < baseline.load_tolerance < math.inf:
+            elif design.models is not None and 1.0 < baseline.load_tolerance < math.inf:
                 before = next(r for r in choices if r["b"] == weight)["ISE"]
                 refined, found = self._on_models(config, design, vector, weight, best_load, (b, c, tf), before)
                 if found is not None:
@@ -431,7 +431,7 @@ class Designer:
         again on the FMU (design_model's "setpoint_search")."""
         baseline, deploy, seed = self.baseline, self.deploy, self.seed
         record = None
-        if design.models is not None and config.n_loops == 1:
+        if design.models is not None:
             record, found = self._on_models(config, design, vector, weight, best_load, structure, math.inf)
             if found is not None:
                 self.model_record["setpoint_search"] = "identified"
@@ -490,7 +490,7 @@ class Designer:
         "setpoint_refined" or "traded_for_overshoot"'s "on_models", (vector with b, the b table) or None)."""
         baseline, deploy, seeds, progress = self.baseline, self.deploy, self.seeds, self.progress
         trading = not math.isfinite(ise_to_beat)  # no b met the overshoot limit: the load tolerance may yield to it
-        bound = None if trading else self._rule_bound(design, design.filters(vector))
+        bound = None if trading or config.n_loops > 1 else self._rule_bound(design, design.filters(vector))
         trade = SetpointDesign(design, self.model_record["predicted_load_cost"], baseline.load_tolerance,
                                deploy.max_overshoot, seeds, on_models=True, rule_bound=bound)
         maxiter, popsize = model_budget(self.maxiter, self.popsize, SETPOINT_MODEL_MINIMUM)
@@ -718,7 +718,16 @@ def follow_setpoints(config: TuningConfig, design: LoadDesign, first: FixedPid, 
     or where the gains of the load search diverged on the episodes (`diverged`) and it follows them; where they
     diverged and it does not follow them either, the stabilising PID `first` with its best setpoint weight. Returns
     (what was found: {"source": "search" | "stabilising PID" | None, "load_optimal_diverged", "load_cost", "ISE",
-    "Overshoot", "feasible", "evaluations"}, (vector, gains, (b, c, Tf)) to keep, or None: the gains stay)."""
+    "Overshoot", "feasible", "evaluations", "on_models"}, (vector, gains, (b, c, Tf)) to keep, or None: the gains
+    stay). Where the load search used the local models the search runs on them first (`_follow_on_models`); its
+    result stands where the FMU confirms it, else the search runs with the setpoint episodes on the FMU."""
+    record = None
+    if design.models is not None:
+        record, kept = _follow_on_models(config, design, best_load, deploy, seeds, seed, maxiter, popsize, progress)
+        if kept is not None:
+            return {"source": "search", "load_optimal_diverged": diverged, "load_cost": record["load_cost"],
+                    "ISE": record["ISE"], "Overshoot": record["Overshoot"], "feasible": True,
+                    "evaluations": record["evaluations"], "on_models": record}, kept
     follow = SetpointDesign(design, best_load, math.inf, deploy.max_overshoot, seeds, objective="load")
     progress.step("least load IAE within the overshoot limit, without the load tolerance"
                   + (" (the load-optimal gains diverge on the setpoint episodes)" if diverged else ""),
@@ -728,7 +737,7 @@ def follow_setpoints(config: TuningConfig, design: LoadDesign, first: FixedPid, 
         load, ise, overshoot = follow.evaluate(result.x)
         feasible = bool(np.max(follow.constraint_values(result.x)) <= 0)
         found = {"source": "search", "load_optimal_diverged": diverged, "load_cost": load, "ISE": ise,
-                 "Overshoot": overshoot, "feasible": feasible, "evaluations": int(result.nfev)}
+                 "Overshoot": overshoot, "feasible": feasible, "evaluations": int(result.nfev), "on_models": record}
     finally:
         follow.close()
     if feasible or (diverged and math.isfinite(ise)):
@@ -747,3 +756,38 @@ def follow_setpoints(config: TuningConfig, design: LoadDesign, first: FixedPid, 
     found = {**found, "source": "stabilising PID", "load_cost": design.load_cost(gains, list(tf)), "ISE": best["ISE"],
              "Overshoot": best["Overshoot"], "feasible": best["Overshoot"] <= 100.0 * deploy.max_overshoot}
     return found, (np.asarray(first.action), gains, ([weight] * config.n_loops, list(c), list(tf)))
+
+
+def _follow_on_models(config: TuningConfig, design: LoadDesign, best_load: float, deploy: DeployConfig,
+                      seeds: list[int], seed: int, maxiter: int, popsize: int, progress: Steps
+                      ) -> tuple[dict, tuple | None]:
+    """follow_setpoints' search on the local models (SetpointDesign on_models: unit setpoint steps and the load cost
+    on the models, tuning.load_design.model_budget's generations, at least SETPOINT_MODEL_MINIMUM), then verified on
+    the FMU: b chosen again on the training episodes (`setpoint_weight`), kept where its overshoot there is within the
+    limit. Returns (the record of followed_setpoints' "on_models", (vector with b, gains, (b, c, Tf)) or None)."""
+    follow = SetpointDesign(design, best_load, math.inf, deploy.max_overshoot, seeds, on_models=True,
+                            objective="load")
+    generations, size = model_budget(maxiter, popsize, SETPOINT_MODEL_MINIMUM)
+    progress.step("least load IAE within the overshoot limit on the local models",
+                  follow.budget(generations, size, whole_box=True))
+    try:
+        result = follow.search(None, seed, generations, size, progress=progress)
+        model_load, _, model_overshoot = follow.evaluate(result.x)
+        feasible = bool(np.max(follow.constraint_values(result.x)) <= 0)
+    finally:
+        follow.close()
+    record = {"evaluations": int(result.nfev), "model_load_cost": model_load, "model_overshoot": model_overshoot,
+              "feasible_on_models": feasible, "kept": False}
+    if not feasible:
+        return record, None
+    x = np.asarray(result.x)
+    gains, tf = design.gains(x[:-1]), design.filters(x[:-1])
+    progress.step("the models' choice: b and load cost verified on the FMU")
+    b, rows = setpoint_weight(config, gains, (list(design.b), list(design.c), tf), seeds, deploy.max_overshoot)
+    row = next(r for r in rows if r["b"] == b)
+    record.update({"load_cost": design.load_cost(gains, tf), "ISE": row["ISE"], "Overshoot": row["Overshoot"],
+                   "b": b})
+    if not (math.isfinite(row["ISE"]) and row["Overshoot"] <= 100.0 * deploy.max_overshoot):
+        return record, None
+    record["kept"] = True
+    return record, (np.append(x[:-1], 2.0 * b - 1.0), gains, ([b] * config.n_loops, list(design.c), tf))

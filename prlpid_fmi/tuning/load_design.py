@@ -61,6 +61,7 @@ from prlpid_fmi.tuning.search_pool import SearchPool, search_fmus, search_worker
 
 B_GRID = tuple(i / 20 for i in range(21))  # setpoint weights tried
 MODEL_GENERATIONS = 2  # a search on the local models runs this many x baseline.maxiter generations, ...
+STABILITY_KEPT = 100_000  # LoadDesign._stable's answers kept at most (then forgotten)
 MODEL_MIN_GENERATIONS, MODEL_MIN_POPSIZE = 20, 10  # ... and popsize, at least these (a model candidate costs ~0.1 ms)
 SETPOINT_MODEL_MINIMUM = (30, 15)  # the setpoint search on the models at least (its 5 parameters, no Kp-interval scans)
 TF_RANGE = (0.1, 100.0)  # measurement filter search range [sample times], log
@@ -235,6 +236,7 @@ class LoadDesign(OutcomeCache):
         self.plants: list = []
         self._seen: dict = {}
         self._intervals: dict = {}
+        self._stability: dict = {}  # `_stable`'s answers (keyed by the model's id: the models live as long)
         self.reference: list = []
         self.loads: list = []  # per point: the load per loop [input units]
         self.start: list | None = None  # the FMU start state's measurement per loop
@@ -510,6 +512,7 @@ class LoadDesign(OutcomeCache):
         per loop from its own measurement's measured response (MeasuredPlant.own), used by the search (`models`), or the reason they cannot be
         (`model_note`): a point without a verified response, a fit worse than MODEL_FIT_LIMIT."""
         self.models, self.loop_models, self.model_note = None, None, ""
+        self._stability.clear()
         if self.design_model != "identified":
             return
         models = []
@@ -550,7 +553,7 @@ class LoadDesign(OutcomeCache):
         Nc, Dc = self._feedback(gains, tf, 0)
         total, chatter = 0.0, 0.0
         for (model,), loads in zip(self.models, self.loads):
-            if not closed_loop_stable(model, Nc, Dc):
+            if not self._stable(model, Nc, Dc):
                 return DIVERGED_COST, 0.0
             dy, du = load_responses(model, Nc, Dc, c.setpoint_hold_steps)
             iae = float(np.sum(np.abs(dy)) * c.sample_time_s)
@@ -577,7 +580,7 @@ class LoadDesign(OutcomeCache):
                 iae = 0.0
                 for i, (model, load) in enumerate(zip(models, loads)):
                     Nc, Dc = self._feedback(gains, tf, i)
-                    if not closed_loop_stable(model, Nc, Dc):
+                    if not self._stable(model, Nc, Dc):
                         return DIVERGED_COST, 0.0
                     dy, du = load_responses(model, Nc, Dc, (n - i) * hold)
                     iae += float(np.sum(np.abs(dy)))
@@ -595,6 +598,17 @@ class LoadDesign(OutcomeCache):
                 total += float(np.sum(np.abs(y) / np.abs(np.asarray(loads))[None, :]) * c.sample_time_s) / n
             chatter = max(chatter, max(chatter_fraction(u[:, i], self.spans[i]) for i in range(n)))
         return total / len(self.models), chatter
+
+    def _stable(self, model, Nc: np.ndarray, Dc: np.ndarray) -> bool:
+        """robustness.local_model.closed_loop_stable, kept per model and PID (a candidate's load cost, Ms and setpoint
+        step each ask for every loop and point)."""
+        key = (id(model), Nc.tobytes(), Dc.tobytes())
+        found = self._stability.get(key)
+        if found is None:
+            if len(self._stability) > STABILITY_KEPT:
+                self._stability.clear()
+            found = self._stability[key] = closed_loop_stable(model, Nc, Dc)
+        return found
 
     def _feedback(self, gains: tuple, tf: list[float], loop: int) -> tuple[np.ndarray, np.ndarray]:
         """(Nc, Dc) of loop `loop`'s PID (robustness.local_model.feedback_polynomials)."""
@@ -625,7 +639,7 @@ class LoadDesign(OutcomeCache):
         decoupled = self._decoupled(gains)
         for models, plants in zip(self.loop_models, self.plants):
             if decoupled:  # each loop on its own model: P_i itself is its effective plant
-                if not all(closed_loop_stable(m, *self._feedback(gains, tf, i)) for i, m in enumerate(models)):
+                if not all(self._stable(m, *self._feedback(gains, tf, i)) for i, m in enumerate(models)):
                     return math.inf
                 w = plants[0].frequencies_rad_s
                 worst = max([worst] + [float(np.max(np.abs(1.0 / (1.0 + self.controller(gains, tf, i)(w) *
@@ -637,22 +651,27 @@ class LoadDesign(OutcomeCache):
         return worst
 
     def model_setpoint_response(self, gains: tuple, tf: list[float], b: float) -> tuple[float, float]:
-        """(ISE, worst overshoot [% of the step]) of a unit setpoint step on the local models (one loop, setpoint
-        weights b and the config's c), over training.setpoint_hold_steps samples: ISE = Ts sum_k (1 - y_k)^2, the mean
-        over the models; (inf, inf) where the loop is unstable on one."""
+        """(ISE, worst overshoot [% of the step]) of a unit setpoint step on the local models (setpoint weights b and
+        the config's c), over training.setpoint_hold_steps samples: ISE = Ts sum_k (1 - y_k)^2, the mean over the
+        models (and loops: with several decoupled PIDs each loop's step on its own model, the others at rest);
+        (inf, inf) where a loop is unstable on one. Coupled PIDs (none a fixed-PID search tries: search_map) raise
+        ValueError: their setpoint path is not modelled."""
         c = self.config
+        if not self._decoupled(gains):
+            raise ValueError("setpoint responses on the local models need decoupled PIDs (coupling 0)")
         Kp, Ti, Td, _ = gains
-        args = (c.sample_time_s, c.derivative_filter_N, tf[0], c.measurement_filter_order)
-        Nc, Dc = feedback_polynomials(Kp[0], Ti[0], Td[0], *args)
-        Nr = reference_polynomial(Kp[0], Ti[0], Td[0], c.sample_time_s, b, self.c[0], *args[1:])
         ise, overshoot = 0.0, 0.0
-        for (model,) in self.models:
-            if not closed_loop_stable(model, Nc, Dc):
-                return math.inf, math.inf
-            y = model_step_response(model, Nc, Dc, Nr, c.setpoint_hold_steps)
-            ise += float(np.sum((1.0 - y) ** 2) * c.sample_time_s)
-            overshoot = max(overshoot, 100.0 * max(0.0, float(np.max(y)) - 1.0))
-        return ise / len(self.models), overshoot
+        for i in range(c.n_loops):
+            Nc, Dc = self._feedback(gains, tf, i)
+            Nr = reference_polynomial(Kp[i], Ti[i], Td[i], c.sample_time_s, b, self.c[i], c.derivative_filter_N, tf[i],
+                                      c.measurement_filter_order)
+            for models in self.models:
+                if not self._stable(models[i], Nc, Dc):
+                    return math.inf, math.inf
+                y = model_step_response(models[i], Nc, Dc, Nr, c.setpoint_hold_steps)
+                ise += float(np.sum((1.0 - y) ** 2) * c.sample_time_s)
+                overshoot = max(overshoot, 100.0 * max(0.0, float(np.max(y)) - 1.0))
+        return ise / (len(self.models) * c.n_loops), overshoot
 
     def validate_models(self, vector) -> dict:
         """The search's result on the FMU against its prediction on the local models: {"predicted_load_cost",
