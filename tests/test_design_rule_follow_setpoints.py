@@ -110,3 +110,37 @@ def test_where_the_search_diverges_the_stabilising_pid_is_kept_and_where_it_dive
     monkeypatch.setattr(design_rule, "setpoint_weight", lambda *a: (0.0, [{"b": 0.0, "ISE": inf, "Overshoot": inf}]))
     found, keep = follow_setpoints(config, load_design, _first(), 0.0252, DeployConfig(), SEEDS, 0, 1, 3, QUIET)
     assert found["source"] is None and keep is None
+
+
+def test_on_the_local_models_the_search_is_verified_on_the_fmu_and_rejects_loads_no_worse(design):
+    """With identified local models the search runs on them (unit setpoint steps, load cost on the models), its
+    choice kept where the FMU's episodes meet the overshoot limit with b chosen again: what it reports is the FMU's
+    (a fresh simulation), Ms within the limit by python-control, and its load IAE no worse than the search on the
+    FMU's episodes with the same budget (the models afford more candidates)."""
+    config, fmu_design = design
+    best_load = 0.0252
+    identified = LoadDesign(config, 0.1, 2.0, 0.02, 4.0, design_model="identified")
+    try:
+        identified.prepare(STABILISING)
+        assert identified.models is not None, identified.model_note
+        found, keep = follow_setpoints(config, identified, _first(), best_load, DeployConfig(), SEEDS, 0, 4, 5, QUIET)
+        record = found["on_models"]
+        assert found["source"] == "search" and record["kept"] and keep is not None
+        vector, gains, (b, c, tf) = keep
+        Kp, Ti, Td, _ = gains
+        assert sensitivity_peak(Kp[0], Ti[0], Td[0]) <= 2.0 * 1.01
+        assert found["Overshoot"] <= 100.0 * DeployConfig().max_overshoot and b == [record["b"]]
+        trade = SetpointDesign(identified, best_load, math.inf, DeployConfig().max_overshoot, SEEDS)
+        try:
+            trade.core.set_structure(b, c, tf)
+            assert setpoint_response(trade.core, gains, SEEDS) == pytest.approx((found["ISE"], found["Overshoot"]),
+                                                                                 rel=1e-12)
+        finally:
+            trade.close()
+        assert found["load_cost"] == pytest.approx(fmu_design.load_cost(gains, tf), rel=1e-12)
+        assert record["model_load_cost"] == pytest.approx(found["load_cost"], rel=0.01)  # the models predict it
+        on_fmu, _ = follow_setpoints(config, fmu_design, _first(), best_load, DeployConfig(), SEEDS, 0, 4, 5, QUIET)
+        assert on_fmu["on_models"] is None and on_fmu["feasible"]
+        assert found["load_cost"] <= 1.02 * on_fmu["load_cost"]
+    finally:
+        identified.close()

@@ -15,12 +15,13 @@ from gymnasium.utils.seeding import np_random
 from prlpid_fmi.config import TuningConfig
 from prlpid_fmi.loop.core import LoopCore, Termination
 from prlpid_fmi.loop.env import PidTuningEnv
+from prlpid_fmi.loop.gains import GainValues
 from prlpid_fmi.loop.isolated import make_core
 from prlpid_fmi.metrics import compute_metrics
 
 GAIN_NAMES = ("Kp", "Ti", "Td", "coupling")  # order of the gains tuple LoopCore.step takes
 Policy = Callable[[np.ndarray], np.ndarray]
-GainsFn = Callable[[LoopCore], tuple]  # core -> (Kp, Ti, Td, coupling) lists, called before each step
+GainsFn = Callable[[LoopCore], GainValues]  # core -> the gains, called before each step
 
 
 def model_policy(model, vecnormalize=None) -> Policy:
@@ -171,8 +172,9 @@ def gains_rollout(gains_fn: GainsFn, config: TuningConfig, seed: int = 0, core: 
 
 def constant_gains(Kp, Ti, Td, coupling=None) -> GainsFn:
     """A gains function that always returns the same gains (a fixed PID); arguments are (n_loops,) values."""
-    gains = ([float(x) for x in np.atleast_1d(Kp)], [float(x) for x in np.atleast_1d(Ti)],
-             [float(x) for x in np.atleast_1d(Td)], None if coupling is None else [float(x) for x in coupling])
+    gains = GainValues([float(x) for x in np.atleast_1d(Kp)], [float(x) for x in np.atleast_1d(Ti)],
+                       [float(x) for x in np.atleast_1d(Td)],
+                       None if coupling is None else [float(x) for x in coupling])
     return lambda core: gains
 
 

@@ -1,13 +1,29 @@
 """PID gains in physical units: Kp, Ti [s], Td [s] per loop and the coupling of a coupled PID.
 
-One type, `Gains`; its `values()` is the plain-list form the loop core steps with, `as_dict()` the form
-fixed_pid.json and metrics.json record.
+One type, `Gains` (numpy arrays, what results carry); its `values()` is the same gains as `GainValues`, the
+plain-list form the loop core steps with every sample and the searches, margins and detuning pass around; `as_dict()`
+the form fixed_pid.json and metrics.json record.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
+
+
+class GainValues(NamedTuple):
+    """Gains as float lists: Kp, Ti [s], Td [s] (n_loops,) each, coupling (6,) or None; what LoopCore.step takes. A
+    tuple: it unpacks as (Kp, Ti, Td, coupling) and compares and hashes by value."""
+
+    Kp: list
+    Ti: list
+    Td: list
+    coupling: list | None = None
+
+    def as_gains(self) -> "Gains":
+        """The same gains as Gains (numpy arrays)."""
+        return gains_from_values(*self)
 
 
 @dataclass(frozen=True)
@@ -26,10 +42,10 @@ class Gains:
             d["coupling"] = self.coupling.copy()
         return d
 
-    def values(self) -> tuple:
-        """(Kp, Ti, Td, coupling) as lists of floats (coupling None when uncoupled): what LoopCore.step takes."""
-        return (self.Kp.tolist(), self.Ti.tolist(), self.Td.tolist(),
-                None if self.coupling is None else self.coupling.tolist())
+    def values(self) -> GainValues:
+        """The gains as GainValues (float lists; coupling None when uncoupled): what LoopCore.step takes."""
+        return GainValues(self.Kp.tolist(), self.Ti.tolist(), self.Td.tolist(),
+                          None if self.coupling is None else self.coupling.tolist())
 
 
 def gains_from_values(Kp: list, Ti: list, Td: list, coupling: list | None = None) -> Gains:
@@ -43,6 +59,6 @@ def gains_from_dict(g: dict) -> Gains:
     return gains_from_values(g["Kp"], g["Ti"], g["Td"], g.get("coupling"))
 
 
-def split_values(values: list, n: int, coupled: bool) -> tuple[list, list, list, list | None]:
-    """A gain map's flat vector [Kp0, Ti0, Td0, Kp1, ..., coupling...] as (Kp, Ti, Td, coupling) lists."""
-    return values[0:3 * n:3], values[1:3 * n:3], values[2:3 * n:3], (values[3 * n:] if coupled else None)
+def split_values(values: list, n: int, coupled: bool) -> GainValues:
+    """A gain map's flat vector [Kp0, Ti0, Td0, Kp1, ..., coupling...] as GainValues."""
+    return GainValues(values[0:3 * n:3], values[1:3 * n:3], values[2:3 * n:3], (values[3 * n:] if coupled else None))

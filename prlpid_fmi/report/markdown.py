@@ -343,8 +343,10 @@ def _followed_sentence(followed: dict, load_optimum: float) -> str:
     why = ("A fixed PID must follow the setpoint steps it is chosen on" if diverged else
            "deploy.max_overshoot is a limit of the deployed controller and baseline.load_tolerance a preference")
     if followed["source"] == "search":
+        where = (" (searched on the identified local models; b chosen again and the overshoot met on the FMU's "
+                 "episodes)" if (followed.get("on_models") or {}).get("kept") else "")
         return (f"{why}, so the load tolerance was dropped: these gains have the least load IAE that meets the "
-                f"overshoot limit on those episodes within the Ms and noise limits ({result}"
+                f"overshoot limit on those episodes within the Ms and noise limits{where} ({result}"
                 + (")." if followed["feasible"] else "; the overshoot limit could not be met).")
                 + " Load rejection is what it costs.")
     if followed["source"] == "stabilising PID":

@@ -40,6 +40,7 @@ import numpy as np
 from prlpid_fmi import runcontext
 from prlpid_fmi.config import TuningConfig
 from prlpid_fmi.loop.core import pid_structure
+from prlpid_fmi.loop.gains import GainValues
 from prlpid_fmi.robustness.plant_response import MeasuredPlant
 from prlpid_fmi.robustness.identification import (
     CONVERGENCE_TOLERANCE,
@@ -470,7 +471,7 @@ def setpoint_range_points(config: TuningConfig) -> list[list[float]]:
     return points
 
 
-def margins_of(config: TuningConfig, gains: tuple, point: list[float]) -> Margins:
+def margins_of(config: TuningConfig, gains: GainValues, point: list[float]) -> Margins:
     """Margins of constant gains (Kp, Ti, Td, coupling lists) at an operating point (setpoints per loop).
 
     The experiment is deterministic (identification: no noise, no disturbances), so each measurement is kept
@@ -492,22 +493,23 @@ def margins_of(config: TuningConfig, gains: tuple, point: list[float]) -> Margin
     return found
 
 
-def measure_margins(config: TuningConfig, gains: tuple, point: list[float]) -> Margins:
+def measure_margins(config: TuningConfig, gains: GainValues, point: list[float]) -> Margins:
     """margins_of's experiment itself, not kept (a worker process measuring ahead: tuning.margin_experiments)."""
-    return loop_margins(config, gains[0], gains[1], gains[2], point, coupling=gains[3])
+    Kp, Ti, Td, coupling = gains
+    return loop_margins(config, Kp, Ti, Td, point, coupling=coupling)
 
 
-def measurement_key(config: TuningConfig, gains: tuple, point) -> tuple:
+def measurement_key(config: TuningConfig, gains: GainValues, point) -> tuple:
     """What margins_of keeps a measurement under: the config, the FMU file, the point and the gains."""
     return _place(config, point) + (tuple(None if g is None else tuple(float(v) for v in g) for g in gains),)
 
 
-def measured_margins(config: TuningConfig, gains: tuple, point: list[float]) -> Margins | None:
+def measured_margins(config: TuningConfig, gains: GainValues, point: list[float]) -> Margins | None:
     """What margins_of keeps for these gains and point, None when they were not measured (or no longer kept)."""
     return runcontext.current().measured.get(measurement_key(config, gains, point))
 
 
-def keep_margins(config: TuningConfig, gains: tuple, point: list[float], margins: Margins) -> None:
+def keep_margins(config: TuningConfig, gains: GainValues, point: list[float], margins: Margins) -> None:
     """Keep a measurement of these gains and point (measure_margins, here or in another process) for margins_of."""
     run = runcontext.current()
     run.keep(run.measured, measurement_key(config, gains, point), margins)
@@ -528,7 +530,7 @@ def _predicts(config: TuningConfig, m: Margins) -> bool:
             and bool(np.all(np.isfinite(m.plant_response))) and status(m) == Robustness.VERIFIED)
 
 
-def predicted_ms(config: TuningConfig, gains: tuple, point: list[float]) -> float | None:
+def predicted_ms(config: TuningConfig, gains: GainValues, point: list[float]) -> float | None:
     """Ms of constant gains at `point` computed, without an experiment, from the plant response measured there
     before (the first verified margins_of measurement of one independent loop at this config, FMU and point); None
     when there is none. The plant is the same whatever PID runs it (its linearisation at the point), so
@@ -537,15 +539,17 @@ def predicted_ms(config: TuningConfig, gains: tuple, point: list[float]) -> floa
     measure (tuning.fixed_pid.detune), never a margin to report: on a linear plant it is within 0.1 % of the
     measured Ms, while a nonlinear plant's response can differ with the controller."""
     found = runcontext.current().references.get(_place(config, point))
-    if found is None or len(gains[0]) != 1:
+    Kp, Ti, _, _ = gains
+    if found is None or len(Kp) != 1:
         return None
     reference, plant = found
-    if math.isfinite(reference[1][0]) != math.isfinite(gains[1][0]):
+    if math.isfinite(reference[1][0]) != math.isfinite(Ti[0]):
         return None  # with and without an integrator the windings differ by the arc at w = 0
 
     def controller(g):
         tf = pid_structure(config)[2][0]
-        return lambda w: pid_frequency_response(g[0][0], g[1][0], g[2][0], config.sample_time_s, w,
+        Kp, Ti, Td, _ = g
+        return lambda w: pid_frequency_response(Kp[0], Ti[0], Td[0], config.sample_time_s, w,
                                                 config.derivative_filter_N, tf, config.measurement_filter_order)
     C = controller(gains)
     if abs(plant.winding(C) - plant.winding(controller(reference))) >= 0.5 * math.pi:

@@ -144,10 +144,10 @@ def load_bound(model: LocalModel, assess: Callable[[tuple[float, float, float]],
     for rule in rules(model).values():
         found = []
         for k in KNOBS:
-            gains = rule(float(k))
-            if not all(math.isfinite(g) for g in gains) or gains[1] <= 0:
+            pid = rule(float(k))  # (Kp, Ti, Td) of one loop
+            if not all(math.isfinite(g) for g in pid) or pid[1] <= 0:  # Ti
                 continue
-            point = assess(gains)
+            point = assess(pid)
             if point is not None and all(math.isfinite(v) for v in point):
                 found.append(point)
         if found:

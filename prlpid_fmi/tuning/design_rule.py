@@ -44,7 +44,7 @@ import numpy as np
 from prlpid_fmi.config import BaselineConfig, DeployConfig, TuningConfig
 from prlpid_fmi.loop.core import pid_structure
 from prlpid_fmi.loop.evaluation import gains_rollout
-from prlpid_fmi.loop.gains import Gains, gains_from_dict, gains_from_values
+from prlpid_fmi.loop.gains import Gains, GainValues, gains_from_dict, gains_from_values
 from prlpid_fmi.metrics import compute_metrics
 from prlpid_fmi.progress import QUIET, Steps
 from prlpid_fmi.robustness.margins import margins_of, setpoint_range_points
@@ -219,8 +219,8 @@ class DesignResult:
                    cost=float(data.get("cost", math.nan)), evaluations=int(data.get("evaluations", 0)),
                    structure=structure, report=DesignReport.from_json(design) if design else None)
 
-    def gains_values(self) -> tuple:
-        """(Kp, Ti, Td, coupling) lists, what LoopCore.step takes."""
+    def gains_values(self) -> GainValues:
+        """The gains as GainValues, what LoopCore.step takes."""
         return self.gains.values()
 
 
@@ -229,7 +229,7 @@ class Candidate:
     """A design under one set of noise limits (or the stabilising PID): what `priority` orders."""
 
     vector: np.ndarray
-    gains: tuple
+    gains: GainValues
     structure: tuple
     details: DesignDetails
     limits: NoiseLimits
@@ -254,7 +254,7 @@ def range_schedule(config: TuningConfig, start: list[float] | None) -> tuple[tup
     return tuple(schedule), hold
 
 
-def following(config: TuningConfig, gains: tuple, structure: tuple) -> Following:
+def following(config: TuningConfig, gains: GainValues, structure: tuple) -> Following:
     """Requirement 1 (module docstring) of constant gains with structure (b, c, Tf) on the range episode."""
     start = start_measurement(config)
     schedule, hold = range_schedule(config, start)
@@ -534,14 +534,14 @@ class Designer:
         classical_rules, the rules from the middle operating point's model, with measurement filter tf and within the
         noise limits), or None where no rule applies (unstable, oscillatory)."""
         def assess(pid: tuple[float, float, float]):
-            gains = ([pid[0]], [pid[1]], [pid[2]], None)
+            gains = GainValues([pid[0]], [pid[1]], [pid[2]])
             if not design.meets_noise_limits(gains, tf):
                 return None
             load = design.model_load_response(gains, tf)[0]
             return None if load >= DIVERGED_COST else (design.limit_values(gains, tf)[0], load)
         return load_bound(design.models[len(design.models) // 2][0], assess)
 
-    def _setpoint_response(self, config: TuningConfig, gains: tuple, structure: tuple) -> tuple[float, float]:
+    def _setpoint_response(self, config: TuningConfig, gains: GainValues, structure: tuple) -> tuple[float, float]:
         """(ISE, worst overshoot [%]) of the training episodes the design chose b on (noise free)."""
         b, c, tf = structure
         weight, rows = setpoint_weight(config, gains, ([b[0]] * config.n_loops, c, tf), self.seeds,
@@ -572,7 +572,7 @@ class Designer:
                          best["ISE"], details.load_cost)
 
 
-def noise_shares(design: LoadDesign, gains: tuple, tf: list[float]) -> dict:
+def noise_shares(design: LoadDesign, gains: GainValues, tf: list[float]) -> dict:
     """{"std_u", "std_du"}: the largest std(u) and std(u_k - u_(k-1)) from the measurement noise over the nominal
     points and loops, fractions of the control span, estimated from the measured plant responses (0 without noise,
     None where nothing was measured)."""

@@ -37,7 +37,7 @@ from prlpid_fmi.config import TuningConfig
 from prlpid_fmi.loop.actions import ActionMap
 from prlpid_fmi.loop.core import LoopCore, pid_structure
 from prlpid_fmi.loop.evaluation import Trajectory, gains_rollout
-from prlpid_fmi.loop.gains import Gains, gains_from_values
+from prlpid_fmi.loop.gains import Gains, GainValues, gains_from_values
 from prlpid_fmi.loop.isolated import make_core
 from prlpid_fmi.progress import Steps, batch_counted
 from prlpid_fmi.robustness.margins import margins_of, predicted_ms, setpoint_range_points
@@ -67,8 +67,8 @@ class FixedPid:
         b, c, tf = self.structure
         return {"setpoint_weight": list(b), "derivative_weight": list(c), "measurement_filter_s": list(tf)}
 
-    def gains_values(self) -> tuple:
-        """(Kp, Ti, Td, coupling) lists, what LoopCore.step takes."""
+    def gains_values(self) -> GainValues:
+        """The gains as GainValues, what LoopCore.step takes."""
         return self.gains.values()
 
 
@@ -112,13 +112,13 @@ DETUNE_BISECTIONS = 4
 PREDICTION_MARGIN = 0.005  # an Ms predicted this far (relative) from the limit decides without an experiment
 
 
-def _meets(config: TuningConfig, gains: tuple, point: list[float], limit: float) -> bool:
+def _meets(config: TuningConfig, gains: GainValues, point: list[float], limit: float) -> bool:
     """The deliverable's rule at the point (robustness.status.meets_limit): verified within the limit, or impossible
     to measure there (a time-varying plant); a failed estimate (diverged, saturated, lightly damped) does not."""
     return meets_limit(margins_of(config, gains, point), limit)
 
 
-def _likely_meets(config: TuningConfig, gains: tuple, point: list[float], limit: float) -> bool:
+def _likely_meets(config: TuningConfig, gains: GainValues, point: list[float], limit: float) -> bool:
     """`_meets` as predicted from the plant response measured at the point before (robustness.margins.predicted_ms)
     where the prediction lies more than PREDICTION_MARGIN (relative) from the limit, else measured. A search step,
     never a verdict: what a search returns is measured (`detune`, `_robust`)."""
@@ -128,14 +128,14 @@ def _likely_meets(config: TuningConfig, gains: tuple, point: list[float], limit:
     return _meets(config, gains, point, limit)
 
 
-def clearly_within(config: TuningConfig, gains: tuple, point: list[float], limit: float) -> bool:
+def clearly_within(config: TuningConfig, gains: GainValues, point: list[float], limit: float) -> bool:
     """Ms predicted (robustness.margins.predicted_ms) more than PREDICTION_MARGIN (relative) below the limit at the
     point: a search may pass such gains without an experiment; a verdict measures them."""
     ms = predicted_ms(config, gains, point)
     return ms is not None and ms < (1.0 - PREDICTION_MARGIN) * limit
 
 
-def detune(config: TuningConfig, gains: tuple, point: list[float], limit: float,
+def detune(config: TuningConfig, gains: GainValues, point: list[float], limit: float,
            keep_ti: bool = False, plant: TuningConfig | None = None) -> tuple | None:
     """`gains` detuned (Kp / lambda, Ti * lambda and Td * lambda, or Ti and Td kept with keep_ti, lambda =
     DETUNE_STEP**k, clipped into the gain ranges) by the smallest k that gives Ms <= limit at `point`. Kp / lambda
@@ -166,18 +166,18 @@ def detune(config: TuningConfig, gains: tuple, point: list[float], limit: float,
     return _detune(config, gains, point, limit, keep_ti, plant, _meets)
 
 
-def _detuned(config: TuningConfig, gains: tuple, k: float, keep_ti: bool) -> tuple:
+def _detuned(config: TuningConfig, gains: GainValues, k: float, keep_ti: bool) -> GainValues:
     """gains detuned by lambda = DETUNE_STEP**k (`detune`), clipped into config's gain ranges."""
     Kp, Ti, Td, coupling = gains
     lam = DETUNE_STEP ** k
     ti_factor = 0.0 if keep_ti else 1.0
-    return ([max(x / lam, l.Kp.low) for x, l in zip(Kp, config.loops)],
-            [min(x * lam ** ti_factor, l.Ti.high) for x, l in zip(Ti, config.loops)],
-            [min(x * lam ** ti_factor, max(l.Td.high, x)) for x, l in zip(Td, config.loops)], coupling)
+    return GainValues([max(x / lam, l.Kp.low) for x, l in zip(Kp, config.loops)],
+                      [min(x * lam ** ti_factor, l.Ti.high) for x, l in zip(Ti, config.loops)],
+                      [min(x * lam ** ti_factor, max(l.Td.high, x)) for x, l in zip(Td, config.loops)], coupling)
 
 
-def _detune(config: TuningConfig, gains: tuple, point: list[float], limit: float, keep_ti: bool, plant: TuningConfig,
-            meets) -> tuple | None:
+def _detune(config: TuningConfig, gains: GainValues, point: list[float], limit: float, keep_ti: bool,
+            plant: TuningConfig, meets) -> GainValues | None:
     """`detune`'s scan and bisection with meets(plant, gains, point, limit) deciding each step."""
     def detuned(k):
         return _detuned(config, gains, k, keep_ti)
@@ -197,7 +197,7 @@ def _detune(config: TuningConfig, gains: tuple, point: list[float], limit: float
     return None
 
 
-def detune_over(config: TuningConfig, gains: tuple, points: list[list[float]], limit: float,
+def detune_over(config: TuningConfig, gains: GainValues, points: list[list[float]], limit: float,
                 keep_ti: bool | None = None, draws: list[TuningConfig] = ()) -> tuple | None:
     """`gains` detuned (`detune`) until Ms <= limit at every operating point, on the nominal plant and on every
     Monte-Carlo draw in `draws` (tuning.load_experiment.parameter_samples): each pass detunes at the worst failing
@@ -281,6 +281,6 @@ def setpoint_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, p
     return FixedPid(vector, gains_from_values(*gains), cost, int(result.nfev), pid_structure(config))
 
 
-def _cost_of(gains: tuple, core: LoopCore, seeds: list[int]) -> float:
+def _cost_of(gains: GainValues, core: LoopCore, seeds: list[int]) -> float:
     return sum(episode_cost(gains_rollout(lambda c: gains, core.config, seed=s, core=core), core)
                for s in seeds) / len(seeds)

@@ -45,6 +45,7 @@ from prlpid_fmi.control.pid import coupling_matrix
 from prlpid_fmi.loop.actions import ActionMap
 from prlpid_fmi.loop.core import LoopCore, control_scales, pid_structure
 from prlpid_fmi.loop.evaluation import gains_rollout
+from prlpid_fmi.loop.gains import GainValues
 from prlpid_fmi.metrics import chatter_fraction
 from prlpid_fmi.progress import QUIET, Steps, batch_counted, counted
 from prlpid_fmi.robustness.local_model import (closed_loop_stable, feedback_polynomials, identify, load_responses,
@@ -242,8 +243,8 @@ class LoadDesign(OutcomeCache):
         self.start: list | None = None  # the FMU start state's measurement per loop
 
     # -- the structure a vector stands for -------------------------------------------------------------------
-    def gains(self, vector) -> tuple:
-        """(Kp, Ti, Td, coupling) lists of a search vector. Ti, Td (and coupling) map like the absolute gain map over
+    def gains(self, vector) -> GainValues:
+        """The GainValues of a search vector. Ti, Td (a coupling: 0, search_map) map like the absolute gain map over
         the widened ranges; each loop's Kp entry is a position in [-1, 1] within the Kp interval where that loop
         meets the Ms and noise limits for its Ti, Td, Tf (`kp_interval`, log-spaced), so every candidate with an
         interval meets them by construction. Without one, Kp maps over the whole widened range."""
@@ -256,7 +257,7 @@ class LoadDesign(OutcomeCache):
                 sign, lo, hi = found
                 frac = (min(max(float(head[3 * i]), -1.0), 1.0) + 1.0) / 2.0
                 Kp[i] = sign * lo * (hi / lo) ** frac
-        return Kp, Ti, Td, coupling
+        return GainValues(Kp, Ti, Td, coupling)
 
     def feasible(self, vector) -> bool:
         """Every loop has a Kp interval for the vector's Ti, Td, Tf (no measured response: always)."""
@@ -310,7 +311,7 @@ class LoadDesign(OutcomeCache):
         tail = list(vector)[self.gain_map.size:]
         return [math.exp(lo + (min(max(a, -1.0), 1.0) + 1.0) / 2.0 * (hi - lo)) for a in tail]
 
-    def controller(self, gains: tuple, tf: list[float], loop: int):
+    def controller(self, gains: GainValues, tf: list[float], loop: int):
         """w -> C(e^{j w Ts}) of loop `loop` (feedback part)."""
         c = self.config
         Kp, Ti, Td, _ = gains
@@ -330,12 +331,12 @@ class LoadDesign(OutcomeCache):
         extra = increment - self.max_increment if math.isfinite(self.max_increment) else -1.0
         return np.array([ms - limit, noise - self.max_noise, extra])
 
-    def meets_noise_limits(self, gains: tuple, tf: list[float]) -> bool:
+    def meets_noise_limits(self, gains: GainValues, tf: list[float]) -> bool:
         """std(u) and std(u_k - u_(k-1)) from the measurement noise within their limits at every point and loop."""
         _, noise, increment = self.limit_values(gains, tf)
         return noise <= self.max_noise and (increment <= self.max_increment or not math.isfinite(self.max_increment))
 
-    def limit_values(self, gains: tuple, tf: list[float]) -> tuple[float, float, float]:
+    def limit_values(self, gains: GainValues, tf: list[float]) -> tuple[float, float, float]:
         """(max Ms, max std(u) share, max std(u_k - u_(k-1)) share) of the measurement noise over the points and loops
         with a measured response (shares of the loop's control span; 0 without noise)."""
         ms, noise, increment = 0.0, 0.0, 0.0
@@ -352,7 +353,7 @@ class LoadDesign(OutcomeCache):
                     increment = max(increment, sigma * std_du / self.spans[i])
         return ms, noise, increment
 
-    def estimates(self, gains: tuple, tf: list[float]) -> list[dict]:
+    def estimates(self, gains: GainValues, tf: list[float]) -> list[dict]:
         """Per point: {"point", "Ms", "noise_gain"} estimated from the measured plant responses (None: none)."""
         out = []
         for p, plants in zip(self.points, self.plants):  # the nominal plant's points (the samples' follow them)
@@ -364,7 +365,7 @@ class LoadDesign(OutcomeCache):
                         "noise_gain": max(pl.noise_gain(C) for pl, C in zip(plants, Cs))})
         return out
 
-    def active_limits(self, gains: tuple, tf: list[float]) -> list[dict]:
+    def active_limits(self, gains: GainValues, tf: list[float]) -> list[dict]:
         """The limits that hold the design: per nominal operating point and loop, the Ms and noise estimates (as
         constraint_values computes them) within ACTIVE_TOLERANCE (relative) of their limits. Each {"limit":
         "max_sensitivity" | "max_noise_gain" | "max_noise_increment", "point", "loop" (index), "value", "bound"};
@@ -384,7 +385,7 @@ class LoadDesign(OutcomeCache):
         return out
 
     # -- the load cost -----------------------------------------------------------------------------------------
-    def prepare(self, gains: tuple, measured: dict | None = None) -> None:
+    def prepare(self, gains: GainValues, measured: dict | None = None) -> None:
         """Measure the plant responses with `gains` in the loop (or take them from another design's `measured()`
         with the same gains) and open one load-experiment core per point, the load signed away from the actuator
         limit nearer to u at the point (as `gains` hold it)."""
@@ -445,7 +446,7 @@ class LoadDesign(OutcomeCache):
         ts = self.config.sample_time_s
         return [self.tf[loop]] + [float(x) for x in np.geomspace(TF_RANGE[0] * ts, TF_RANGE[1] * ts, FILTER_PROBES)]
 
-    def relax_increment_limit(self, gains: tuple) -> None:
+    def relax_increment_limit(self, gains: GainValues) -> None:
         """The noise-increment limit is a preference, Ms the requirement: where no Kp meets both for the stabilising
         PID's Ti, Td on some loop with any measurement filter the search may choose (`filter_candidates`), but one
         meets Ms and std(u) alone, the limit is dropped for this design and `increment_relaxed` says so. (The
@@ -468,7 +469,7 @@ class LoadDesign(OutcomeCache):
             self.max_increment = limit
         self._intervals.clear()
 
-    def load_response(self, gains: tuple, tf: list[float]) -> tuple[float, float]:
+    def load_response(self, gains: GainValues, tf: list[float]) -> tuple[float, float]:
         """(J_load, worst chatter) of constant gains with measurement filter tf: the load cost of the module
         docstring and the largest fraction of samples from the first load on where a loop's u reverses
         (metrics.chatter_fraction)."""
@@ -485,11 +486,11 @@ class LoadDesign(OutcomeCache):
                                            for i in range(self.config.n_loops)))
         return total / max(len(self.cores), 1), chatter
 
-    def load_cost(self, gains: tuple, tf: list[float]) -> float:
+    def load_cost(self, gains: GainValues, tf: list[float]) -> float:
         """J_load (module docstring) of constant gains with measurement filter tf."""
         return self.load_response(gains, tf)[0]
 
-    def search_load_cost(self, gains: tuple, tf: list[float]) -> float:
+    def search_load_cost(self, gains: GainValues, tf: list[float]) -> float:
         """J_load as the searches see it: on the local models while they are used, else on the FMU (load_cost)."""
         return self.model_load_response(gains, tf)[0] if self.models is not None else self.load_cost(gains, tf)
 
@@ -541,7 +542,7 @@ class LoadDesign(OutcomeCache):
             return [loops[0].as_dict() for loops in self.models]
         return [{**model.as_dict(), "loop": i} for loops in self.models for i, model in enumerate(loops)]
 
-    def model_load_response(self, gains: tuple, tf: list[float]) -> tuple[float, float]:
+    def model_load_response(self, gains: GainValues, tf: list[float]) -> tuple[float, float]:
         """(J_load, worst chatter) as load_response defines them, on the local models: one loop, the load response
         of robustness.local_model.load_responses over the load experiment's samples after the load, per unit load;
         several loops (or the coupled PID), the closed loop of robustness.loop_models on diag(the loops' models)
@@ -561,12 +562,13 @@ class LoadDesign(OutcomeCache):
             chatter = max(chatter, chatter_fraction(abs(loads[0]) * du, self.spans[0]))
         return total / len(self.models), chatter
 
-    def _decoupled(self, gains: tuple) -> bool:
+    def _decoupled(self, gains: GainValues) -> bool:
         """No coupling between the loops' PIDs (uncoupled, or every coefficient 0: the fixed PID's, search_map): on
         diag(the models) each loop is then closed on its own model alone."""
-        return not self.config.coupled or not any(gains[3])
+        _, _, _, coupling = gains
+        return not self.config.coupled or not any(coupling)
 
-    def _loops_load_response(self, gains: tuple, tf: list[float]) -> tuple[float, float]:
+    def _loops_load_response(self, gains: GainValues, tf: list[float]) -> tuple[float, float]:
         """model_load_response with several loops: loop i loaded with loads[i] from hold * i samples after the first
         load (tuning.load_experiment.load_config), J_load = Ts sum_k sum_i |y_i,k| / |d_i| / n. Decoupled PIDs: each
         loop's own closed loop (robustness.local_model.load_responses), the same sums."""
@@ -610,21 +612,21 @@ class LoadDesign(OutcomeCache):
             found = self._stability[key] = closed_loop_stable(model, Nc, Dc)
         return found
 
-    def _feedback(self, gains: tuple, tf: list[float], loop: int) -> tuple[np.ndarray, np.ndarray]:
+    def _feedback(self, gains: GainValues, tf: list[float], loop: int) -> tuple[np.ndarray, np.ndarray]:
         """(Nc, Dc) of loop `loop`'s PID (robustness.local_model.feedback_polynomials)."""
         c = self.config
         Kp, Ti, Td, _ = gains
         return feedback_polynomials(Kp[loop], Ti[loop], Td[loop], c.sample_time_s, c.derivative_filter_N, tf[loop],
                                     c.measurement_filter_order)
 
-    def _loop_args(self, gains: tuple, tf: list[float]) -> tuple:
+    def _loop_args(self, gains: GainValues, tf: list[float]) -> tuple:
         """The arguments after the models of robustness.loop_models.closed_loop and loop_plants for these gains."""
         c = self.config
         Kp, Ti, Td, coupling = gains
         matrix = coupling_matrix(coupling) if c.coupled else None
         return Kp, Ti, Td, c.sample_time_s, c.derivative_filter_N, tf, c.measurement_filter_order, matrix
 
-    def _loops_ms(self, models: tuple, plants: list, gains: tuple, tf: list[float]) -> float:
+    def _loops_ms(self, models: tuple, plants: list, gains: GainValues, tf: list[float]) -> float:
         """The largest Ms over the loops at one point on the models: each loop's effective plant with the candidate's
         other loops closed (robustness.loop_models.loop_plants) and its own PID, at the frequencies measured there."""
         w = plants[0].frequencies_rad_s
@@ -632,7 +634,7 @@ class LoadDesign(OutcomeCache):
         return max(float(np.max(np.abs(1.0 / (1.0 + self.controller(gains, tf, i)(w) * P[i]))))
                    for i in range(len(plants)))
 
-    def models_ms(self, gains: tuple, tf: list[float]) -> float:
+    def models_ms(self, gains: GainValues, tf: list[float]) -> float:
         """The largest Ms on the local models over the nominal points and loops, each loop with the candidate's
         other loops closed (`_loops_ms`); inf where the closed loop is unstable on a model."""
         worst = 0.0
@@ -650,7 +652,7 @@ class LoadDesign(OutcomeCache):
             worst = max(worst, self._loops_ms(models, plants, gains, tf))
         return worst
 
-    def model_setpoint_response(self, gains: tuple, tf: list[float], b: float) -> tuple[float, float]:
+    def model_setpoint_response(self, gains: GainValues, tf: list[float], b: float) -> tuple[float, float]:
         """(ISE, worst overshoot [% of the step]) of a unit setpoint step on the local models (setpoint weights b and
         the config's c), over training.setpoint_hold_steps samples: ISE = Ts sum_k (1 - y_k)^2, the mean over the
         models (and loops: with several decoupled PIDs each loop's step on its own model, the others at rest);
@@ -767,7 +769,7 @@ class LoadDesign(OutcomeCache):
         self.cores, self.quiet_cores = [], []
 
 
-def setpoint_response(core, gains: tuple, seeds: list[int]) -> tuple[float, float]:
+def setpoint_response(core, gains: GainValues, seeds: list[int]) -> tuple[float, float]:
     """(ISE mean over the episodes, worst overshoot [% of the step]) of constant gains on `core`'s (noise-free)
     episodes; (inf, inf) when one ends early. ISE = Ts sum_k e_k^2 summed over loops; overshoot per setpoint step
     as metrics.compute_metrics defines it (the first step from the initial measurement), computed here directly
@@ -945,7 +947,7 @@ def model_budget(maxiter: int, popsize: int, minimum: tuple[int, int] = (MODEL_M
     return max(MODEL_GENERATIONS * maxiter, minimum[0]), max(popsize, minimum[1])
 
 
-def setpoint_weight(config: TuningConfig, gains: tuple, structure: tuple[list, list, list], seeds: list[int],
+def setpoint_weight(config: TuningConfig, gains: GainValues, structure: tuple[list, list, list], seeds: list[int],
                     max_overshoot: float, grid: tuple = B_GRID) -> tuple[float, list[dict]]:
     """The b of `grid` (B_GRID: tuning.design_rule, requirement 3) and the table of what each b gave ({"b", "ISE",
     "Overshoot"}, Overshoot in percent of the step, worst over the episodes' setpoint steps)."""

@@ -22,6 +22,7 @@ import numpy as np
 
 from prlpid_fmi.config import Disturbance, TuningConfig
 from prlpid_fmi.loop.core import control_scales, randomized_parameters
+from prlpid_fmi.loop.gains import GainValues
 from prlpid_fmi.loop.isolated import make_core
 from prlpid_fmi.robustness.margins import margins_of, setpoint_range_points
 from prlpid_fmi.robustness.plant_response import MeasuredPlant
@@ -30,7 +31,7 @@ from prlpid_fmi.robustness.status import Robustness, status
 DIVERGED_COST = 1e6
 
 
-def plant_responses(config: TuningConfig, gains: tuple, points: list[list[float]]) -> list[list[MeasuredPlant] | None]:
+def plant_responses(config: TuningConfig, gains: GainValues, points: list[list[float]]) -> list[list[MeasuredPlant] | None]:
     """Per point, each loop's measured plant response (with `gains` in the loop; the others closed), or None where
     the estimate is not verified (robustness.status: the loop diverged or sat at a limit, or the plant varies
     faster than the experiment): no constraint comes from that point, the final check on the FMU still applies."""

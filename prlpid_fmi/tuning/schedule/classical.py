@@ -37,6 +37,7 @@ import numpy as np
 
 from prlpid_fmi.config import TuningConfig
 from prlpid_fmi.errors import PrlPidError
+from prlpid_fmi.loop.gains import GainValues
 from prlpid_fmi.progress import QUIET, Steps
 from prlpid_fmi.robustness.margins import margins_of, operating_point, setpoint_range_points
 from prlpid_fmi.robustness.status import Robustness, meets_limit, status
@@ -53,7 +54,7 @@ CLASSICAL_POINTS = 5  # breakpoints of the classical schedule before refinement
 NONLINEAR_GAIN_RATIO = 1.25  # |P| at the ends of the range vs the middle, beyond which "auto" builds the schedule
 
 
-def gain_variation(config: TuningConfig, gains: tuple) -> float:
+def gain_variation(config: TuningConfig, gains: GainValues) -> float:
     """Largest ratio (>= 1) between |P(jw)| measured with `gains` at the low or high end of the setpoint range and at
     its middle, over the frequencies below the middle's gain crossover (where a PID design is decided); NaN when no
     two verified measurements exist. Every loop's effective plant counts."""
@@ -81,7 +82,7 @@ def gain_variation(config: TuningConfig, gains: tuple) -> float:
     return worst
 
 
-def wanted(setting, config: TuningConfig, gains: tuple) -> tuple[bool, float]:
+def wanted(setting, config: TuningConfig, gains: GainValues) -> tuple[bool, float]:
     """(build it?, gain_variation) for deploy.classical_schedule = setting ("auto" | True | False)."""
     if setting is False:
         return False, math.nan
@@ -98,8 +99,8 @@ def _at(config: TuningConfig, setpoints: list[float]) -> TuningConfig:
     return dataclasses.replace(config, loops=loops, measurement_filter=0.0)
 
 
-def local_design(config: TuningConfig, setpoint: float, start: tuple, baseline, deploy, limit: float, seed: int,
-                 progress: Steps = QUIET) -> tuple[tuple, dict]:
+def local_design(config: TuningConfig, setpoint: float, start: GainValues, baseline, deploy, limit: float,
+                 seed: int, progress: Steps = QUIET) -> tuple[GainValues, dict]:
     """(gains, info) of the load design at loop 0's setpoint `setpoint`, the plant measured with `start` in the loop;
     info: {"setpoint", "load_cost", "Ms_estimate", "detuned", "kept_fixed"}."""
     from prlpid_fmi.tuning.fixed_pid import detune_over
@@ -131,14 +132,15 @@ def local_design(config: TuningConfig, setpoint: float, start: tuple, baseline, 
                    "design_model": {k: v for k, v in record.items() if k != "models"}}
 
 
-def _row(gains: tuple) -> dict:
-    return {"Kp": np.asarray(gains[0], float), "Ti": np.asarray(gains[1], float), "Td": np.asarray(gains[2], float)}
+def _row(gains: GainValues) -> dict:
+    Kp, Ti, Td, _ = gains
+    return {"Kp": np.asarray(Kp, float), "Ti": np.asarray(Ti, float), "Td": np.asarray(Td, float)}
 
 
-def _halfway(schedule: GainSchedule, config: TuningConfig, j: int) -> tuple:
+def _halfway(schedule: GainSchedule, config: TuningConfig, j: int) -> tuple[float, GainValues, list[float]]:
     """(mid, gains, point) halfway between breakpoints j and j + 1: the interpolated gains there."""
     mid = 0.5 * (float(schedule.breakpoints[j]) + float(schedule.breakpoints[j + 1]))
-    return mid, tuple(list(a) for a in schedule.gains_at(mid)) + (None,), operating_point(config, mid)
+    return mid, GainValues(*(list(a) for a in schedule.gains_at(mid))), operating_point(config, mid)
 
 
 def _measure_halfway(schedule: GainSchedule, config: TuningConfig, workers: int | None) -> None:
@@ -180,7 +182,7 @@ def robust_between(schedule: GainSchedule, config, limit: float, workers: int | 
         fixed = detune(config, gains, point, limit)
         if fixed is None:
             continue  # the deliverable then refuses the table, saying where
-        lam = np.asarray(gains[0], float) / np.asarray(fixed[0], float)
+        lam = np.asarray(gains.Kp, float) / np.asarray(fixed.Kp, float)
         for row in (j, j + 1):
             Kp[row], Ti[row], Td[row] = Kp[row] / lam, Ti[row] * lam, Td[row] * lam
         notes.append(f"rows {bp[j]:g} and {bp[j + 1]:g}: Ms between them (at {mid:g}) above {limit:g}, both detuned "
@@ -215,7 +217,7 @@ def classical_schedule(scenario, fixed: DesignResult, progress: Steps = QUIET,
     workers = scenario.baseline.workers
     refined = _between(schedule, config, limit, workers)
     for s in refined:  # a local design where the interpolation fails, from the table's own gains there
-        here = tuple(list(a) for a in schedule.gains_at(s)) + (None,)
+        here = GainValues(*(list(a) for a in schedule.gains_at(s)))
         gains, info = local_design(config, s, here, scenario.baseline, scenario.deploy, limit, seed, progress)
         infos.append(info)
         rows.append((float(s), _row(gains)))
@@ -254,8 +256,8 @@ def training_setpoint_ise(schedule: GainSchedule, config: TuningConfig, seed: in
     return training_metrics(schedule, config, seed, FOLLOW_EPISODES, offset=0)["ISE"]
 
 
-def blended(schedule: GainSchedule, fixed: tuple, weight: float) -> GainSchedule:
-    """The table with every row moved towards the fixed PID `fixed` ((Kp, Ti, Td, coupling) lists): Kp and Ti
+def blended(schedule: GainSchedule, fixed: GainValues, weight: float) -> GainSchedule:
+    """The table with every row moved towards the fixed PID `fixed` (GainValues): Kp and Ti
     geometrically (Kp_f (Kp/Kp_f)^w, the signs kept), Td linearly; weight 1: the table, 0: the fixed PID everywhere."""
     Kp_f, Ti_f, Td_f = (np.asarray(a, float) for a in fixed[:3])
 
@@ -268,7 +270,7 @@ def blended(schedule: GainSchedule, fixed: tuple, weight: float) -> GainSchedule
                                Td=Td_f + weight * (schedule.Td - Td_f))
 
 
-def best_blend(schedule: GainSchedule, fixed: tuple, config: TuningConfig, seed: int) -> tuple[float, list[float]]:
+def best_blend(schedule: GainSchedule, fixed: GainValues, config: TuningConfig, seed: int) -> tuple[float, list[float]]:
     """(weight, ISE per weight of FOLLOW_BLENDS): the weight whose blended table (`blended`) has the least
     `training_setpoint_ise` (the first of equals; 0.0: the fixed PID beats every table), and every weight's ISE. A
     local load design is a small-signal design: on the exothermic reactor the rows (Ms <= 2 at and between the

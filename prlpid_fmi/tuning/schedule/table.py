@@ -39,7 +39,7 @@ import numpy as np
 
 from prlpid_fmi.config import TuningConfig
 from prlpid_fmi.control import COUPLING_NAMES, parallel_gains
-from prlpid_fmi.loop.gains import Gains
+from prlpid_fmi.loop.gains import Gains, GainValues
 from prlpid_fmi.loop.scheduling import LOOP_SIGNALS, LOOP_VARIABLE
 
 # The discrete law of prlpid_fmi.control.pid, written in its evaluation order (the exports compute it so)
@@ -144,8 +144,8 @@ class GainSchedule:
         """Parallel derivative gain Kp*Td (K, n_loops) [u-unit*s / y-unit]."""
         return parallel_gains(self.Kp, self.Ti, self.Td)[1]
 
-    def row(self, j: int) -> tuple:
-        """Row j as (Kp, Ti, Td, coupling) lists (coupling None for uncoupled loops)."""
+    def row(self, j: int) -> GainValues:
+        """Row j as GainValues (coupling None for uncoupled loops)."""
         return Gains(self.Kp[j], self.Ti[j], self.Td[j], None if self.coupling is None else self.coupling[j]).values()
 
     def gains_at(self, value: float) -> tuple:
