@@ -144,3 +144,26 @@ def test_on_the_local_models_the_search_is_verified_on_the_fmu_and_rejects_loads
         assert found["load_cost"] <= 1.02 * on_fmu["load_cost"]
     finally:
         identified.close()
+
+
+def test_where_the_least_load_iae_leaves_range_steps_unsettled_the_least_setpoint_ise_is_kept(design, monkeypatch):
+    """Requirement 1 ranks first: where the least load IAE within the limits does not settle the range episode (here
+    every PID the load objective returns is said not to), the least setpoint ISE within the same limits is kept if it
+    settles it; where neither settles, the least load IAE stays."""
+    from prlpid_fmi.tuning.design_rule import Following
+
+    config, load_design = design
+    by_load, _ = follow_setpoints(config, load_design, _first(), 0.0252, DeployConfig(), SEEDS, 0, 4, 5, QUIET)
+    unsettled = by_load["load_cost"]
+
+    def following(config, gains, structure):
+        settles = load_design.load_cost(gains, list(structure[2])) != unsettled
+        return Following(12, 0 if settles else 3, 0, False, 0.0, 1.0)
+
+    monkeypatch.setattr(design_rule, "following", following)
+    found, keep = follow_setpoints(config, load_design, _first(), 0.0252, DeployConfig(), SEEDS, 0, 4, 5, QUIET)
+    assert found["objective"] == "setpoint" and keep is not None and found["load_cost"] != unsettled
+    assert found["feasible"] and found["Overshoot"] <= 100.0 * DeployConfig().max_overshoot
+    monkeypatch.setattr(design_rule, "following", lambda *a: Following(12, 3, 0, False, 0.0, 1.0))
+    found, keep = follow_setpoints(config, load_design, _first(), 0.0252, DeployConfig(), SEEDS, 0, 4, 5, QUIET)
+    assert found["objective"] == "load" and found["load_cost"] == unsettled and keep is not None

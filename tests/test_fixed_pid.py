@@ -143,3 +143,19 @@ def test_a_pid_too_weak_for_the_unstable_plant_costs_one_experiment_not_a_scan(m
     monkeypatch.setattr(margins, "loop_margins", lambda *a, **k: measured.append(a[1:4]) or real(*a, **k))
     assert fixed_pid.detune(CONFIG, weak, point, 2.0) is None
     assert len(measured) == 1
+
+
+def test_predictions_the_measurement_contradicts_do_not_end_the_detuning(monkeypatch, run_context):
+    """Where every k is predicted to fail but the measurement of the most promising one misses its prediction by
+    more than PREDICTION_TOLERANCE (a nonlinear plant's response changes with the PID; here a prediction of Ms 3
+    for every PID), detune does not give up: it finds what the search on measurements alone finds, within the limit
+    on python-control's exact loop."""
+    import prlpid_fmi.tuning.fixed_pid as fixed_pid
+
+    point = [-0.5]
+    fixed_pid.margins_of(CONFIG, TOGETHER, point)
+    monkeypatch.setattr(fixed_pid, "predicted_ms", lambda *a: 3.0)
+    found = fixed_pid.detune(CONFIG, TOGETHER, point, 2.0)
+    assert found is not None and exact_ms(found) <= 2.0 * 1.01
+    monkeypatch.setattr(fixed_pid, "predicted_ms", lambda *a: None)
+    assert found == fixed_pid.detune(CONFIG, TOGETHER, point, 2.0)

@@ -342,13 +342,19 @@ def _followed_sentence(followed: dict, load_optimum: float) -> str:
     diverged = followed.get("load_optimal_diverged", True)
     why = ("A fixed PID must follow the setpoint steps it is chosen on" if diverged else
            "deploy.max_overshoot is a limit of the deployed controller and baseline.load_tolerance a preference")
-    if followed["source"] == "search":
-        where = (" (searched on the identified local models; b chosen again and the overshoot met on the FMU's "
-                 "episodes)" if (followed.get("on_models") or {}).get("kept") else "")
-        return (f"{why}, so the load tolerance was dropped: these gains have the least load IAE that meets the "
-                f"overshoot limit on those episodes within the Ms and noise limits{where} ({result}"
+    if followed["source"] == "search" and followed.get("objective") == "setpoint":
+        return (f"{why}, so the load tolerance was dropped; the least load IAE within the Ms, noise and overshoot "
+                "limits left setpoint steps between the low, middle and high setpoint unsettled, so these gains have "
+                f"the least setpoint ISE within those limits ({result}"
                 + (")." if followed["feasible"] else "; the overshoot limit could not be met).")
                 + " Load rejection is what it costs.")
+    if followed["source"] == "search":
+        where = (" They were searched on the identified local models, then b chosen again and the overshoot checked "
+                 "on the FMU's episodes." if (followed.get("on_models") or {}).get("kept") else "")
+        return (f"{why}, so the load tolerance was dropped: these gains have the least load IAE that meets the "
+                f"overshoot limit on those episodes within the Ms and noise limits ({result}"
+                + (")." if followed["feasible"] else "; the overshoot limit could not be met).")
+                + where + " Load rejection is what it costs.")
     if followed["source"] == "stabilising PID":
         return (f"{why}, and no gains within the Ms and noise limits did, so the stabilising PID of the setpoint search "
                 f"is kept, with its best setpoint weight ({result}).")

@@ -716,35 +716,31 @@ def follow_setpoints(config: TuningConfig, design: LoadDesign, first: FixedPid, 
     overshoot limits (the rule's order: the overshoot limit before the load tolerance, nearest that), without a load
     limit, searched over the whole box. Its best is kept where it meets every limit,
     or where the gains of the load search diverged on the episodes (`diverged`) and it follows them; where they
-    diverged and it does not follow them either, the stabilising PID `first` with its best setpoint weight. Returns
-    (what was found: {"source": "search" | "stabilising PID" | None, "load_optimal_diverged", "load_cost", "ISE",
+    diverged and it does not follow them either, the stabilising PID `first` with its best setpoint weight. Where the
+    load search used the local models the search runs on them first (`_follow_on_models`); its result stands where
+    the FMU confirms it and it settles the range episode, else the search runs with the setpoint episodes on the FMU.
+    Where the least load IAE leaves a step of the range episode unsettled (requirement 1 ranks first), the least
+    setpoint ISE within the same limits is kept if it settles them ("objective": "setpoint"). Returns (what was
+    found: {"source": "search" | "stabilising PID" | None, "objective", "load_optimal_diverged", "load_cost", "ISE",
     "Overshoot", "feasible", "evaluations", "on_models"}, (vector, gains, (b, c, Tf)) to keep, or None: the gains
-    stay). Where the load search used the local models the search runs on them first (`_follow_on_models`); its
-    result stands where the FMU confirms it, else the search runs with the setpoint episodes on the FMU."""
+    stay)."""
     record = None
     if design.models is not None:
         record, kept = _follow_on_models(config, design, best_load, deploy, seeds, seed, maxiter, popsize, progress)
+        if kept is not None and following(config, kept[1], kept[2]).settles:
+            return {"source": "search", "objective": "load", "load_optimal_diverged": diverged,
+                    "load_cost": record["load_cost"], "ISE": record["ISE"], "Overshoot": record["Overshoot"],
+                    "feasible": True, "evaluations": record["evaluations"], "on_models": record}, kept
         if kept is not None:
-            return {"source": "search", "load_optimal_diverged": diverged, "load_cost": record["load_cost"],
-                    "ISE": record["ISE"], "Overshoot": record["Overshoot"], "feasible": True,
-                    "evaluations": record["evaluations"], "on_models": record}, kept
-    follow = SetpointDesign(design, best_load, math.inf, deploy.max_overshoot, seeds, objective="load")
-    progress.step("least load IAE within the overshoot limit, without the load tolerance"
-                  + (" (the load-optimal gains diverge on the setpoint episodes)" if diverged else ""),
-                  follow.budget(maxiter, popsize, whole_box=True))
-    try:
-        result = follow.search(None, seed, maxiter, popsize, progress=progress)
-        load, ise, overshoot = follow.evaluate(result.x)
-        feasible = bool(np.max(follow.constraint_values(result.x)) <= 0)
-        found = {"source": "search", "load_optimal_diverged": diverged, "load_cost": load, "ISE": ise,
-                 "Overshoot": overshoot, "feasible": feasible, "evaluations": int(result.nfev), "on_models": record}
-    finally:
-        follow.close()
-    if feasible or (diverged and math.isfinite(ise)):
-        vector = np.asarray(result.x)
-        b = [follow.weight(vector)] * config.n_loops
-        tf = design.filters(vector[:-1])
-        return found, (vector, design.gains(vector[:-1]), (b, list(design.c), tf))
+            record.update({"kept": False, "settles_range": False})
+    args = (config, design, best_load, deploy, seeds, seed, maxiter, popsize, progress, diverged, record)
+    found, kept = _follow_on_fmu(*args, objective="load")
+    if kept is not None and not following(config, kept[1], kept[2]).settles:
+        by_ise, kept_by_ise = _follow_on_fmu(*args, objective="setpoint")
+        if kept_by_ise is not None and following(config, kept_by_ise[1], kept_by_ise[2]).settles:
+            return by_ise, kept_by_ise
+    if kept is not None:
+        return found, kept
     if not diverged:
         return {**found, "source": None}, None
     gains = first.gains.values()
@@ -756,6 +752,33 @@ def follow_setpoints(config: TuningConfig, design: LoadDesign, first: FixedPid, 
     found = {**found, "source": "stabilising PID", "load_cost": design.load_cost(gains, list(tf)), "ISE": best["ISE"],
              "Overshoot": best["Overshoot"], "feasible": best["Overshoot"] <= 100.0 * deploy.max_overshoot}
     return found, (np.asarray(first.action), gains, ([weight] * config.n_loops, list(c), list(tf)))
+
+
+def _follow_on_fmu(config: TuningConfig, design: LoadDesign, best_load: float, deploy: DeployConfig, seeds: list[int],
+                   seed: int, maxiter: int, popsize: int, progress: Steps, diverged: bool, record: dict | None,
+                   objective: str) -> tuple[dict, tuple | None]:
+    """follow_setpoints' search with the setpoint episodes on the FMU, minimising the load cost (objective "load") or
+    the setpoint ISE ("setpoint") within the Ms, noise and overshoot limits: (what it found, (vector, gains, (b, c,
+    Tf)) where it meets every limit or, where the load-optimal gains diverged, it follows the episodes; else None)."""
+    follow = SetpointDesign(design, best_load, math.inf, deploy.max_overshoot, seeds, objective=objective)
+    progress.step(("least load IAE" if objective == "load" else "least setpoint ISE")
+                  + " within the overshoot limit, without the load tolerance"
+                  + (" (the load-optimal gains diverge on the setpoint episodes)" if diverged else ""),
+                  follow.budget(maxiter, popsize, whole_box=True))
+    try:
+        result = follow.search(None, seed, maxiter, popsize, progress=progress)
+        load, ise, overshoot = follow.evaluate(result.x)
+        feasible = bool(np.max(follow.constraint_values(result.x)) <= 0)
+    finally:
+        follow.close()
+    found = {"source": "search", "objective": objective, "load_optimal_diverged": diverged, "load_cost": load,
+             "ISE": ise, "Overshoot": overshoot, "feasible": feasible, "evaluations": int(result.nfev),
+             "on_models": record}
+    if not (feasible or (diverged and math.isfinite(ise))):
+        return found, None
+    vector = np.asarray(result.x)
+    b = [follow.weight(vector)] * config.n_loops
+    return found, (vector, design.gains(vector[:-1]), (b, list(design.c), design.filters(vector[:-1])))
 
 
 def _follow_on_models(config: TuningConfig, design: LoadDesign, best_load: float, deploy: DeployConfig,

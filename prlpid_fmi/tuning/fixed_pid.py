@@ -28,6 +28,7 @@ uses the first, and the second only where the first cannot meet the limit.
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -110,6 +111,7 @@ DETUNE_BISECTIONS = 4
 
 
 PREDICTION_MARGIN = 0.005  # an Ms predicted this far (relative) from the limit decides without an experiment
+PREDICTION_TOLERANCE = 0.05  # a measured Ms this close (relative) to its prediction confirms the predictions
 
 
 def _meets(config: TuningConfig, gains: GainValues, point: list[float], limit: float) -> bool:
@@ -151,8 +153,9 @@ def detune(config: TuningConfig, gains: GainValues, point: list[float], limit: f
     point's response, and predicts the steps after it); the result is then measured. Where that measurement fails
     the limit, the whole search runs again on measurements alone (the search before predictions): same result
     whenever the predictions decide as the measurements would. Where no k is predicted to pass, the scan's k of least
-    predicted Ms is measured: failing too, None (a PID too weak for an unstable plant, which detuning only weakens,
-    costs one experiment, not a scan); passing, the search on measurements alone."""
+    predicted Ms is measured: failing too, and within PREDICTION_TOLERANCE of its prediction, None (a PID too weak for
+    an unstable plant, which detuning only weakens, costs one experiment, not a scan); passing, or a measurement
+    the prediction missed (a nonlinear plant's response changes with the PID), the search on measurements alone."""
     plant = config if plant is None else plant
     found = _detune(config, gains, point, limit, keep_ti, plant, _likely_meets)
     if found is not None and _meets(plant, found, point, limit):
@@ -160,8 +163,11 @@ def detune(config: TuningConfig, gains: GainValues, point: list[float], limit: f
     if found is None:  # predicted: no k passes; the most promising k measured, and where it fails too, none
         predicted = [(predicted_ms(plant, _detuned(config, gains, k, keep_ti), point), k) for k in DETUNE_SCAN]
         if all(ms is not None for ms, _ in predicted):
-            _, k = min(predicted)
-            if not _meets(plant, _detuned(config, gains, k, keep_ti), point, limit):
+            expected, k = min(predicted)
+            measured = margins_of(plant, _detuned(config, gains, k, keep_ti), point)
+            confirmed = (not math.isfinite(expected) and not math.isfinite(measured.Ms)) or \
+                abs(measured.Ms - expected) <= PREDICTION_TOLERANCE * expected
+            if not meets_limit(measured, limit) and confirmed:
                 return None
     return _detune(config, gains, point, limit, keep_ti, plant, _meets)
 
