@@ -765,12 +765,7 @@ def _follow_on_fmu(config: TuningConfig, design: LoadDesign, best_load: float, d
                   + " within the overshoot limit, without the load tolerance"
                   + (" (the load-optimal gains diverge on the setpoint episodes)" if diverged else ""),
                   follow.budget(maxiter, popsize, whole_box=True))
-    try:
-        result = follow.search(None, seed, maxiter, popsize, progress=progress)
-        load, ise, overshoot = follow.evaluate(result.x)
-        feasible = bool(np.max(follow.constraint_values(result.x)) <= 0)
-    finally:
-        follow.close()
+    result, (load, ise, overshoot), feasible = _whole_box(follow, seed, maxiter, popsize, progress)
     found = {"source": "search", "objective": objective, "load_optimal_diverged": diverged, "load_cost": load,
              "ISE": ise, "Overshoot": overshoot, "feasible": feasible, "evaluations": int(result.nfev),
              "on_models": record}
@@ -779,6 +774,16 @@ def _follow_on_fmu(config: TuningConfig, design: LoadDesign, best_load: float, d
     vector = np.asarray(result.x)
     b = [follow.weight(vector)] * config.n_loops
     return found, (vector, design.gains(vector[:-1]), (b, list(design.c), design.filters(vector[:-1])))
+
+
+def _whole_box(follow: SetpointDesign, seed: int, generations: int, popsize: int, progress: Steps) -> tuple:
+    """(DE result, (load cost, ISE, overshoot) of its best, whether that meets every limit) of `follow`'s search over
+    the whole box; `follow` closed after it."""
+    try:
+        result = follow.search(None, seed, generations, popsize, progress=progress)
+        return result, follow.evaluate(result.x), bool(np.max(follow.constraint_values(result.x)) <= 0)
+    finally:
+        follow.close()
 
 
 def _follow_on_models(config: TuningConfig, design: LoadDesign, best_load: float, deploy: DeployConfig,
@@ -793,12 +798,7 @@ def _follow_on_models(config: TuningConfig, design: LoadDesign, best_load: float
     generations, size = model_budget(maxiter, popsize, SETPOINT_MODEL_MINIMUM)
     progress.step("least load IAE within the overshoot limit on the local models",
                   follow.budget(generations, size, whole_box=True))
-    try:
-        result = follow.search(None, seed, generations, size, progress=progress)
-        model_load, _, model_overshoot = follow.evaluate(result.x)
-        feasible = bool(np.max(follow.constraint_values(result.x)) <= 0)
-    finally:
-        follow.close()
+    result, (model_load, _, model_overshoot), feasible = _whole_box(follow, seed, generations, size, progress)
     record = {"evaluations": int(result.nfev), "model_load_cost": model_load, "model_overshoot": model_overshoot,
               "feasible_on_models": feasible, "kept": False}
     if not feasible:
