@@ -510,8 +510,9 @@ class LoadDesign(OutcomeCache):
     # -- the load cost on local models -------------------------------------------------------------------------
     def identify_models(self) -> None:
         """With design_model "identified": per nominal operating point, a LocalModel (robustness.local_model.identify)
-        per loop from its own measurement's measured response (MeasuredPlant.own), used by the search (`models`), or the reason they cannot be
-        (`model_note`): a point without a verified response, a fit worse than MODEL_FIT_LIMIT."""
+        per loop from its own measurement's measured response (MeasuredPlant.own), used by the search (`models`), or
+        the reason they cannot be (`model_note`): a point without a verified response, a fit worse than
+        MODEL_FIT_LIMIT."""
         self.models, self.loop_models, self.model_note = None, None, ""
         self._stability.clear()
         if self.design_model != "identified":
@@ -628,11 +629,14 @@ class LoadDesign(OutcomeCache):
 
     def _loops_ms(self, models: tuple, plants: list, gains: GainValues, tf: list[float]) -> float:
         """The largest Ms over the loops at one point on the models: each loop's effective plant with the candidate's
-        other loops closed (robustness.loop_models.loop_plants) and its own PID, at the frequencies measured there."""
-        w = plants[0].frequencies_rad_s
-        P = loop_plants(list(models), *self._loop_args(gains, tf), w)
-        return max(float(np.max(np.abs(1.0 / (1.0 + self.controller(gains, tf, i)(w) * P[i]))))
-                   for i in range(len(plants)))
+        other loops closed (robustness.loop_models.loop_plants) and its own PID, at the frequencies measured for that
+        loop there."""
+        worst = 0.0
+        for i, plant in enumerate(plants):
+            w = plant.frequencies_rad_s
+            P = loop_plants(list(models), *self._loop_args(gains, tf), w)[i]
+            worst = max(worst, float(np.max(np.abs(1.0 / (1.0 + self.controller(gains, tf, i)(w) * P)))))
+        return worst
 
     def models_ms(self, gains: GainValues, tf: list[float]) -> float:
         """The largest Ms on the local models over the nominal points and loops, each loop with the candidate's
@@ -643,9 +647,10 @@ class LoadDesign(OutcomeCache):
             if decoupled:  # each loop on its own model: P_i itself is its effective plant
                 if not all(self._stable(m, *self._feedback(gains, tf, i)) for i, m in enumerate(models)):
                     return math.inf
-                w = plants[0].frequencies_rad_s
-                worst = max([worst] + [float(np.max(np.abs(1.0 / (1.0 + self.controller(gains, tf, i)(w) *
-                                                                   m.response(w))))) for i, m in enumerate(models)])
+                for i, (m, plant) in enumerate(zip(models, plants)):
+                    w = plant.frequencies_rad_s
+                    worst = max(worst, float(np.max(np.abs(1.0 / (1.0 + self.controller(gains, tf, i)(w) *
+                                                                   m.response(w))))))
                 continue
             if not loop_stable(loop_closed_loop(list(models), *self._loop_args(gains, tf))[0]):
                 return math.inf
