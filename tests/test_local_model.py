@@ -7,6 +7,7 @@ import math
 
 import numpy as np
 import pytest
+from scipy.optimize import differential_evolution
 from scipy.signal import cont2discrete, lfilter
 
 from prlpid_fmi.control.pid import PID
@@ -383,5 +384,23 @@ def test_the_quadrotors_loop_models_are_its_double_integrators_and_predict_the_f
         assert design.model_load_response(decoupled, tf) == pytest.approx(design.model_load_response(barely, tf),
                                                                            rel=1e-7, abs=1e-12)
         assert design.models_ms(decoupled, tf) == pytest.approx(design.models_ms(barely, tf), rel=1e-9)
+        # on diag(models) decoupled loops are separable: J_load is the loops' shares summed, chatter and Ms their worst
+        shares = [design.loop_load_response(i, decoupled, tf) for i in range(3)]
+        joint, chatter = design.model_load_response(decoupled, tf)
+        assert sum(j for j, _ in shares) == pytest.approx(joint, rel=1e-12)
+        assert max(c for _, c in shares) == pytest.approx(chatter, abs=1e-15)
+        assert max(design.loop_models_ms(i, decoupled, tf) for i in range(3)) == design.models_ms(decoupled, tf)
+        # so the search one loop at a time reaches a joint cost no worse than DE over all nine entries with at least
+        # as many evaluations, and no small step of any entry lowers it (a local optimum of the joint cost)
+        found = design.search(seed=2, maxiter=8, popsize=8)
+        assert found.fun == pytest.approx(design.cost(found.x), rel=1e-12) and found.fun < 1.0
+        joint_de = differential_evolution(lambda v: design.cost(v), [(-1.0, 1.0)] * design.n, maxiter=8,
+                                          popsize=int(np.ceil(found.nfev / (9 * design.n))), seed=2, polish=False)
+        assert joint_de.nfev >= found.nfev and found.fun <= joint_de.fun
+        for k in range(design.n):
+            for step in (-0.02, 0.02):
+                moved = found.x.copy()
+                moved[k] = np.clip(moved[k] + step, -1.0, 1.0)
+                assert design.cost(moved) >= found.fun * (1.0 - 1e-3)
     finally:
         design.close()

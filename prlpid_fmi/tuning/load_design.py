@@ -19,8 +19,8 @@ and the setpoint search within a load limit. tuning.design_rule orders them; tun
    With baseline.design_model "identified", the search scores its candidates on local models instead
    (`identify_models`: robustness.local_model fitted to each loop's response measured at each point; the load
    response per unit load by lfilter, with several loops by robustness.loop_models' closed loop on the loops' models,
-   whose Ms with the candidate's other loops closed is then a limit too (`models_ms`); the chatter of the PID output's
-   response): microseconds of numpy instead of an FMU simulation. The choice is verified on the FMU
+   whose Ms with the candidate's other loops closed is then a limit too (`models_ms`); the fixed PID's decoupled loops
+   searched one at a time, `search_loops`; the chatter of the PID output's response): microseconds of numpy instead of an FMU simulation. The choice is verified on the FMU
    (`validate_models`) and the search reruns on the FMU (`use_fmu`) where the two differ by more than MODEL_TOLERANCE
    (`search_verified`). The setpoint search's load cost follows the same path (`search_load_cost`;
    tuning.design_rule verifies its result on the FMU too).
@@ -38,7 +38,7 @@ import dataclasses
 import math
 
 import numpy as np
-from scipy.optimize import NonlinearConstraint, differential_evolution, minimize
+from scipy.optimize import NonlinearConstraint, OptimizeResult, differential_evolution, minimize
 
 from prlpid_fmi.config import GainRange, TuningConfig
 from prlpid_fmi.control.pid import coupling_matrix
@@ -581,13 +581,12 @@ class LoadDesign(OutcomeCache):
             u = np.zeros((n * hold, n))
             if decoupled:
                 iae = 0.0
-                for i, (model, load) in enumerate(zip(models, loads)):
-                    Nc, Dc = self._feedback(gains, tf, i)
-                    if not self._stable(model, Nc, Dc):
+                for i in range(n):
+                    dy, du = self._loop_response(models[i], loads[i], i, gains, tf)
+                    if dy is None:
                         return DIVERGED_COST, 0.0
-                    dy, du = load_responses(model, Nc, Dc, (n - i) * hold)
                     iae += float(np.sum(np.abs(dy)))
-                    u[i * hold:, i] = load * du
+                    u[:, i] = du
                 total += iae * c.sample_time_s / n
             else:
                 A, B, Y, U = loop_closed_loop(list(models), *self._loop_args(gains, tf))
@@ -600,6 +599,33 @@ class LoadDesign(OutcomeCache):
                     u[i * hold:] += load * du[:(n - i) * hold, :, i]
                 total += float(np.sum(np.abs(y) / np.abs(np.asarray(loads))[None, :]) * c.sample_time_s) / n
             chatter = max(chatter, max(chatter_fraction(u[:, i], self.spans[i]) for i in range(n)))
+        return total / len(self.models), chatter
+
+    def _loop_response(self, model, load: float, loop: int, gains: GainValues, tf: list[float]):
+        """Decoupled loop `loop` of the several-loop load experiment on its own model: (dy (steps,) per unit load from
+        its load on, the PID output over the whole experiment (n * hold,) [input units], 0 before that load), or
+        (None, None) where the closed loop is unstable on the model."""
+        c = self.config
+        n, hold = c.n_loops, c.setpoint_hold_steps
+        Nc, Dc = self._feedback(gains, tf, loop)
+        if not self._stable(model, Nc, Dc):
+            return None, None
+        dy, du = load_responses(model, Nc, Dc, (n - loop) * hold)
+        u = np.zeros(n * hold)
+        u[loop * hold:] = load * du
+        return dy, u
+
+    def loop_load_response(self, loop: int, gains: GainValues, tf: list[float]) -> tuple[float, float]:
+        """Loop `loop`'s share of the several-loop J_load on the models with decoupled PIDs, and its chatter
+        (model_load_response's J_load is the sum of these over the loops, its chatter their largest)."""
+        c = self.config
+        total, chatter = 0.0, 0.0
+        for models, loads in zip(self.models, self.loads):
+            dy, u = self._loop_response(models[loop], loads[loop], loop, gains, tf)
+            if dy is None:
+                return DIVERGED_COST, 0.0
+            total += float(np.sum(np.abs(dy))) * c.sample_time_s / c.n_loops
+            chatter = max(chatter, chatter_fraction(u, self.spans[loop]))
         return total / len(self.models), chatter
 
     def _stable(self, model, Nc: np.ndarray, Dc: np.ndarray) -> bool:
@@ -638,6 +664,19 @@ class LoadDesign(OutcomeCache):
             worst = max(worst, float(np.max(np.abs(1.0 / (1.0 + self.controller(gains, tf, i)(w) * P)))))
         return worst
 
+    def _loop_ms(self, model, plant, gains: GainValues, tf: list[float], loop: int) -> float:
+        """Ms of decoupled loop `loop` on its own model at the frequencies measured for it (plant); inf where the
+        closed loop is unstable on the model."""
+        if not self._stable(model, *self._feedback(gains, tf, loop)):
+            return math.inf
+        w = plant.frequencies_rad_s
+        return float(np.max(np.abs(1.0 / (1.0 + self.controller(gains, tf, loop)(w) * model.response(w)))))
+
+    def loop_models_ms(self, loop: int, gains: GainValues, tf: list[float]) -> float:
+        """`_loop_ms` of loop `loop` over the nominal points (decoupled PIDs: models_ms is the largest over loops)."""
+        return max(self._loop_ms(models[loop], plants[loop], gains, tf, loop)
+                   for models, plants in zip(self.loop_models, self.plants))
+
     def models_ms(self, gains: GainValues, tf: list[float]) -> float:
         """The largest Ms on the local models over the nominal points and loops, each loop with the candidate's
         other loops closed (`_loops_ms`); inf where the closed loop is unstable on a model."""
@@ -645,12 +684,8 @@ class LoadDesign(OutcomeCache):
         decoupled = self._decoupled(gains)
         for models, plants in zip(self.loop_models, self.plants):
             if decoupled:  # each loop on its own model: P_i itself is its effective plant
-                if not all(self._stable(m, *self._feedback(gains, tf, i)) for i, m in enumerate(models)):
-                    return math.inf
-                for i, (m, plant) in enumerate(zip(models, plants)):
-                    w = plant.frequencies_rad_s
-                    worst = max(worst, float(np.max(np.abs(1.0 / (1.0 + self.controller(gains, tf, i)(w) *
-                                                                   m.response(w))))))
+                for i in range(len(models)):
+                    worst = max(worst, self._loop_ms(models[i], plants[i], gains, tf, i))
                 continue
             if not loop_stable(loop_closed_loop(list(models), *self._loop_args(gains, tf))[0]):
                 return math.inf
@@ -660,25 +695,35 @@ class LoadDesign(OutcomeCache):
     def model_setpoint_response(self, gains: GainValues, tf: list[float], b: float) -> tuple[float, float]:
         """(ISE, worst overshoot [% of the step]) of a unit setpoint step on the local models (setpoint weights b and
         the config's c), over training.setpoint_hold_steps samples: ISE = Ts sum_k (1 - y_k)^2, the mean over the
-        models (and loops: with several decoupled PIDs each loop's step on its own model, the others at rest);
-        (inf, inf) where a loop is unstable on one. Coupled PIDs (none a fixed-PID search tries: search_map) raise
-        ValueError: their setpoint path is not modelled."""
-        c = self.config
+        models (and loops: with several decoupled PIDs each loop's step on its own model, the others at rest,
+        `loop_setpoint_response`); (inf, inf) where a loop is unstable on one. Coupled PIDs (none a fixed-PID search
+        tries: search_map) raise ValueError: their setpoint path is not modelled."""
         if not self._decoupled(gains):
             raise ValueError("setpoint responses on the local models need decoupled PIDs (coupling 0)")
-        Kp, Ti, Td, _ = gains
         ise, overshoot = 0.0, 0.0
-        for i in range(c.n_loops):
-            Nc, Dc = self._feedback(gains, tf, i)
-            Nr = reference_polynomial(Kp[i], Ti[i], Td[i], c.sample_time_s, b, self.c[i], c.derivative_filter_N, tf[i],
-                                      c.measurement_filter_order)
-            for models in self.models:
-                if not self._stable(models[i], Nc, Dc):
-                    return math.inf, math.inf
-                y = model_step_response(models[i], Nc, Dc, Nr, c.setpoint_hold_steps)
-                ise += float(np.sum((1.0 - y) ** 2) * c.sample_time_s)
-                overshoot = max(overshoot, 100.0 * max(0.0, float(np.max(y)) - 1.0))
-        return ise / (len(self.models) * c.n_loops), overshoot
+        for i in range(self.config.n_loops):
+            loop_ise, loop_overshoot = self.loop_setpoint_response(i, gains, tf, b)
+            if not math.isfinite(loop_ise):
+                return math.inf, math.inf
+            ise, overshoot = ise + loop_ise, max(overshoot, loop_overshoot)
+        return ise / self.config.n_loops, overshoot
+
+    def loop_setpoint_response(self, loop: int, gains: GainValues, tf: list[float], b: float) -> tuple[float, float]:
+        """(ISE mean over the models, worst overshoot [%]) of loop `loop`'s unit setpoint step on its own models
+        (model_setpoint_response for one decoupled loop); (inf, inf) where it is unstable on one."""
+        c = self.config
+        Kp, Ti, Td, _ = gains
+        Nc, Dc = self._feedback(gains, tf, loop)
+        Nr = reference_polynomial(Kp[loop], Ti[loop], Td[loop], c.sample_time_s, b, self.c[loop],
+                                  c.derivative_filter_N, tf[loop], c.measurement_filter_order)
+        ise, overshoot = 0.0, 0.0
+        for models in self.models:
+            if not self._stable(models[loop], Nc, Dc):
+                return math.inf, math.inf
+            y = model_step_response(models[loop], Nc, Dc, Nr, c.setpoint_hold_steps)
+            ise += float(np.sum((1.0 - y) ** 2) * c.sample_time_s)
+            overshoot = max(overshoot, 100.0 * max(0.0, float(np.max(y)) - 1.0))
+        return ise / len(self.models), overshoot
 
     def validate_models(self, vector) -> dict:
         """The search's result on the FMU against its prediction on the local models: {"predicted_load_cost",
@@ -717,7 +762,9 @@ class LoadDesign(OutcomeCache):
         """Differential evolution of `cost`, then a Nelder-Mead polish from its result (polish_evaluations(maxiter)
         per parameter at most); scipy's OptimizeResult of the better. Each generation is evaluated as a whole
         (deferred updating) on `pool_workers()` processes (tuning.search_pool): the same result for any number.
-        progress: counts every cost evaluation."""
+        progress: counts every cost evaluation. Several loops on the local models: `search_loops`."""
+        if self.models is not None and self.config.n_loops > 1:
+            return self.search_loops(seed, maxiter, popsize, progress)
         # the local models in this process (microseconds a candidate), the FMU on the search pool
         with (contextlib.nullcontext() if self.models is not None else
               SearchPool(self, LoadDesign.replica, (self.args, self.prepared()), self.pool_workers(),
@@ -736,6 +783,62 @@ class LoadDesign(OutcomeCache):
                 result.x, result.fun = polished.x, float(polished.fun)
             result.nfev += int(polished.nfev)
         return result
+
+    def loop_indices(self, loop: int) -> list[int]:
+        """The entries of a search vector that loop `loop`'s PID depends on: its Kp, Ti, Td (and Tf when tuned)."""
+        return [3 * loop, 3 * loop + 1, 3 * loop + 2] + ([self.gain_map.size + loop] if self.tune_filter else [])
+
+    def loop_cost(self, loop: int, vector) -> float:
+        """Loop `loop`'s share of `cost` on the local models with decoupled PIDs (vector: a whole search vector; only
+        loop_indices(loop) matter): DIVERGED_COST where the loop has no Kp interval or its Ms on its models exceeds
+        the limit, else penalised(loop_load_response)."""
+        gains, tf = self.gains(vector), self.filters(vector)
+        if self.kp_interval(loop, gains.Ti[loop], gains.Td[loop], tf[loop]) is None:
+            return DIVERGED_COST
+        if self.limit is not None and self.loop_models_ms(loop, gains, tf) > self.limit:
+            return DIVERGED_COST
+        return penalised(*self.loop_load_response(loop, gains, tf))
+
+    def search_loops(self, seed: int, maxiter: int, popsize: int, progress: Steps = QUIET):
+        """`search` of several decoupled loops on the local models (the fixed-PID searches' coupling is 0: search_map),
+        one loop at a time: on diag(the models) J_load is the sum of the loops' shares, the chatter, Ms and stability
+        each loop's own (`loop_cost`), so the joint optimum is the loops' optima together wherever no loop chatters
+        above MAX_CHATTER (the joint cost multiplies the whole sum by the worst chatter's penalty). Per loop a
+        differential evolution over its 3-4 entries (seed + loop), then its Nelder-Mead polish: the same number of
+        evaluations as `budget`'s joint search, each a third (two loops: half) of the work, and a search in 3-4
+        dimensions instead of 3-4 n. scipy's OptimizeResult with the joint `cost` of the loops' optima together."""
+        x = np.zeros(self.n)
+        calls = [0]
+
+        def counted_batch(fn):
+            def wrapped(population):
+                out = fn(population)
+                calls[0] += columns(population).shape[0]
+                progress.update(calls[0])
+                return out
+            return wrapped
+
+        for loop in range(self.config.n_loops):
+            idx = self.loop_indices(loop)
+
+            def loop_cost(sub, loop=loop, idx=idx):
+                vector = x.copy()
+                vector[idx] = sub
+                return self.loop_cost(loop, vector)
+            costs = counted_batch(lambda pop, f=loop_cost: np.array([f(v) for v in columns(pop)]))
+            found = differential_evolution(costs, [(-1.0, 1.0)] * len(idx), maxiter=maxiter, popsize=popsize,
+                                           seed=seed + loop, polish=False, tol=1e-6, vectorized=True,
+                                           updating="deferred")
+            best, best_cost = np.asarray(found.x), float(found.fun)
+            if best_cost < DIVERGED_COST:
+                polished = minimize(counted_batch(loop_cost), best, method="Nelder-Mead",
+                                    bounds=[(-1.0, 1.0)] * len(idx),
+                                    options={"maxfev": polish_evaluations(maxiter) * len(idx), "xatol": 1e-4,
+                                             "fatol": 1e-7})
+                if polished.fun < best_cost:
+                    best = np.asarray(polished.x)
+            x[idx] = best
+        return OptimizeResult(x=x, fun=float(self.cost(x)), nfev=calls[0], success=True)
 
     def search_verified(self, seed: int, maxiter: int, popsize: int, progress: Steps = QUIET) -> tuple:
         """`search` on the local models where `identify_models` found them, its result verified on the FMU
