@@ -18,7 +18,7 @@ from prlpid_fmi.loop.actions import ScheduledActionMap
 from prlpid_fmi.loop.env import PidTuningEnv
 from prlpid_fmi.loop.evaluation import rollout
 from prlpid_fmi.loop.gains import Gains
-from prlpid_fmi.tuning.design_rule import DesignResult
+from prlpid_fmi.tuning.design_result import DesignResult
 from prlpid_fmi.run.state import anchor_name, run_anchor, training_anchor
 from prlpid_fmi.scenario.load import load_scenario
 from prlpid_fmi.scenario.presets import preset, scenario_path

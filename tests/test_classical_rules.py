@@ -136,7 +136,7 @@ def test_the_setpoint_search_never_rejects_loads_worse_than_amigo_at_the_same_ms
     result = design_rule.tune_fixed_pid(config, baseline=dataclasses.replace(design_rule.BaselineConfig(), workers=1),
                                         seed=0, episodes=1, maxiter=6, popsize=6, max_sensitivity=2.0)
     refined = result.report.details.setpoint_refined
-    assert refined["classical_bound"] and refined["kept"]  # the bound was in force and the search moved the gains
+    assert refined.classical_bound and refined.kept  # the bound was in force and the search moved the gains
 
     Ts = config.sample_time_s
     P = control.sample_system(control.tf([1.0], [1.0, 2.0, 1.0]), Ts, method="zoh") * \

@@ -18,8 +18,9 @@ from prlpid_fmi.loop.gains import gains_from_values
 from prlpid_fmi.progress import QUIET
 from prlpid_fmi.scenario.presets import preset
 from prlpid_fmi.tuning import design_rule
-from prlpid_fmi.tuning.design_rule import (RANGE_HOLD, RANGE_ORDER, RELAX_FACTORS, Candidate, DesignDetails, Following,
-                                           NoiseLimits, Relaxation, following, priority, relaxations)
+from prlpid_fmi.tuning.design_result import DesignDetails, Following, Relaxation
+from prlpid_fmi.tuning.design_rule import (RANGE_HOLD, RANGE_ORDER, RELAX_FACTORS, Candidate, NoiseLimits, following,
+                                           priority, relaxations)
 
 TS = 0.1  # first_order: 1/(s - 1), Ts 0.1 s, setpoint range [-1, 1], setpoint_hold_steps 100
 STRICT = ([1.05], [50.0], [0.0], None)  # what a strict noise limit leaves: barely stabilising, almost no integral
@@ -195,7 +196,8 @@ def test_where_no_relaxation_settles_the_stabilising_pid_that_settles_is_kept(mo
 def test_the_design_report_is_json():
     import json
 
-    from prlpid_fmi.tuning.design_rule import DesignReport, requirements
+    from prlpid_fmi.tuning.design_result import DesignReport
+    from prlpid_fmi.tuning.design_rule import requirements
 
     c = _candidate(RELAXED, overshoot=np.float64(4.0))
     reqs = requirements(c, DeployConfig(), 2.0, 1.15)

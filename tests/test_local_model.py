@@ -227,13 +227,13 @@ def test_the_fixed_pid_on_local_models_is_no_worse_than_the_fmu_paths_on_the_uns
     generations), and its report says which path it took and how well the models predicted the FMU."""
     result = fixed_pid("identified")
     record = result.report.details.design_model
-    assert record["path"] == "identified" and record["agrees"] and record["validation_error"] < 1e-6
-    assert [m["order"] for m in record["models"]] == [1, 1, 1]
+    assert record.path == "identified" and record.agrees and record.validation_error < 1e-6
+    assert [m["order"] for m in record.models] == [1, 1, 1]
     traded = result.report.details.traded_for_overshoot
-    assert traded is not None and traded["on_models"]["kept"]  # searched on the models, verified on the FMU
-    assert record["setpoint_search"] == "identified"
-    assert traded["on_models"]["model_load_cost"] == pytest.approx(traded["load_cost"], rel=1e-6)
-    assert on_fmu.report.details.design_model["path"] == "fmu"
+    assert traded is not None and traded.on_models.kept  # searched on the models, verified on the FMU
+    assert record.setpoint_search == "identified"
+    assert traded.on_models.model_load_cost == pytest.approx(traded.load_cost, rel=1e-6)
+    assert on_fmu.report.details.design_model.path == "fmu"
 
     def ise(r):
         return next(q.value for q in r.report.requirements if q.name == "setpoint ISE")
@@ -253,9 +253,9 @@ def test_a_model_that_disagrees_with_the_fmu_sends_the_search_to_the_fmu(monkeyp
     monkeypatch.setattr(load_design, "identify", doubled)
     result = fixed_pid("identified")
     record = result.report.details.design_model
-    assert record["path"] == "fmu" and record["requested"] == "identified"
-    assert record["validation_error"] > 0.1 and not record["agrees"]
-    assert "differs" in record["note"]
+    assert record.path == "fmu" and record.requested == "identified"
+    assert record.validation_error > 0.1 and not record.agrees
+    assert "differs" in record.note
     np.testing.assert_allclose(result.gains.values()[0], on_fmu.gains.values()[0])
     assert result.cost == pytest.approx(on_fmu.cost)
 
@@ -319,7 +319,7 @@ def test_the_setpoint_search_on_the_local_models_reaches_the_independent_setpoin
     against this unit step), load IAE <= 1.15 x the design's load optimum and Ms <= 2 (+1 %)."""
     result = fixed_pid("identified")
     traded = result.report.details.traded_for_overshoot
-    assert traded["feasible"] and traded["on_models"]["kept"]
+    assert traded.feasible and traded.on_models.kept
     b = result.structure[0][0]
     ise, overshoot, load_iae, ms = _first_order_figures(result.gains.Kp[0], result.gains.Ti[0], result.gains.Td[0], b)
     ise_opt, overshoot_opt, load_opt, ms_opt = _first_order_figures(**SETPOINT_OPTIMUM)
@@ -340,8 +340,8 @@ def test_where_no_gains_within_the_load_tolerance_meet_the_overshoot_limit_the_n
     result = design_rule.tune_fixed_pid(preset("first_order"), baseline=dataclasses.replace(
         design_rule.BaselineConfig(), workers=1, load_tolerance=1.01), **{**BUDGET, "maxiter": 12, "popsize": 8})
     traded = result.report.details.traded_for_overshoot
-    assert traded["nearest_load_tolerance"] and not traded["feasible"]
-    assert traded["on_models"]["kept"] and traded["on_models"]["nearest_on_models"]
+    assert traded.nearest_load_tolerance and not traded.feasible
+    assert traded.on_models.kept and traded.on_models.nearest_on_models
     _, overshoot, load_iae, ms = _first_order_figures(result.gains.Kp[0], result.gains.Ti[0], result.gains.Td[0],
                                                       result.structure[0][0])
     assert overshoot <= 5.3 and ms <= 2.02

@@ -231,7 +231,7 @@ def test_classical_schedule_setting_is_auto_or_a_boolean_with_one_message(tmp_pa
 
 
 def _design(**extra):
-    from prlpid_fmi.tuning.design_rule import DesignResult
+    from prlpid_fmi.tuning.design_result import DesignResult
 
     return DesignResult.from_json({"gains": {"Kp": [8.3], "Ti": [5.8], "Td": [62.0]},
             "structure": {"setpoint_weight": [0.0], "derivative_weight": [0.0], "measurement_filter_s": [72.3]},

@@ -19,7 +19,7 @@ from prlpid_fmi.fmu.resolve import loop_units as units_of_loops
 from prlpid_fmi.loop.core import pid_structure
 from prlpid_fmi.metrics import overall_metric
 from prlpid_fmi.robustness.status import INFINITE_MS, ms_text, why
-from prlpid_fmi.tuning.design_rule import DesignReport, DesignResult
+from prlpid_fmi.tuning.design_result import DesignReport, DesignResult, Followed
 from prlpid_fmi.tuning.load_design import ACTIVE_TOLERANCE
 
 METRIC_COLUMNS = ("ISE", "IAE", "ITAE", "Overshoot", "SettlingTime", "RiseTime", "SteadyStateError",
@@ -265,29 +265,29 @@ def design_section(fixed: DesignResult, loop_names) -> str:
     if held:
         lines += ["", held]
     traded = design.traded_for_overshoot
-    if traded and traded["feasible"]:
+    if traded and traded.feasible:
         lines.append(f"No setpoint weight kept the overshoot within the limit with the load-optimal gains, so the gains "
-                     f"gave up load rejection ({number(traded['load_cost'] / design.load_optimum, 3)}x the optimum) "
-                     f"for an overshoot of {number(traded['Overshoot'], 3)} %.")
+                     f"gave up load rejection ({number(traded.load_cost / design.load_optimum, 3)}x the optimum) "
+                     f"for an overshoot of {number(traded.Overshoot, 3)} %.")
     refined = design.setpoint_refined
-    if refined and refined["kept"]:
+    if refined and refined.kept:
         lines.append(f"Within the load tolerance, gains searched on the identified local models for the least setpoint "
-                     f"ISE replaced the load-optimal ones: setpoint ISE {number(refined['ISE'] / refined['ISE_before'], 3)}"
-                     f"x theirs with their b, load IAE {number(refined['load_cost'] / design.load_optimum, 3)}x the "
-                     f"optimum, overshoot {number(refined['Overshoot'], 3)} % (both on the FMU)"
+                     f"ISE replaced the load-optimal ones: setpoint ISE {number(refined.ISE / refined.ISE_before, 3)}"
+                     f"x theirs with their b, load IAE {number(refined.load_cost / design.load_optimum, 3)}x the "
+                     f"optimum, overshoot {number(refined.Overshoot, 3)} % (both on the FMU)"
                      + ("; its load IAE was held no worse than SIMC's or AMIGO's PID tuned to the same Ms on the "
-                        "models." if refined.get("classical_bound") else "."))
+                        "models." if refined.classical_bound else "."))
     followed = design.followed_setpoints
-    replaced = bool(followed and followed["source"])
-    if traded and traded.get("nearest_load_tolerance"):
+    replaced = bool(followed and followed.source)
+    if traded and traded.nearest_load_tolerance:
         lines.append("No setpoint weight kept the overshoot within the limit with the load-optimal gains, and no gains "
                      "within the load tolerance (baseline.load_tolerance) did: the gains nearest it that meet the "
-                     f"overshoot limit are kept, load IAE {number(traded['load_cost'] / design.load_optimum, 3)}x "
-                     f"the optimum, overshoot {number(traded['Overshoot'], 3)} % (the overshoot limit ranks above the "
+                     f"overshoot limit are kept, load IAE {number(traded.load_cost / design.load_optimum, 3)}x "
+                     f"the optimum, overshoot {number(traded.Overshoot, 3)} % (the overshoot limit ranks above the "
                      "load tolerance).")
-    elif traded and not traded["feasible"]:  # the load optimum stays, with the b of least overshoot
-        best = (f"its best: load IAE {number(traded['load_cost'] / design.load_optimum, 3)}x the optimum, overshoot "
-                f"{number(traded['Overshoot'], 3)} %" if math.isfinite(traded["Overshoot"]) else
+    elif traded and not traded.feasible:  # the load optimum stays, with the b of least overshoot
+        best = (f"its best: load IAE {number(traded.load_cost / design.load_optimum, 3)}x the optimum, overshoot "
+                f"{number(traded.Overshoot, 3)} %" if math.isfinite(traded.Overshoot) else
                 "the setpoint episodes of its best candidate diverged")
         lines.append("No setpoint weight kept the overshoot within the limit with the load-optimal gains, and the search "
                      f"for gains that would, within the load tolerance, found none ({best})"
@@ -335,31 +335,31 @@ def _rule_sentences(report: DesignReport) -> list[str]:
     return out
 
 
-def _followed_sentence(followed: dict, load_optimum: float) -> str:
-    """fixed_pid.json design.followed_setpoints in words (tuning.design_rule.follow_setpoints)."""
-    result = (f"load IAE {number(followed['load_cost'] / load_optimum, 3)}x the optimum, worst overshoot "
-              f"{number(followed['Overshoot'], 3)} % on those episodes")
-    diverged = followed.get("load_optimal_diverged", True)
+def _followed_sentence(followed: Followed, load_optimum: float) -> str:
+    """DesignDetails.followed_setpoints in words (tuning.design_rule.follow_setpoints)."""
+    result = (f"load IAE {number(followed.load_cost / load_optimum, 3)}x the optimum, worst overshoot "
+              f"{number(followed.Overshoot, 3)} % on those episodes")
+    diverged = followed.load_optimal_diverged
     why = ("A fixed PID must follow the setpoint steps it is chosen on" if diverged else
            "deploy.max_overshoot is a limit of the deployed controller and baseline.load_tolerance a preference")
-    if followed["source"] == "search" and followed.get("objective") == "setpoint":
+    if followed.source == "search" and followed.objective == "setpoint":
         return (f"{why}, so the load tolerance was dropped; the least load IAE within the Ms, noise and overshoot "
                 "limits left setpoint steps between the low, middle and high setpoint unsettled, so these gains have "
                 f"the least setpoint ISE within those limits ({result}"
-                + (")." if followed["feasible"] else "; the overshoot limit could not be met).")
+                + (")." if followed.feasible else "; the overshoot limit could not be met).")
                 + " Load rejection is what it costs.")
-    if followed["source"] == "search":
+    if followed.source == "search":
         where = (" They were searched on the identified local models, then b chosen again and the overshoot checked "
-                 "on the FMU's episodes." if (followed.get("on_models") or {}).get("kept") else "")
+                 "on the FMU's episodes." if followed.on_models and followed.on_models.kept else "")
         return (f"{why}, so the load tolerance was dropped: these gains have the least load IAE that meets the "
                 f"overshoot limit on those episodes within the Ms and noise limits ({result}"
-                + (")." if followed["feasible"] else "; the overshoot limit could not be met).")
+                + (")." if followed.feasible else "; the overshoot limit could not be met).")
                 + where + " Load rejection is what it costs.")
-    if followed["source"] == "stabilising PID":
+    if followed.source == "stabilising PID":
         return (f"{why}, and no gains within the Ms and noise limits did, so the stabilising PID of the setpoint search "
                 f"is kept, with its best setpoint weight ({result}).")
     if not diverged:
-        best = (f"its best: {result}" if math.isfinite(followed["Overshoot"]) else
+        best = (f"its best: {result}" if math.isfinite(followed.Overshoot) else
                 "the setpoint episodes of its best candidate diverged")
         return f"Without the load tolerance no gains met the overshoot limit either ({best})."
     return ("A fixed PID must follow the setpoint steps it is chosen on, but neither a search without the load limit "

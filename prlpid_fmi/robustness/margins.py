@@ -542,8 +542,8 @@ def predicted_ms(config: TuningConfig, gains: GainValues, point: list[float]) ->
     Kp, Ti, _, _ = gains
     if found is None or len(Kp) != 1:
         return None
-    reference, plant = found
-    if math.isfinite(reference[1][0]) != math.isfinite(Ti[0]):
+    reference, plant = GainValues(*found[0]), found[1]  # the gains it was measured with
+    if math.isfinite(reference.Ti[0]) != math.isfinite(Ti[0]):
         return None  # with and without an integrator the windings differ by the arc at w = 0
 
     def controller(g):

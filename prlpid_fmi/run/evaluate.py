@@ -16,7 +16,7 @@ from prlpid_fmi.run.state import (deployed_controller, load_policy, load_trained
                                     run_anchor)
 from prlpid_fmi.rundir import write_atomic, write_json
 from prlpid_fmi.scenario.load import Scenario, scenario_to_yaml
-from prlpid_fmi.tuning.design_rule import DesignResult
+from prlpid_fmi.tuning.design_result import DesignResult
 
 
 @dataclass

@@ -13,7 +13,7 @@ from prlpid_fmi.deliver.rule import Deployed
 from prlpid_fmi.errors import RunError
 from prlpid_fmi.run.record import RunRecord
 from prlpid_fmi.scenario.load import Scenario, load_scenario
-from prlpid_fmi.tuning.design_rule import DesignResult
+from prlpid_fmi.tuning.design_result import DesignResult
 
 
 def one_line(exc: BaseException) -> str:

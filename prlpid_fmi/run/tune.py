@@ -51,7 +51,7 @@ from prlpid_fmi.schema.types import MAX_SEED
 
 if TYPE_CHECKING:
     from prlpid_fmi.deliver.candidates import ScheduleChoice
-    from prlpid_fmi.tuning.design_rule import DesignResult
+    from prlpid_fmi.tuning.design_result import DesignResult
 
 
 def tune(scenario_path: str | Path, timesteps: int | None = None, seed: int | None = None,

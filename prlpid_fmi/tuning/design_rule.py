@@ -44,12 +44,14 @@ import numpy as np
 from prlpid_fmi.config import BaselineConfig, DeployConfig, TuningConfig
 from prlpid_fmi.loop.core import pid_structure
 from prlpid_fmi.loop.evaluation import gains_rollout
-from prlpid_fmi.loop.gains import Gains, GainValues, gains_from_dict, gains_from_values
+from prlpid_fmi.loop.gains import GainValues, gains_from_values
 from prlpid_fmi.metrics import compute_metrics
 from prlpid_fmi.progress import QUIET, Steps
 from prlpid_fmi.robustness.margins import margins_of, setpoint_range_points
 from prlpid_fmi.robustness.status import meets_limit
 from prlpid_fmi.tuning.classical_rules import load_bound
+from prlpid_fmi.tuning.design_result import (CandidateRecord, DesignDetails, DesignReport, DesignResult, Followed,
+                                             Following, ModelPath, ModelSearch, Relaxation, Requirement, Trade)
 from prlpid_fmi.tuning.fixed_pid import FixedPid, detune_over, setpoint_pid
 from prlpid_fmi.tuning.load_design import (MODEL_TOLERANCE, SETPOINT_MODEL_MINIMUM, LoadDesign, SetpointDesign,
                                            model_budget, setpoint_weight)
@@ -73,155 +75,6 @@ class NoiseLimits:
     gain: float
     increment: float
     filter_tuned: bool
-
-
-@dataclass(frozen=True)
-class Relaxation:
-    """A noise preference given up for requirement 1: `limit` ("measurement_filter", "max_noise_gain",
-    "max_noise_increment") from `requested` to `used` (the filter: 0 / 1 for not searched / searched)."""
-
-    limit: str
-    requested: float
-    used: float
-
-
-@dataclass(frozen=True)
-class Following:
-    """Requirement 1 on the range episode: setpoint steps, those unsettled at the end of their hold, those settled
-    only after setpoint_hold_steps (slow), divergence, worst overshoot [% of the step], ISE [output units^2 s]."""
-
-    steps: int
-    unsettled: int
-    slow: int
-    diverged: bool
-    overshoot: float
-    ise: float
-
-    @property
-    def settles(self) -> bool:
-        return not self.diverged and self.unsettled == 0
-
-
-@dataclass(frozen=True)
-class Requirement:
-    """One requirement's measured value against its limit (limit None: a quantity minimised, no limit)."""
-
-    rank: int
-    name: str
-    value: float
-    limit: float | None
-    met: bool
-
-
-@dataclass(frozen=True)
-class DesignDetails:
-    """The load design's own record (fixed_pid.json "design" keys besides the rule's): the load cost and optimum
-    [output units s per input unit], the load step [fraction of the control span], the trades and refinements
-    (tuning.load_design's records: traded_for_overshoot, followed_setpoints, setpoint_refined; None where not
-    made), the Ms and noise estimates per point, the limits that held the design, the setpoint weights tried,
-    the stabilising PID's gains, the noise shares, the design model's record, and every candidate the rule ranked."""
-
-    objective: str = "load"
-    load_cost: float = math.nan
-    load_optimum: float | None = None
-    load_step: float = math.nan
-    traded_for_overshoot: dict | None = None
-    followed_setpoints: dict | None = None
-    setpoint_refined: dict | None = None
-    estimates: list = dataclasses.field(default_factory=list)
-    active_limits: list = dataclasses.field(default_factory=list)
-    setpoint_weights: list = dataclasses.field(default_factory=list)
-    stabilising_gains: dict | None = None
-    feasible: bool = True
-    fell_back_to_setpoint_search: bool = False
-    noise_increment_limit_relaxed: bool = False
-    noise: dict | None = None
-    design_model: dict = dataclasses.field(default_factory=dict)
-    candidates: list = dataclasses.field(default_factory=list)
-
-    @property
-    def held_by(self) -> set:
-        """The names of the limits that held the design (LoadDesign.active_limits)."""
-        return {a["limit"] for a in self.active_limits}
-
-    def as_json(self) -> dict:
-        return dataclasses.asdict(self)
-
-    @classmethod
-    def from_json(cls, design: dict) -> "DesignDetails":
-        """The record of a fixed_pid.json "design" (keys it does not know, from older files, are left out)."""
-        names = {f.name for f in dataclasses.fields(cls)}
-        return cls(**{k: v for k, v in design.items() if k in names and v is not None})
-
-
-@dataclass(frozen=True)
-class DesignReport:
-    """Which requirement bound the design (`bound`, one of the `Requirement` names), what was relaxed, each
-    requirement's measured value, requirement 1 on the range episode, and the search's own record (`details`)."""
-
-    bound: str
-    relaxed: tuple[Relaxation, ...]
-    requirements: tuple[Requirement, ...]
-    following: Following | None  # None only in a fixed_pid.json written before the rule by priority
-    details: DesignDetails
-
-    def as_json(self) -> dict:
-        """fixed_pid.json's "design": the search's record plus "bound", "relaxed", "requirements", "following"."""
-        return {**self.details.as_json(), "bound": self.bound,
-                "relaxed": [dataclasses.asdict(r) for r in self.relaxed],
-                "requirements": [dataclasses.asdict(r) for r in self.requirements],
-                "following": dataclasses.asdict(self.following) if self.following is not None else None}
-
-    @classmethod
-    def from_json(cls, design: dict) -> "DesignReport":
-        """The report of fixed_pid.json's "design" (as_json's form; a file written before the rule has only the
-        search's record: no bound, relaxations, requirements or following)."""
-        following = design.get("following")
-        return cls(bound=design.get("bound") or "",
-                   relaxed=tuple(Relaxation(**r) for r in design.get("relaxed") or ()),
-                   requirements=tuple(Requirement(**r) for r in design.get("requirements") or ()),
-                   following=Following(**following) if following else None,
-                   details=DesignDetails.from_json(design))
-
-
-@dataclass(frozen=True)
-class DesignResult:
-    """The fixed PID: gains, structure (b, c, Tf lists per loop), its search vector, load cost (objective "load") or
-    setpoint cost, the cost evaluations spent, and the design report (None for baseline.objective "setpoint")."""
-
-    action: np.ndarray
-    gains: Gains
-    cost: float
-    evaluations: int
-    structure: tuple
-    report: DesignReport | None = None
-
-    def structure_dict(self) -> dict:
-        """{"setpoint_weight", "derivative_weight", "measurement_filter_s"}: lists per loop (fixed_pid.json)."""
-        b, c, tf = self.structure
-        return {"setpoint_weight": list(b), "derivative_weight": list(c), "measurement_filter_s": list(tf)}
-
-    def as_json(self) -> dict:
-        """fixed_pid.json: {"action", "gains", "cost", "evaluations", "structure", "design": the design report}."""
-        return {"action": np.asarray(self.action).tolist(), "gains": self.gains.as_dict(), "cost": self.cost,
-                "evaluations": self.evaluations, "structure": self.structure_dict() if self.structure else None,
-                "design": self.report.as_json() if self.report is not None else {}}
-
-    @classmethod
-    def from_json(cls, data: dict) -> "DesignResult":
-        """The design of a fixed_pid.json (as_json's form). A file without "structure" (written before the 2-DOF law)
-        gives structure None: the controller's settings apply."""
-        s = data.get("structure")
-        structure = (tuple(map(float, s["setpoint_weight"])), tuple(map(float, s["derivative_weight"])),
-                     tuple(map(float, s["measurement_filter_s"]))) if s else None
-        design = data.get("design") or {}
-        return cls(action=np.asarray(data.get("action", ()), float), gains=gains_from_dict(data["gains"]),
-                   cost=float(data.get("cost", math.nan)), evaluations=int(data.get("evaluations", 0)),
-                   structure=structure, report=DesignReport.from_json(design) if design else None)
-
-    def gains_values(self) -> GainValues:
-        """The gains as GainValues, what LoopCore.step takes."""
-        return self.gains.values()
 
 
 @dataclass
@@ -311,7 +164,7 @@ class Designer:
         self.measured: dict | None = None
         self.evaluations = self.first.evaluations
         self.load_optimum: float | None = None
-        self.model_record: dict = {}  # the last load search's path (Designer.load_search)
+        self.model_record = ModelPath()  # the last load search's path (LoadDesign.search_verified)
 
     def design_under(self, limits: NoiseLimits, relaxed: tuple = ()) -> Candidate:
         """Requirements 2-6 at these noise limits: the load search (Ms and noise by the Kp interval), b for the
@@ -353,7 +206,7 @@ class Designer:
                 traded, second = self._trade(config, design, vector, weight, best_load, (b, c, tf))
                 # the load tolerance (requirement 4) missed, every limit above it met: the gains nearest the
                 # tolerance that meet the overshoot limit are kept (the search ranks by violation)
-                if traded["feasible"] or traded["nearest_load_tolerance"]:  # else the load optimum stays, with the
+                if traded.feasible or traded.nearest_load_tolerance:  # else the load optimum stays, with the
                     # b of least overshoot
                     vector = second
                     gains, tf = design.gains(vector[:-1]), design.filters(vector[:-1])
@@ -365,7 +218,7 @@ class Designer:
                     vector, choices = found
                     gains, tf = design.gains(vector[:-1]), design.filters(vector[:-1])
                     b = [SetpointDesign.weight(vector)] * config.n_loops
-            if traded is not None and not traded["feasible"] and not traded["nearest_load_tolerance"]:
+            if traded is not None and not traded.feasible and not traded.nearest_load_tolerance:
                 followed, found = follow_setpoints(config, design, self.first, best_load, deploy, seeds, seed,
                                                    maxiter, popsize, progress,
                                                    diverged=not follows_setpoints(choices, traded))
@@ -420,28 +273,26 @@ class Designer:
         return Candidate(vector, gains, structure, details, limits, relaxed, ms_met, overshoot, ise, cost)
 
     def _trade(self, config: TuningConfig, design: LoadDesign, vector, weight: float, best_load: float,
-               structure: tuple) -> tuple[dict, np.ndarray]:
+               structure: tuple) -> tuple[Trade, np.ndarray]:
         """The setpoint search within the load tolerance (SetpointDesign) from the load optimum with b = weight:
-        (what it found: {"load_cost", "ISE", "Overshoot", "feasible", "nearest_load_tolerance": every limit but the load
-        tolerance met, "evaluations"}, its vector). Where the load search used the local models, the search runs on
-        them first (`_on_models`: setpoint steps and load cost on the models, verified on the FMU); where the FMU does
+        (what it found, a Trade: feasible, or nearest_load_tolerance where every limit but the load tolerance is
+        met; its vector). Where the load search used the local models, the search runs on them first (`_on_models`: setpoint steps and load cost on the models, verified on the FMU); where the FMU does
         not confirm it, it runs with the setpoint responses on the FMU, its load cost still on the models (its load
-        limit the models' optimum's) and its result's load IAE verified on the FMU ("load_cost" the FMU's,
-        "load_cost_model", "validation_error"); where the two differ by more than MODEL_TOLERANCE, the search runs
-        again on the FMU (design_model's "setpoint_search")."""
+        limit the models' optimum's) and its result's load IAE verified on the FMU (Trade.load_cost the FMU's,
+        load_cost_model, validation_error); where the two differ by more than MODEL_TOLERANCE, the search runs
+        again on the FMU (ModelPath.setpoint_search)."""
         baseline, deploy, seed = self.baseline, self.deploy, self.seed
         record = None
         if design.models is not None:
             record, found = self._on_models(config, design, vector, weight, best_load, structure, math.inf)
             if found is not None:
-                self.model_record["setpoint_search"] = "identified"
-                feasible = record["load_cost"] <= baseline.load_tolerance * best_load
-                return {"load_cost": record["load_cost"], "ISE": record["ISE"], "Overshoot": record["Overshoot"],
-                        "feasible": feasible, "nearest_load_tolerance": not feasible,
-                        "evaluations": record["evaluations"], "on_models": record}, found[0]
+                self.model_record.setpoint_search = "identified"
+                feasible = record.load_cost <= baseline.load_tolerance * best_load
+                return Trade(record.load_cost, record.ISE, record.Overshoot, feasible, not feasible,
+                             record.evaluations, on_models=record), found[0]
         while True:
             on_models = design.models is not None
-            reference = self.model_record["predicted_load_cost"] if on_models else best_load
+            reference = self.model_record.predicted_load_cost if on_models else best_load
             trade = SetpointDesign(design, reference, baseline.load_tolerance, deploy.max_overshoot, self.seeds)
             self.progress.step("setpoint ISE within the overshoot limit (no b met it)"
                                + (" on the local models' load cost" if on_models else ""),
@@ -456,27 +307,26 @@ class Designer:
             finally:
                 trade.close()
             self.evaluations += int(second.nfev)
-            found = {"load_cost": load, "ISE": ise, "Overshoot": overshoot, "feasible": feasible,
-                     "nearest_load_tolerance": nearest, "evaluations": int(second.nfev), "on_models": record}
+            found = Trade(load, ise, overshoot, feasible, nearest, int(second.nfev), on_models=record)
             if not on_models:
-                if "setpoint_search" not in self.model_record:
-                    self.model_record["setpoint_search"] = "fmu"
+                if self.model_record.setpoint_search is None:
+                    self.model_record.setpoint_search = "fmu"
                 return found, np.asarray(second.x)
             x = np.asarray(second.x)
             measured = design.load_cost(design.gains(x[:-1]), design.filters(x[:-1]))
             error = abs(measured - load) / measured if measured > 0 else math.inf
-            found.update({"load_cost": measured, "load_cost_model": load, "validation_error": error})
+            found = dataclasses.replace(found, load_cost=measured, load_cost_model=load, validation_error=error)
             if error <= MODEL_TOLERANCE or min(measured, load) >= DIVERGED_COST:  # both diverge: the models agree
-                self.model_record["setpoint_search"] = "identified"
+                self.model_record.setpoint_search = "identified"
                 return found, x
-            self.model_record["setpoint_search"] = "fmu"
-            self.model_record["setpoint_search_note"] = (
+            self.model_record.setpoint_search = "fmu"
+            self.model_record.setpoint_search_note = (
                 f"the setpoint search's result has load cost {measured:.4g} on the FMU, {load:.4g} on the models "
                 f"({100 * error:.1f} % apart, tolerance {100 * MODEL_TOLERANCE:.0f} %): that search ran again on the FMU")
             design.use_fmu()
 
     def _on_models(self, config: TuningConfig, design: LoadDesign, vector, weight: float, best_load: float,
-                   structure: tuple, ise_to_beat: float) -> tuple[dict, tuple | None]:
+                   structure: tuple, ise_to_beat: float) -> tuple[ModelSearch, tuple | None]:
         """Requirements 3-5 on the local models (the load search used them): the least setpoint ISE within the load
         tolerance and the overshoot limit, searched on the models (SetpointDesign with on_models: a unit step, from the
         load optimum with b = weight; tuning.load_design.model_budget's generations and population, at least
@@ -486,12 +336,13 @@ class Designer:
         optimum's, and, replacing an optimum that met the limits, where it settles the range episode (requirement 1).
         ise_to_beat inf: no b met the overshoot limit with the optimum; then where no gains on the models meet the
         load tolerance with the overshoot limit, those nearest it that meet every other limit (the search ranks by
-        violation) are verified and kept the same way, the load tolerance given up (requirement 3 ranks above 4). Returns (the record of fixed_pid.json's
-        "setpoint_refined" or "traded_for_overshoot"'s "on_models", (vector with b, the b table) or None)."""
+        violation) are verified and kept the same way, the load tolerance given up (requirement 3 ranks above 4).
+        Returns (the ModelSearch of DesignDetails.setpoint_refined or Trade.on_models, (vector with b, the b table)
+        or None)."""
         baseline, deploy, seeds, progress = self.baseline, self.deploy, self.seeds, self.progress
         trading = not math.isfinite(ise_to_beat)  # no b met the overshoot limit: the load tolerance may yield to it
         bound = None if trading or config.n_loops > 1 else self._rule_bound(design, design.filters(vector))
-        trade = SetpointDesign(design, self.model_record["predicted_load_cost"], baseline.load_tolerance,
+        trade = SetpointDesign(design, self.model_record.predicted_load_cost, baseline.load_tolerance,
                                deploy.max_overshoot, seeds, on_models=True, rule_bound=bound)
         maxiter, popsize = model_budget(self.maxiter, self.popsize, SETPOINT_MODEL_MINIMUM)
         progress.step("least setpoint ISE within the load tolerance on the local models", trade.budget(maxiter, popsize))
@@ -505,10 +356,10 @@ class Designer:
         finally:
             trade.close()
         self.evaluations += int(second.nfev)
-        record = {"evaluations": int(second.nfev), "model_ise_ratio": model_ise / start_ise if start_ise > 0 else None,
-                  "model_load_cost": model_load, "model_overshoot": model_overshoot, "feasible_on_models": feasible,
-                  "nearest_on_models": nearest, "ISE_before": ise_to_beat if math.isfinite(ise_to_beat) else None,
-                  "classical_bound": bound is not None, "kept": False}
+        record = ModelSearch(int(second.nfev), model_load, model_overshoot, feasible,
+                             model_ise_ratio=model_ise / start_ise if start_ise > 0 else None, nearest_on_models=nearest,
+                             ISE_before=ise_to_beat if math.isfinite(ise_to_beat) else None,
+                             classical_bound=bound is not None)
         if not (feasible or (trading and nearest)) or not (trading or model_ise <= start_ise):
             return record, None
         x = np.asarray(second.x)
@@ -517,15 +368,15 @@ class Designer:
         load = design.load_cost(gains, tf)
         b, rows = setpoint_weight(config, gains, (structure[0], structure[1], tf), seeds, deploy.max_overshoot)
         row = next(r for r in rows if r["b"] == b)
-        record.update({"load_cost": load, "ISE": row["ISE"], "Overshoot": row["Overshoot"], "b": b})
+        record.load_cost, record.ISE, record.Overshoot, record.b = load, row["ISE"], row["Overshoot"], b
         if not ((trading or load <= baseline.load_tolerance * best_load) and row["ISE"] < ise_to_beat
                 and row["Overshoot"] <= 100.0 * deploy.max_overshoot):
             return record, None
         if not trading:  # replacing gains that met every limit: only by gains that settle the range
-            record["settles_range"] = following(config, gains, ([b] * config.n_loops, structure[1], tf)).settles
-            if not record["settles_range"]:
+            record.settles_range = following(config, gains, ([b] * config.n_loops, structure[1], tf)).settles
+            if not record.settles_range:
                 return record, None
-        record["kept"] = True
+        record.kept = True
         return record, (np.append(x[:-1], 2.0 * b - 1.0), rows)
 
     @staticmethod
@@ -564,9 +415,9 @@ class Designer:
         structure = ([weight] * config.n_loops, list(c), list(tf))
         details = DesignDetails(
             load_cost=load, load_optimum=self.load_optimum, load_step=self.baseline.load_step,
-            followed_setpoints={"source": "stabilising PID", "load_optimal_diverged": True, "load_cost": load,
-                                "ISE": best["ISE"], "Overshoot": best["Overshoot"],
-                                "feasible": best["Overshoot"] <= 100.0 * self.deploy.max_overshoot, "evaluations": 0},
+            followed_setpoints=Followed("stabilising PID", load_optimal_diverged=True, load_cost=load, ISE=best["ISE"],
+                                        Overshoot=best["Overshoot"],
+                                        feasible=best["Overshoot"] <= 100.0 * self.deploy.max_overshoot),
             setpoint_weights=rows, stabilising_gains=first.gains.as_dict(), design_model=self.model_record)
         return Candidate(np.asarray(first.action), gains, structure, details, limits, (), True, best["Overshoot"],
                          best["ISE"], details.load_cost)
@@ -643,7 +494,7 @@ def bound_by(candidate: Candidate, reqs: tuple[Requirement, ...]) -> str:
     if "max_sensitivity" in active:
         return reqs[1].name
     traded = d.traded_for_overshoot
-    if (traded and traded.get("feasible")) or (d.followed_setpoints or {}).get("source"):
+    if (traded and traded.feasible) or (d.followed_setpoints and d.followed_setpoints.source):
         return reqs[2].name
     if active & {"max_noise_gain", "max_noise_increment"}:
         return reqs[5].name if "max_noise_gain" in active else reqs[6].name
@@ -673,12 +524,9 @@ def design_load_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int
         candidates.append(candidate)
     kept = min(candidates, key=lambda c: priority(c, deploy, load_limit))
     reqs = requirements(kept, deploy, max_sensitivity, baseline.load_tolerance)
-    details = dataclasses.replace(kept.details, candidates=[
-        {"relaxed": [dataclasses.asdict(r) for r in c.relaxed], "following": dataclasses.asdict(c.following),
-         "load_cost": float(c.load_cost), "ISE": float(c.ise), "Overshoot": float(c.overshoot),
-         "ms_met": bool(c.ms_met),
-         "gains": {k: np.asarray(v).tolist() for k, v in gains_from_values(*c.gains).as_dict().items()},
-         "kept": c is kept} for c in candidates])
+    details = dataclasses.replace(kept.details, candidates=tuple(
+        CandidateRecord(tuple(c.relaxed), c.following, float(c.load_cost), float(c.ise), float(c.overshoot),
+                        bool(c.ms_met), gains_from_values(*c.gains), c is kept) for c in candidates))
     report = DesignReport(bound_by(kept, reqs), tuple(kept.relaxed), reqs, kept.following, details)
     return DesignResult(kept.vector, gains_from_values(*kept.gains), kept.load_cost, designer.evaluations,
                         kept.structure, report)
@@ -703,15 +551,15 @@ def tune_fixed_pid(config: TuningConfig, seed: int = 0, episodes: int | None = N
     return DesignResult(found.action, found.gains, found.cost, found.evaluations, found.structure)
 
 
-def follows_setpoints(choices: list[dict], traded: dict | None) -> bool:
+def follows_setpoints(choices: list[dict], traded: Trade | None) -> bool:
     """Whether the gains of the load search follow the training episodes b is chosen on: with some b of
     setpoint_weight's table they did not diverge, or the trade found gains within every limit."""
-    return any(math.isfinite(r["ISE"]) for r in choices) or bool(traded and traded["feasible"])
+    return any(math.isfinite(r["ISE"]) for r in choices) or bool(traded and traded.feasible)
 
 
 def follow_setpoints(config: TuningConfig, design: LoadDesign, first: FixedPid, best_load: float, deploy: DeployConfig,
                      seeds: list[int], seed: int, maxiter: int, popsize: int, progress: Steps,
-                     diverged: bool = True) -> tuple[dict, tuple | None]:
+                     diverged: bool = True) -> tuple[Followed, tuple | None]:
     """Where no gains within the load tolerance met the overshoot limit: the least load cost within the Ms, noise and
     overshoot limits (the rule's order: the overshoot limit before the load tolerance, nearest that), without a load
     limit, searched over the whole box. Its best is kept where it meets every limit,
@@ -720,19 +568,16 @@ def follow_setpoints(config: TuningConfig, design: LoadDesign, first: FixedPid, 
     load search used the local models the search runs on them first (`_follow_on_models`); its result stands where
     the FMU confirms it and it settles the range episode, else the search runs with the setpoint episodes on the FMU.
     Where the least load IAE leaves a step of the range episode unsettled (requirement 1 ranks first), the least
-    setpoint ISE within the same limits is kept if it settles them ("objective": "setpoint"). Returns (what was
-    found: {"source": "search" | "stabilising PID" | None, "objective", "load_optimal_diverged", "load_cost", "ISE",
-    "Overshoot", "feasible", "evaluations", "on_models"}, (vector, gains, (b, c, Tf)) to keep, or None: the gains
-    stay)."""
+    setpoint ISE within the same limits is kept if it settles them (objective "setpoint"). Returns (what was
+    found, a Followed, (vector, gains, (b, c, Tf)) to keep, or None: the gains stay)."""
     record = None
     if design.models is not None:
         record, kept = _follow_on_models(config, design, best_load, deploy, seeds, seed, maxiter, popsize, progress)
         if kept is not None and following(config, kept[1], kept[2]).settles:
-            return {"source": "search", "objective": "load", "load_optimal_diverged": diverged,
-                    "load_cost": record["load_cost"], "ISE": record["ISE"], "Overshoot": record["Overshoot"],
-                    "feasible": True, "evaluations": record["evaluations"], "on_models": record}, kept
+            return Followed("search", "load", diverged, record.load_cost, record.ISE, record.Overshoot, True,
+                            record.evaluations, record), kept
         if kept is not None:
-            record.update({"kept": False, "settles_range": False})
+            record.kept, record.settles_range = False, False
     args = (config, design, best_load, deploy, seeds, seed, maxiter, popsize, progress, diverged, record)
     found, kept = _follow_on_fmu(*args, objective="load")
     if kept is not None and not following(config, kept[1], kept[2]).settles:
@@ -742,21 +587,22 @@ def follow_setpoints(config: TuningConfig, design: LoadDesign, first: FixedPid, 
     if kept is not None:
         return found, kept
     if not diverged:
-        return {**found, "source": None}, None
+        return dataclasses.replace(found, source=None), None
     gains = first.gains.values()
     _, c, tf = first.structure
     weight, rows = setpoint_weight(config, gains, first.structure, seeds, deploy.max_overshoot)
     best = next(r for r in rows if r["b"] == weight)
     if not math.isfinite(best["ISE"]):
-        return {**found, "source": None}, None
-    found = {**found, "source": "stabilising PID", "load_cost": design.load_cost(gains, list(tf)), "ISE": best["ISE"],
-             "Overshoot": best["Overshoot"], "feasible": best["Overshoot"] <= 100.0 * deploy.max_overshoot}
+        return dataclasses.replace(found, source=None), None
+    found = dataclasses.replace(found, source="stabilising PID", load_cost=design.load_cost(gains, list(tf)),
+                                ISE=best["ISE"], Overshoot=best["Overshoot"],
+                                feasible=best["Overshoot"] <= 100.0 * deploy.max_overshoot)
     return found, (np.asarray(first.action), gains, ([weight] * config.n_loops, list(c), list(tf)))
 
 
 def _follow_on_fmu(config: TuningConfig, design: LoadDesign, best_load: float, deploy: DeployConfig, seeds: list[int],
-                   seed: int, maxiter: int, popsize: int, progress: Steps, diverged: bool, record: dict | None,
-                   objective: str) -> tuple[dict, tuple | None]:
+                   seed: int, maxiter: int, popsize: int, progress: Steps, diverged: bool,
+                   record: ModelSearch | None, objective: str) -> tuple[Followed, tuple | None]:
     """follow_setpoints' search with the setpoint episodes on the FMU, minimising the load cost (objective "load") or
     the setpoint ISE ("setpoint") within the Ms, noise and overshoot limits: (what it found, (vector, gains, (b, c,
     Tf)) where it meets every limit or, where the load-optimal gains diverged, it follows the episodes; else None)."""
@@ -766,9 +612,7 @@ def _follow_on_fmu(config: TuningConfig, design: LoadDesign, best_load: float, d
                   + (" (the load-optimal gains diverge on the setpoint episodes)" if diverged else ""),
                   follow.budget(maxiter, popsize, whole_box=True))
     result, (load, ise, overshoot), feasible = _whole_box(follow, seed, maxiter, popsize, progress)
-    found = {"source": "search", "objective": objective, "load_optimal_diverged": diverged, "load_cost": load,
-             "ISE": ise, "Overshoot": overshoot, "feasible": feasible, "evaluations": int(result.nfev),
-             "on_models": record}
+    found = Followed("search", objective, diverged, load, ise, overshoot, feasible, int(result.nfev), record)
     if not (feasible or (diverged and math.isfinite(ise))):
         return found, None
     vector = np.asarray(result.x)
@@ -788,19 +632,18 @@ def _whole_box(follow: SetpointDesign, seed: int, generations: int, popsize: int
 
 def _follow_on_models(config: TuningConfig, design: LoadDesign, best_load: float, deploy: DeployConfig,
                       seeds: list[int], seed: int, maxiter: int, popsize: int, progress: Steps
-                      ) -> tuple[dict, tuple | None]:
+                      ) -> tuple[ModelSearch, tuple | None]:
     """follow_setpoints' search on the local models (SetpointDesign on_models: unit setpoint steps and the load cost
     on the models, tuning.load_design.model_budget's generations, at least SETPOINT_MODEL_MINIMUM), then verified on
     the FMU: b chosen again on the training episodes (`setpoint_weight`), kept where its overshoot there is within the
-    limit. Returns (the record of followed_setpoints' "on_models", (vector with b, gains, (b, c, Tf)) or None)."""
+    limit. Returns (Followed.on_models, (vector with b, gains, (b, c, Tf)) or None)."""
     follow = SetpointDesign(design, best_load, math.inf, deploy.max_overshoot, seeds, on_models=True,
                             objective="load")
     generations, size = model_budget(maxiter, popsize, SETPOINT_MODEL_MINIMUM)
     progress.step("least load IAE within the overshoot limit on the local models",
                   follow.budget(generations, size, whole_box=True))
     result, (model_load, _, model_overshoot), feasible = _whole_box(follow, seed, generations, size, progress)
-    record = {"evaluations": int(result.nfev), "model_load_cost": model_load, "model_overshoot": model_overshoot,
-              "feasible_on_models": feasible, "kept": False}
+    record = ModelSearch(int(result.nfev), model_load, model_overshoot, feasible)
     if not feasible:
         return record, None
     x = np.asarray(result.x)
@@ -808,9 +651,9 @@ def _follow_on_models(config: TuningConfig, design: LoadDesign, best_load: float
     progress.step("the models' choice: b and load cost verified on the FMU")
     b, rows = setpoint_weight(config, gains, (list(design.b), list(design.c), tf), seeds, deploy.max_overshoot)
     row = next(r for r in rows if r["b"] == b)
-    record.update({"load_cost": design.load_cost(gains, tf), "ISE": row["ISE"], "Overshoot": row["Overshoot"],
-                   "b": b})
+    record.load_cost, record.ISE, record.Overshoot, record.b = (design.load_cost(gains, tf), row["ISE"],
+                                                                row["Overshoot"], b)
     if not (math.isfinite(row["ISE"]) and row["Overshoot"] <= 100.0 * deploy.max_overshoot):
         return record, None
-    record["kept"] = True
+    record.kept = True
     return record, (np.append(x[:-1], 2.0 * b - 1.0), gains, ([b] * config.n_loops, list(design.c), tf))

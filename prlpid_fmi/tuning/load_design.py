@@ -56,6 +56,7 @@ from prlpid_fmi.robustness.loop_models import loop_plants
 from prlpid_fmi.robustness.loop_models import stable as loop_stable
 from prlpid_fmi.robustness.loop_models import step_responses
 from prlpid_fmi.robustness.margins import pid_frequency_response, setpoint_range_points
+from prlpid_fmi.tuning.design_result import ModelPath
 from prlpid_fmi.tuning.load_experiment import (DIVERGED_COST, load_config, load_iae, open_core, parameter_samples,
                                                plant_responses, signed_loads, start_measurement)
 from prlpid_fmi.tuning.search_pool import SearchPool, search_fmus, search_workers
@@ -725,17 +726,18 @@ class LoadDesign(OutcomeCache):
             overshoot = max(overshoot, 100.0 * max(0.0, float(np.max(y)) - 1.0))
         return ise / len(self.models), overshoot
 
-    def validate_models(self, vector) -> dict:
-        """The search's result on the FMU against its prediction on the local models: {"predicted_load_cost",
-        "fmu_load_cost", "fmu_chatter", "validation_error" (|FMU - model| / FMU), "tolerance", "agrees"}: agrees when
-        the error is at most MODEL_TOLERANCE and the FMU's chatter at most MAX_CHATTER."""
+    def validate_models(self, vector, record: ModelPath) -> ModelPath:
+        """record with the search's result on the FMU against its prediction on the local models: predicted_load_cost,
+        fmu_load_cost, fmu_chatter, validation_error (|FMU - model| / FMU), tolerance, agrees (the error at most
+        MODEL_TOLERANCE and the FMU's chatter at most MAX_CHATTER)."""
         gains, tf = self.gains(vector), self.filters(vector)
         predicted, _ = self.model_load_response(gains, tf)
         measured, chatter = self.load_response(gains, tf)
         error = abs(measured - predicted) / measured if measured > 0 else math.inf
-        return {"predicted_load_cost": float(predicted), "fmu_load_cost": float(measured), "fmu_chatter": float(chatter),
-                "validation_error": float(error), "tolerance": MODEL_TOLERANCE,
-                "agrees": bool(error <= MODEL_TOLERANCE and chatter <= MAX_CHATTER and measured < DIVERGED_COST)}
+        return dataclasses.replace(
+            record, predicted_load_cost=float(predicted), fmu_load_cost=float(measured), fmu_chatter=float(chatter),
+            validation_error=float(error), tolerance=MODEL_TOLERANCE,
+            agrees=bool(error <= MODEL_TOLERANCE and chatter <= MAX_CHATTER and measured < DIVERGED_COST))
 
     def use_fmu(self) -> None:
         """The search's load cost on the FMU from here on (the local models dropped, their outcomes forgotten; several
@@ -843,10 +845,8 @@ class LoadDesign(OutcomeCache):
     def search_verified(self, seed: int, maxiter: int, popsize: int, progress: Steps = QUIET) -> tuple:
         """`search` on the local models where `identify_models` found them, its result verified on the FMU
         (`validate_models`; its cost is then the FMU's); where they disagree, or without models, `search` on the FMU.
-        Returns (scipy's result, nfev the evaluations of both searches; the record of fixed_pid.json's
-        "design_model": {"requested", "path" ("identified" | "fmu"), "note", "models", and validate_models' keys})."""
-        record = {"requested": self.design_model, "path": "fmu", "note": self.model_note,
-                  "models": self.model_records()}
+        Returns (scipy's result, nfev the evaluations of both searches; the path taken, a ModelPath)."""
+        record = ModelPath(self.design_model, "fmu", self.model_note, self.model_records())
         spent = 0
         if self.models is not None:
             generations, population = model_budget(maxiter, popsize)
@@ -854,16 +854,15 @@ class LoadDesign(OutcomeCache):
                           self.budget(generations, population))
             result = self.search(seed, generations, population, progress=progress)
             progress.step("load design: the identified models' choice verified on the FMU")
-            check = self.validate_models(result.x)
-            record.update(check)
-            if check["agrees"]:
-                record["path"] = "identified"
-                result.fun = penalised(check["fmu_load_cost"], check["fmu_chatter"])
+            record = self.validate_models(result.x, record)
+            if record.agrees:
+                record.path = "identified"
+                result.fun = penalised(record.fmu_load_cost, record.fmu_chatter)
                 return result, record
-            record["note"] = (f"the FMU's load cost {check['fmu_load_cost']:.4g} differs from the models' "
-                              f"{check['predicted_load_cost']:.4g} by {100 * check['validation_error']:.1f} % "
-                              f"(tolerance {100 * check['tolerance']:.0f} %) or the loop chatters on the FMU "
-                              f"({check['fmu_chatter']:.3f}): the search ran on the FMU")
+            record.note = (f"the FMU's load cost {record.fmu_load_cost:.4g} differs from the models' "
+                           f"{record.predicted_load_cost:.4g} by {100 * record.validation_error:.1f} % "
+                           f"(tolerance {100 * record.tolerance:.0f} %) or the loop chatters on the FMU "
+                           f"({record.fmu_chatter:.3f}): the search ran on the FMU")
             spent = int(result.nfev)
             self.use_fmu()
         progress.step("load design (differential evolution, then Nelder-Mead)", self.budget(maxiter, popsize))

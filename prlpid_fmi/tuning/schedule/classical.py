@@ -48,7 +48,7 @@ from prlpid_fmi.tuning.schedule.extraction import operating_setpoints
 from prlpid_fmi.tuning.schedule.table import GainSchedule, schedule_from_rows
 
 if TYPE_CHECKING:
-    from prlpid_fmi.tuning.design_rule import DesignResult
+    from prlpid_fmi.tuning.design_result import DesignResult
 
 CLASSICAL_POINTS = 5  # breakpoints of the classical schedule before refinement
 NONLINEAR_GAIN_RATIO = 1.25  # |P| at the ends of the range vs the middle, beyond which "auto" builds the schedule
@@ -129,7 +129,7 @@ def local_design(config: TuningConfig, setpoint: float, start: GainValues, basel
         design.close()
     return final, {"setpoint": float(setpoint), "load_cost": float(cost), "Ms_estimate": estimate,
                    "detuned": (not kept) and repaired != gains, "kept_fixed": kept,
-                   "design_model": {k: v for k, v in record.items() if k != "models"}}
+                   "design_model": {k: v for k, v in dataclasses.asdict(record).items() if k != "models"}}
 
 
 def _row(gains: GainValues) -> dict:
