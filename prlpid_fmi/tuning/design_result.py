@@ -48,6 +48,14 @@ class ModelSearch:
         return None if data is None else cls(**_known(cls, data))
 
 
+def _with_on_models(cls, data: dict | None):
+    """cls (a record with an "on_models" ModelSearch) of its JSON form; None for None."""
+    if data is None:
+        return None
+    known = _known(cls, data)
+    return cls(**{**known, "on_models": ModelSearch.from_json(known.get("on_models"))})
+
+
 @dataclass
 class Trade:
     """The setpoint search within the load tolerance where no b met the overshoot limit (fixed_pid.json's
@@ -68,10 +76,7 @@ class Trade:
 
     @classmethod
     def from_json(cls, data: dict | None) -> "Trade | None":
-        if data is None:
-            return None
-        known = _known(cls, data)
-        return cls(**{**known, "on_models": ModelSearch.from_json(known.get("on_models"))})
+        return _with_on_models(cls, data)
 
 
 @dataclass
@@ -93,10 +98,7 @@ class Followed:
 
     @classmethod
     def from_json(cls, data: dict | None) -> "Followed | None":
-        if data is None:
-            return None
-        known = _known(cls, data)
-        return cls(**{**known, "on_models": ModelSearch.from_json(known.get("on_models"))})
+        return _with_on_models(cls, data)
 
 
 @dataclass
