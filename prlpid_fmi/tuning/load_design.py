@@ -185,17 +185,16 @@ def _exact_ok(plants, shape, sign: float, lo: float, hi: float, limit: float):
     ends = np.maximum.accumulate(forbidden[:, 1]) if len(forbidden) else forbidden[:, 1]
     starts = np.concatenate([[lo], np.maximum(ends, lo)])      # an allowed piece starts where the covered run ends
     stops = np.concatenate([np.minimum(forbidden[:, 0], hi), [hi]])   # and stops where the next interval starts
-    kept = []
-    for a, b in zip(starts, stops):
-        if not b >= a:
-            continue
-        k = sign * np.geomspace(a, b, STABILITY_CHECKS)
-        stable = np.all([np.abs(plant.scan(k, g, noise=False)[2] - reference) < 0.5 * math.pi
-                         for (plant, reference), g in zip(plants, shapes)], axis=0)
-        if stable.any() and not stable.all():
-            return None
-        if stable.all():
-            kept.append((a, b))
+    pieces = [(a, b) for a, b in zip(starts, stops) if b >= a]
+    if not pieces:
+        return lambda mags: np.zeros(len(mags), bool)
+    # every piece's checks at once: one scan per plant response
+    k = sign * np.concatenate([np.geomspace(a, b, STABILITY_CHECKS) for a, b in pieces])
+    stable = np.all([np.abs(plant.scan(k, g, noise=False)[2] - reference) < 0.5 * math.pi
+                     for (plant, reference), g in zip(plants, shapes)], axis=0).reshape(len(pieces), STABILITY_CHECKS)
+    if np.any(stable.any(axis=1) & ~stable.all(axis=1)):
+        return None
+    kept = [piece for piece, ok in zip(pieces, stable.all(axis=1)) if ok]
     if not kept:
         return lambda mags: np.zeros(len(mags), bool)
     low, high = np.array(kept).T
