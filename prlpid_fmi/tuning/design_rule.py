@@ -276,7 +276,8 @@ class Designer:
                structure: tuple) -> tuple[Trade, np.ndarray]:
         """The setpoint search within the load tolerance (SetpointDesign) from the load optimum with b = weight:
         (what it found, a Trade: feasible, or nearest_load_tolerance where every limit but the load tolerance is
-        met; its vector). Where the load search used the local models, the search runs on them first (`_on_models`: setpoint steps and load cost on the models, verified on the FMU); where the FMU does
+        met; its vector). Where the load search used the local models, the search runs on them first (`_on_models`:
+        setpoint steps and load cost on the models, verified on the FMU); where the FMU does
         not confirm it, it runs with the setpoint responses on the FMU, its load cost still on the models (its load
         limit the models' optimum's) and its result's load IAE verified on the FMU (Trade.load_cost the FMU's,
         load_cost_model, validation_error); where the two differ by more than MODEL_TOLERANCE, the search runs
@@ -357,7 +358,8 @@ class Designer:
             trade.close()
         self.evaluations += int(second.nfev)
         record = ModelSearch(int(second.nfev), model_load, model_overshoot, feasible,
-                             model_ise_ratio=model_ise / start_ise if start_ise > 0 else None, nearest_on_models=nearest,
+                             model_ise_ratio=model_ise / start_ise if start_ise > 0 else None,
+                             nearest_on_models=nearest,
                              ISE_before=ise_to_beat if math.isfinite(ise_to_beat) else None,
                              classical_bound=bound is not None)
         if not (feasible or (trading and nearest)) or not (trading or model_ise <= start_ise):

@@ -20,10 +20,10 @@ and the setpoint search within a load limit. tuning.design_rule orders them; tun
    (`identify_models`: robustness.local_model fitted to each loop's response measured at each point; the load
    response per unit load by lfilter, with several loops by robustness.loop_models' closed loop on the loops' models,
    whose Ms with the candidate's other loops closed is then a limit too (`models_ms`); the fixed PID's decoupled loops
-   searched one at a time, `search_loops`; the chatter of the PID output's response): microseconds of numpy instead of an FMU simulation. The choice is verified on the FMU
-   (`validate_models`) and the search reruns on the FMU (`use_fmu`) where the two differ by more than MODEL_TOLERANCE
-   (`search_verified`). The setpoint search's load cost follows the same path (`search_load_cost`;
-   tuning.design_rule verifies its result on the FMU too).
+   searched one at a time, `search_loops`; the chatter of the PID output's response): microseconds of numpy instead
+   of an FMU simulation. The choice is verified on the FMU (`validate_models`) and the search reruns on the FMU
+   (`use_fmu`) where the two differ by more than MODEL_TOLERANCE (`search_verified`). The setpoint search's load cost
+   follows the same path (`search_load_cost`; tuning.design_rule verifies its result on the FMU too).
 2. b (`setpoint_weight`): on noise-free training episodes (setpoint steps), the b in B_GRID with the lowest ISE
    among those with overshoot <= deploy.max_overshoot. b changes neither Ms nor the load response.
 3. The setpoint search (`SetpointDesign`): (Kp, Ti, Td[, Tf], b) minimise the setpoint ISE of those episodes
