@@ -37,7 +37,8 @@ SETTLE_WINDOW = 50          # samples over which the closed loop must be still t
 SETTLE_TOLERANCE = 1e-7     # per-sample change of y [measurement_scale] and u [amplitude scale] counted as still
 MAX_SETTLE_STEPS = 20_000   # give up settling after this many samples (the experiment still checks convergence)
 CONVERGENCE_TOLERANCE = 1e-3  # max |L_p - L_{p-1}| / |1 + L_p| between the last two periods
-MAX_PERIODS = 6             # measured periods at most (after the transient wait)
+MAX_PERIODS = 6             # measured periods at most (after the transient wait), or for a period shorter than
+PERIODS_OF = 4096           # this many samples, as many as fill MAX_PERIODS x PERIODS_OF samples
 MIN_WAIT = 200              # samples waited after the multisine starts, at least (at most one period)
 AMPLITUDE_FRACTION = 0.02   # default multisine peak: 2 % of the u range (or of Kp * measurement_scale)
 DECAY_RATIO = 0.5            # PlantResponse.decaying: last change between periods / first change at most this
@@ -317,9 +318,9 @@ def measure_response(rig: ClosedLoopRig, loop: int, bins: Sequence[int], period:
 
     Starts from the settled state (rig.restore()), waits `wait` samples (at least MIN_WAIT, at most one
     period), then measures whole periods until the loop transfer L = C * P changes by at most
-    CONVERGENCE_TOLERANCE * |1 + L| between consecutive periods (MAX_PERIODS at most). When a control
-    signal hits a limit or the loop diverges, the amplitude is halved and the experiment repeated
-    (AMPLITUDE_RETRIES times).
+    CONVERGENCE_TOLERANCE * |1 + L| between consecutive periods (MAX_PERIODS at most, more when short).
+    When a control signal hits a limit or the loop diverges, the amplitude is halved and the experiment
+    repeated (AMPLITUDE_RETRIES times).
     `controller(w)` gives the loop's PID response C(e^{j w Ts}) at w [rad/s].
     """
     bins = np.unique(np.asarray(bins, dtype=int))
@@ -357,7 +358,7 @@ def measure_response(rig: ClosedLoopRig, loop: int, bins: Sequence[int], period:
                 L1, L0 = C * estimates[-1], C * estimates[-2]
                 change = float(np.max(np.abs(L1 - L0) / np.abs(1 + L1)))
                 changes.append(change)
-                if change <= CONVERGENCE_TOLERANCE or periods >= MAX_PERIODS:
+                if change <= CONVERGENCE_TOLERANCE or periods >= MAX_PERIODS * max(1, PERIODS_OF // period):
                     break
         if not (saturated or diverged) or attempt == AMPLITUDE_RETRIES:
             break

@@ -19,8 +19,10 @@ The PID's transfer function (positional form, e = r - y)::
 
 Frequency grid: the DFT bins of a multisine period of N samples, log-spaced from 2 pi/(N Ts) up to
 the Nyquist frequency pi/Ts, then every bin of that period around the |S| peak and the crossovers.
-N starts at DEFAULT_PERIOD and grows (up to MAX_PERIOD) while a point of interest lies below bin
-MIN_RESOLUTION_BIN, so the grid is fine enough near the peak for Ms to 1 %.
+N starts at the loop's settling time at the operating point (a power of 2 from SHORTEST_PERIOD to
+DEFAULT_PERIOD: a slow loop's transient contaminates a short period's estimate) and grows (up to
+MAX_PERIOD) while a point of interest lies below bin MIN_RESOLUTION_BIN, so the grid is fine enough near
+the peak for Ms to 1 %, or, below DEFAULT_PERIOD, while |L| < CROSSING_RANGE at the lowest frequency.
 
 Several loops: loop-at-a-time margins. Each loop is broken at its plant input in turn with the other
 loops closed; the returned Margins is the loop with the largest Ms, and ``per_loop`` holds every
@@ -51,7 +53,8 @@ from prlpid_fmi.robustness.identification import (
     measure_response,
 )
 
-DEFAULT_PERIOD = 4096        # samples per multisine period: lowest frequency 2 pi/(N Ts), 3 decades below Nyquist
+SHORTEST_PERIOD = 1024       # samples per multisine period at least (lowest frequency 2 pi/(N Ts))
+DEFAULT_PERIOD = 4096        # and at least this while the loop settles slower or |L| < CROSSING_RANGE at the lowest
 MAX_PERIOD = 32768           # longest period the grid refinement may choose
 GRID_POINTS = 120            # log-spaced bins of the first multisine (fewer after rounding to distinct bins)
 MIN_RESOLUTION_BIN = 32      # a peak or crossover below this bin gets a longer period (finer grid)
@@ -234,15 +237,19 @@ def _points_of_interest(L: np.ndarray) -> list[int]:
     return sorted(points)
 
 
-def _period_factor(omega: np.ndarray, bins: np.ndarray, L: np.ndarray, points: list[int]) -> int:
+def _period_factor(omega: np.ndarray, bins: np.ndarray, L: np.ndarray, points: list[int], period: int) -> int:
     """How many times longer the multisine period must be for a fine enough grid at the points of interest.
 
     A point below bin MIN_RESOLUTION_BIN needs that bin. An |S| peak at the lowest grid point (a peak
     at DC, e.g. P control of an unstable plant) needs |S| flat there: |S| is even in w, so
     |S(0)| - |S(w0)| ~ (|S(w0)| - |S(w1)|) w0^2 / (w1^2 - w0^2), which must be below DC_PEAK_GAP * |S(w0)|.
+    A period shorter than DEFAULT_PERIOD grows to it while |L| < CROSSING_RANGE at the lowest frequency: the loop
+    gain has not risen to where |S| is small and no crossing is left below, so the grid must reach lower.
     """
     S = np.abs(1 / (1 + L))
     factor = 1
+    if period < DEFAULT_PERIOD and abs(L[0]) < CROSSING_RANGE:
+        factor = DEFAULT_PERIOD // period
     for j in points:
         if j == 0 and int(np.argmax(S)) == 0 and len(S) > 1:
             gap = (S[0] - S[1]) / S[0] * omega[0] ** 2 / (omega[1] ** 2 - omega[0] ** 2)
@@ -286,8 +293,8 @@ def _measure_loop(rig: ClosedLoopRig, loop: int, frequencies, amplitude: float, 
     """
     Ts = rig.config.sample_time_s
     controller = _controller(rig, loop)
-    if frequencies is None:
-        period = DEFAULT_PERIOD
+    if frequencies is None:  # a period the loop's settling time fits in (its transients die out within one)
+        period = int(2 ** math.ceil(math.log2(min(max(wait, SHORTEST_PERIOD), DEFAULT_PERIOD))))
     else:
         w_min = float(np.min(frequencies))
         if not 0 < w_min or np.max(frequencies) > np.pi / Ts * (1 + 1e-9):
@@ -300,7 +307,7 @@ def _measure_loop(rig: ClosedLoopRig, loop: int, frequencies, amplitude: float, 
         L = controller(omega) * P
         points = _points_of_interest(L)
         grid = np.round(omega * period * Ts / (2 * np.pi)).astype(int)
-        factor = 1 if frequencies is not None else _period_factor(omega, grid, L, points)
+        factor = 1 if frequencies is not None else _period_factor(omega, grid, L, points, period)
         grown = min(MAX_PERIOD, period * factor) > period
         if grown:  # every measured frequency is also a bin of the longer period
             period = min(MAX_PERIOD, period * factor)
@@ -515,10 +522,21 @@ def keep_margins(config: TuningConfig, gains: GainValues, point: list[float], ma
     run.keep(run.measured, measurement_key(config, gains, point), margins)
 
 
+# TuningConfig fields the closed-loop experiment never reads (ClosedLoopRig: the plant, its loops and limits, the
+# PID law): the prior, the reward, the training episodes, their noise and disturbances
+NOT_IN_EXPERIMENT = ("prior", "prior_mode", "forecast_horizon", "smoothing", "smoothing_window", "smoothing_alpha",
+                     "reward", "divergence_penalty", "episode_steps", "setpoint_hold_steps", "setpoint_schedule",
+                     "disturbances", "measurement_noise_std", "actuator_noise_std", "randomize", "load_disturbance",
+                     "gain_mapping", "anchor_on", "anchor_bands")
+
+
 def _place(config: TuningConfig, point) -> tuple:
-    """What a measurement depends on besides the controller: the config, the FMU file (size, time), the point."""
+    """What a measurement depends on besides the controller: the config (without NOT_IN_EXPERIMENT: a search's
+    config without the forecast measures what the scenario's does), the FMU file (size, time), the point."""
     fmu = fmu_file(config).stat()
-    return repr(config), fmu.st_size, fmu.st_mtime_ns, tuple(float(v) for v in point)
+    unread = {f.name: f.default if f.default is not dataclasses.MISSING else f.default_factory()
+              for f in dataclasses.fields(TuningConfig) if f.name in NOT_IN_EXPERIMENT}
+    return repr(dataclasses.replace(config, **unread)), fmu.st_size, fmu.st_mtime_ns, tuple(float(v) for v in point)
 
 
 def _predicts(config: TuningConfig, m: Margins) -> bool:
