@@ -221,6 +221,45 @@ def test_time_varying_plant_is_flagged_after_one_experiment(monkeypatch):
     assert len(experiments) >= 2  # a good estimate is refined around its peak and crossovers
 
 
+def test_the_period_follows_the_loops_settling_time(monkeypatch):
+    """A fast loop (settled within 1024 samples, its crossings at bin 32 of 1024 or above, |L| > 20 at the lowest
+    bin: PI with Ti 0.2 s on 1/(s - 1)) is measured with 1024-sample periods, not a fixed 4096, and matches its exact
+    ZOH reference; the slow two-tank loop (settling over 800 samples, its crossover below bin 32 of 1024) is measured
+    with longer periods and matches its linearisation."""
+    import prlpid_fmi.robustness.margins as margins
+
+    experiments = []
+    monkeypatch.setattr(margins, "measure_response",
+                        lambda *a: experiments.append(measure_response(*a)) or experiments[-1])
+    m = loop_margins(preset("first_order"), [6.0], [0.2], [0.0], [1.0])
+    assert_close_margins(m, reference_margins(pid_by_hand(6.0, 0.2, 0.0) * first_order_zoh(1.0)))
+    assert {e.period for e in experiments} == {1024}
+    experiments.clear()
+    m = loop_margins(preset("two_tank"), [5.0], [20.0], [0.0], [10.0])
+    assert_close_margins(m, reference_margins(pid_by_hand(5.0, 20.0, 0.0) * two_tank_zoh(10.0)))
+    assert max(e.period for e in experiments) >= 4096
+
+
+def test_a_measurement_is_kept_whatever_the_training_settings(monkeypatch):
+    """margins_of measures once for configs that differ only in what the experiment never reads (the forecast,
+    the training noise); a different sample time is a different experiment."""
+    import prlpid_fmi.robustness.margins as margins
+    from prlpid_fmi import runcontext
+
+    measured = []
+    monkeypatch.setattr(margins, "measure_margins", lambda *a: measured.append(a) or loop_margins(
+        a[0], a[1][0], a[1][1], a[1][2], a[2]))
+    config = preset("first_order")
+    gains = ([3.0], [2.0], [0.05], None)
+    with runcontext.opened():
+        first = margins.margins_of(config, gains, [1.0])
+        again = margins.margins_of(dataclasses.replace(config, forecast_horizon=0, measurement_noise_std=0.05),
+                                   gains, [1.0])
+        assert again is first and len(measured) == 1
+        margins.margins_of(dataclasses.replace(config, sample_time_s=0.05), gains, [1.0])
+        assert len(measured) == 2
+
+
 def test_format_margins_one_line():
     # L = C * P on three frequencies: 1, -0.5 and 2, so T = L / (1 + L) is 0.5, -1 and 2/3: Mt = 1 by hand;
     # the delay margin is PM / w_gc = 52.2 deg = 0.91106 rad over 3.4 rad/s = 0.26796 s
