@@ -302,12 +302,15 @@ def _measure_loop(rig: ClosedLoopRig, loop: int, frequencies, amplitude: float, 
         period = int(2 ** math.ceil(math.log2(max(2 * np.pi * MIN_RESOLUTION_BIN / (w_min * Ts), 16))))
     bins = _log_bins(period, GRID_POINTS) if frequencies is None else _bins_for(frequencies, period, Ts)
     responses = [measure_response(rig, loop, bins, period, amplitude, controller, wait)]
+    grown = False
     while not responses[-1].diverged and not _problems(responses):  # refining cannot make a flagged estimate good
         omega, P = _merged(responses)
         L = controller(omega) * P
         points = _points_of_interest(L)
         grid = np.round(omega * period * Ts / (2 * np.pi)).astype(int)
         factor = 1 if frequencies is not None else _period_factor(omega, grid, L, points, period)
+        if grown and factor == 1:
+            break  # the longer period's experiment refined around the points of interest already
         grown = min(MAX_PERIOD, period * factor) > period
         if grown:  # every measured frequency is also a bin of the longer period
             period = min(MAX_PERIOD, period * factor)
