@@ -260,6 +260,19 @@ def test_a_measurement_is_kept_whatever_the_training_settings(monkeypatch):
         assert len(measured) == 2
 
 
+def test_a_growing_oscillation_fails_and_a_time_varying_plant_stays_impossible():
+    """PI control of a double integrator is never stable (I s^3 + Kp s^2 + Kp/Ti has no s term: not Hurwitz). With a
+    small Kp the quadrotor's loops oscillate slowly, beating, and grow without leaving their divergence bound within
+    the experiment: failed ("growing"), not "impossible" as for a plant that varies in time. The time-varying plant's
+    swing stays level: impossible, as before."""
+    from prlpid_fmi.robustness.status import Robustness, status
+
+    m = loop_margins(preset("quadrotor"), [0.002] * 3, [1000.0] * 3, [0.0] * 3, [0.0] * 3, coupling=[0.0] * 6)
+    assert status(m) == Robustness.FAILED and "growing" in m.problems and "unstable" in m.note
+    m = loop_margins(preset("time_varying"), [5.0], [2.0], [0.05], [1.0])
+    assert status(m) == Robustness.IMPOSSIBLE and m.problems[0] == "varying"
+
+
 def test_format_margins_one_line():
     # L = C * P on three frequencies: 1, -0.5 and 2, so T = L / (1 + L) is 0.5, -1 and 2/3: Mt = 1 by hand;
     # the delay margin is PM / w_gc = 52.2 deg = 0.91106 rad over 3.4 rad/s = 0.26796 s

@@ -42,6 +42,7 @@ PERIODS_OF = 4096           # this many samples, as many as fill MAX_PERIODS x P
 MIN_WAIT = 200              # samples waited after the multisine starts, at least (at most one period)
 AMPLITUDE_FRACTION = 0.02   # default multisine peak: 2 % of the u range (or of Kp * measurement_scale)
 DECAY_RATIO = 0.5            # PlantResponse.decaying: last change between periods / first change at most this
+GROWTH_RATIO = 2.0           # PlantResponse.growing: the loop's measurement swung this x more late than early
 AMPLITUDE_RETRIES = 4       # halvings of the amplitude when the control signal hits a limit
 
 
@@ -123,6 +124,7 @@ class PlantResponse:
     diverged: bool
     changes: tuple = ()  # the change between each pair of consecutive periods, in order
     own_response: np.ndarray | None = None  # (K,) Y_i / U_i, the loop's own measurement (None: equal to response)
+    levels: tuple = ()  # std of the loop's measurement over each measured period [plant units], in order
 
     @property
     def decaying(self) -> bool:
@@ -130,6 +132,17 @@ class PlantResponse:
         or more): a transient dying out, as in a lightly damped linear loop; a time-varying plant's go up and down."""
         c = self.changes
         return len(c) >= 3 and all(b <= a for a, b in zip(c, c[1:])) and c[-1] <= DECAY_RATIO * c[0]
+
+    @property
+    def growing(self) -> float | None:
+        """How many times more the measurement swung over the last third of the measured periods than over the first
+        (3 periods or more) when at least GROWTH_RATIO, else None: an oscillation growing (beating, where it is slow),
+        as in an unstable loop not yet out of its divergence bound; a time-varying plant's swing stays level."""
+        v, k = self.levels, max(1, len(self.levels) // 3)
+        if len(v) < 3 or not np.mean(v[:k]) > 0:
+            return None
+        ratio = float(np.mean(v[-k:]) / np.mean(v[:k]))
+        return ratio if ratio >= GROWTH_RATIO else None
 
 
 class ClosedLoopRig:
@@ -338,7 +351,7 @@ def measure_response(rig: ClosedLoopRig, loop: int, bins: Sequence[int], period:
         rig.restore()
         d = multisine(bins, period, amplitude)
         _, _, saturated, diverged = rig.simulate(loop, d[:wait])
-        estimates, own, change, changes, periods, distortion = [], [], math.inf, [], 0, math.nan
+        estimates, own, change, changes, periods, distortion, levels = [], [], math.inf, [], 0, math.nan, []
         start = wait
         while not diverged:
             uu, yy, sat, diverged = rig.simulate(loop, np.roll(d, -(start % period)))
@@ -349,6 +362,7 @@ def measure_response(rig: ClosedLoopRig, loop: int, bins: Sequence[int], period:
             Y = np.fft.rfft(yy, axis=1)
             Y_eff = Y[loop] - coupling_row @ Y
             estimates.append(Y_eff[bins] / U[bins])
+            levels.append(float(np.std(yy[loop])))
             own.append(Y[loop][bins] / U[bins])
             periods += 1
             start += period
@@ -369,4 +383,4 @@ def measure_response(rig: ClosedLoopRig, loop: int, bins: Sequence[int], period:
         response[-1] = response[-1].real  # exactly real at Nyquist for a real system
         own_response[-1] = own_response[-1].real
     return PlantResponse(omega, response, period, periods, change, distortion, amplitude, saturated, diverged,
-                         tuple(changes), own_response)
+                         tuple(changes), own_response, tuple(levels))

@@ -354,7 +354,7 @@ def _loop_result(rig: ClosedLoopRig, loop: int, responses: list[PlantResponse]) 
                    own_response=own)
 
 
-PROBLEM_KINDS = ("saturated", "lightly_damped", "varying", "distorted", "not_settled")  # Margins.problems
+PROBLEM_KINDS = ("saturated", "lightly_damped", "growing", "varying", "distorted", "not_settled")  # Margins.problems
 
 
 def _problems(responses: list[PlantResponse]) -> list[tuple[str, str]]:
@@ -367,10 +367,16 @@ def _problems(responses: list[PlantResponse]) -> list[tuple[str, str]]:
                                       f"{amplitude:.3g}"))
     worst = max(responses, key=lambda r: r.change)
     if worst.change > 10 * CONVERGENCE_TOLERANCE:
+        growing = next((r for r in responses if r.growing is not None), None)
         if worst.decaying:
             problems.append(("lightly_damped", f"the response did not reach a periodic steady state (change "
                                                f"{worst.change:.2g} between periods, falling: a loop too lightly "
                                                "damped to settle)"))
+        elif growing is not None:
+            problems.append(("growing", f"the response did not reach a periodic steady state: the measurement swung "
+                                        f"{growing.growing:.3g}x more over the last third of {len(growing.levels)} "
+                                        "periods than over the first (an oscillation growing: the loop is unstable "
+                                        "at this operating point)"))
         else:
             problems.append(("varying", f"the response did not reach a periodic steady state (change "
                                         f"{worst.change:.2g} between periods, not falling: a time-varying plant)"))

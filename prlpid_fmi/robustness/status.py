@@ -5,7 +5,8 @@ A margin estimate (robustness.margins.Margins at one operating point) is
 - **failed**: the loop is not deployable there, whatever the limit: it diverged or was held at an actuator
   limit (Ms = inf), the control signal reached a limit under the smallest multisine ("saturated"), or the
   response did not become periodic while the change between periods kept falling ("lightly_damped": a
-  linear loop too lightly damped to settle within the experiment);
+  linear loop too lightly damped to settle within the experiment) or while the measurement swung more period
+  after period ("growing": an unstable loop not yet out of its divergence bound);
 - **impossible**: the response did not become periodic and the change between periods did not fall
   ("varying"): the plant varies faster than the experiment can measure it, so no margin exists to check.
   The verdict says so, and the choice rests on the closed-loop replays;
@@ -32,7 +33,7 @@ class Robustness(str, enum.Enum):
 
 def status(margins) -> Robustness:
     """The state of one Margins estimate (module docstring)."""
-    if not math.isfinite(margins.Ms) or {"saturated", "lightly_damped"} & set(margins.problems):
+    if not math.isfinite(margins.Ms) or {"saturated", "lightly_damped", "growing"} & set(margins.problems):
         return Robustness.FAILED
     if "varying" in margins.problems:
         return Robustness.IMPOSSIBLE
