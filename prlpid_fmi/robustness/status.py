@@ -5,8 +5,8 @@ A margin estimate (robustness.margins.Margins at one operating point) is
 - **failed**: the loop is not deployable there, whatever the limit: it diverged or was held at an actuator
   limit (Ms = inf), the control signal reached a limit under the smallest multisine ("saturated"), or the
   response did not become periodic while the change between periods kept falling ("lightly_damped": a
-  linear loop too lightly damped to settle within the experiment) or while the measurement swung more period
-  after period ("growing": an unstable loop not yet out of its divergence bound);
+  linear loop too lightly damped to settle within the experiment) or while its swing grew over the periods
+  ("growing": an unstable loop not yet out of its divergence bound);
 - **impossible**: the response did not become periodic and the change between periods did not fall
   ("varying"): the plant varies faster than the experiment can measure it, so no margin exists to check.
   The verdict says so, and the choice rests on the closed-loop replays;
