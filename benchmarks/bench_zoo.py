@@ -20,7 +20,9 @@ the verdict (report.md's first line under "## Verdict"), and judges it with code
   (ed(-1) := ed(0)), u = Kp (ep + Td D) + Kp/Ti I, clipped to the actuator limits with clamping (conditional
   integration), the measurement filter of order 1 or 2 (backward-Euler sections of Tf/order, started at y(0)),
   bumpless start I(-1) = (u0 - Kp (b - 1) y0)/Ki from the actuator's start value, and bumpless gain changes of a
-  schedule (the error sum rescaled so that u does not jump), the gains interpolated linearly in the setpoint.
+  schedule (the error sum rescaled so that u does not jump), the gains interpolated linearly in the scheduling
+  variable (the setpoint r, the measurement y or the error r - y of the loop; at a steady state, where a
+  linearisation is taken, the error's row is that of error 0).
   No import of the tool's PID, replay or metrics.
 - Checks, each on the scenario's evaluation and on HELD_OUT seeded episodes of the training distribution (random
   setpoints from setpoint_range every setpoint_hold_steps; setpoint steps only, no load steps):
@@ -179,7 +181,7 @@ def verdict_line(run: Path) -> str:
 @dataclass
 class Table:
     """A gain table as written by the tool (its CSV header names the law's options)."""
-    variable: str           # setpoint | measurement
+    variable: str           # setpoint | measurement | error (r - y)
     points: np.ndarray      # breakpoints (K,)
     Kp: np.ndarray
     Ti: np.ndarray
@@ -199,8 +201,16 @@ class Table:
             return tuple(float(a[i]) for a in (self.Kp, self.Ti, self.Td, self.b, self.c, self.Tf))
         return tuple(float(np.interp(s, self.points, a)) for a in (self.Kp, self.Ti, self.Td, self.b, self.c, self.Tf))
 
+    def at_rest(self, r: float) -> tuple[float, ...]:
+        """The gains in force at a steady state at setpoint r (y = r, error 0)."""
+        return self.at(0.0 if self.variable == "error" else r)
+
     def gain_sets(self) -> list[tuple[float, ...]]:
         return [self.at(float(p)) for p in self.points]
+
+
+class NotReplayed(Exception):
+    """A table whose law this benchmark's replay does not implement (that plant's row says so)."""
 
 
 def read_table(path: Path) -> Table:
@@ -217,10 +227,10 @@ def read_table(path: Path) -> Table:
     a = np.array(rows)
     col = {h.split("[")[0]: i for i, h in enumerate(head)}
     var = head[0].split("[")[0]
-    if var not in ("setpoint", "measurement"):
-        raise SystemExit(f"{path}: scheduling variable {head[0]} is not replayed by this benchmark")
+    if var not in ("setpoint", "measurement", "error"):
+        raise NotReplayed(f"{path}: scheduling variable {head[0]} is not replayed by this benchmark")
     if meta.get("u_rate_limit[" + head[0].split("[")[1], "inf").strip() not in ("inf", ""):
-        raise SystemExit(f"{path}: an output rate limit is not replayed by this benchmark")
+        raise NotReplayed(f"{path}: an output rate limit is not replayed by this benchmark")
     n = meta.get("derivative_filter_N", "none")
     order = int(meta.get("measurement_filter_order", "1"))
     Ti = a[:, col["Ti"]]
@@ -235,7 +245,7 @@ class ReplayPID:
 
     def __init__(self, table: Table, Ts: float, u_limits: tuple):
         if table.anti_windup not in ("clamping", "none"):
-            raise SystemExit(f"anti-windup {table.anti_windup} is not replayed by this benchmark")
+            raise NotReplayed(f"anti-windup {table.anti_windup} is not replayed by this benchmark")
         self.t, self.Ts, (self.lo, self.hi) = table, Ts, u_limits
 
     def start(self, y0: float, r0: float, u0: float):
@@ -245,7 +255,7 @@ class ReplayPID:
 
     def step(self, r: float, y: float) -> float:
         t, Ts = self.t, self.Ts
-        s = r if t.variable == "setpoint" else y
+        s = r if t.variable == "setpoint" else y if t.variable == "measurement" else r - y
         Kp, Ti, Td, b, c, Tf = t.at(s)
         Ki = Kp / Ti if math.isfinite(Ti) and Ti > 0 else 0.0
         if self.first:
@@ -460,7 +470,7 @@ def worst_ms(plant: ZooPlant, table: Table, lin) -> float:
     worst = 0.0
     for r, bp in lin:
         P = bpd.discretise(bp)
-        sets = table.gain_sets() if math.isnan(r) else [table.at(r)]
+        sets = table.gain_sets() if math.isnan(r) else [table.at_rest(r)]
         for Kp, Ti, Td, b, c, Tf in sets:
             loop = bpd.close(P, Kp, Ti, Td, Tf, table.order)
             worst = max(worst, bpd.peak_sensitivity(loop)[0] if loop.stable else math.inf)
@@ -604,7 +614,7 @@ def linear_ratios(plant: ZooPlant, table: Table, lin, cache: dict, load_tol: flo
                   max_overshoot: float, quick: bool) -> dict:
     bp = lin[0][1]
     P = bpd.discretise(bp)
-    Kp, Ti, Td, b, c, Tf = table.at(0.5 * sum(plant.setpoint_range))   # a schedule: its middle row
+    Kp, Ti, Td, b, c, Tf = table.at_rest(0.5 * sum(plant.setpoint_range))   # a schedule: its middle row
     loop = bpd.close(P, Kp, Ti, Td, Tf, table.order)
     out = {}
     if not loop.stable:
