@@ -387,7 +387,7 @@ def replay_episode(plant: ZooPlant, table: Table, setpoints: list[tuple[int, flo
     ends = [k for k, _ in setpoints[1:]] + [n]
     for i, ((k0, v), k1) in enumerate(zip(setpoints, ends)):
         step = v - base
-        prev, base = base, v
+        base = v
         if abs(step) < 1e-12 * max(1.0, abs(v)) or k0 >= len(u):
             continue
         out.steps += 1
