@@ -37,12 +37,12 @@ SETTLE_WINDOW = 50          # samples over which the closed loop must be still t
 SETTLE_TOLERANCE = 1e-7     # per-sample change of y [measurement_scale] and u [amplitude scale] counted as still
 MAX_SETTLE_STEPS = 20_000   # give up settling after this many samples (the experiment still checks convergence)
 CONVERGENCE_TOLERANCE = 1e-3  # max |L_p - L_{p-1}| / |1 + L_p| between the last two periods
-MAX_PERIODS = 6             # measured periods at most (after the transient wait), or for a period shorter than
-PERIODS_OF = 4096           # this many samples, as many as fill MAX_PERIODS x PERIODS_OF samples
+MAX_PERIODS = 6             # measured periods at most (after the transient wait) of PERIODS_OF samples or more;
+PERIODS_OF = 4096           # a shorter period measures as many as fill MAX_PERIODS x PERIODS_OF samples
 MIN_WAIT = 200              # samples waited after the multisine starts, at least (at most one period)
 AMPLITUDE_FRACTION = 0.02   # default multisine peak: 2 % of the u range (or of Kp * measurement_scale)
 DECAY_RATIO = 0.5            # PlantResponse.decaying: last change between periods / first change at most this
-GROWTH_RATIO = 2.0           # PlantResponse.growing: the loop's measurement swung this x more late than early
+GROWTH_RATIO = 2.0           # PlantResponse.growth: the loop's measurement swung this x more late than early
 AMPLITUDE_RETRIES = 4       # halvings of the amplitude when the control signal hits a limit
 
 
@@ -134,7 +134,7 @@ class PlantResponse:
         return len(c) >= 3 and all(b <= a for a, b in zip(c, c[1:])) and c[-1] <= DECAY_RATIO * c[0]
 
     @property
-    def growing(self) -> float | None:
+    def growth(self) -> float | None:
         """How many times more the measurement swung over the last third of the measured periods than over the first
         (3 periods or more) when at least GROWTH_RATIO, else None: an oscillation growing (beating, where it is slow),
         as in an unstable loop not yet out of its divergence bound; a time-varying plant's swing stays level."""

@@ -367,14 +367,14 @@ def _problems(responses: list[PlantResponse]) -> list[tuple[str, str]]:
                                       f"{amplitude:.3g}"))
     worst = max(responses, key=lambda r: r.change)
     if worst.change > 10 * CONVERGENCE_TOLERANCE:
-        growing = next((r for r in responses if r.growing is not None), None)
+        growing = next((r for r in responses if r.growth is not None), None)
         if worst.decaying:
             problems.append(("lightly_damped", f"the response did not reach a periodic steady state (change "
                                                f"{worst.change:.2g} between periods, falling: a loop too lightly "
                                                "damped to settle)"))
         elif growing is not None:
             problems.append(("growing", f"the response did not reach a periodic steady state: the measurement swung "
-                                        f"{growing.growing:.3g}x more over the last third of {len(growing.levels)} "
+                                        f"{growing.growth:.3g}x more over the last third of {len(growing.levels)} "
                                         "periods than over the first (an oscillation growing: the loop is unstable "
                                         "at this operating point)"))
         else:
@@ -537,15 +537,15 @@ NOT_IN_EXPERIMENT = ("prior", "prior_mode", "forecast_horizon", "smoothing", "sm
                      "reward", "divergence_penalty", "episode_steps", "setpoint_hold_steps", "setpoint_schedule",
                      "disturbances", "measurement_noise_std", "actuator_noise_std", "randomize", "load_disturbance",
                      "gain_mapping", "anchor_on", "anchor_bands")
+_UNREAD = {f.name: f.default if f.default is not dataclasses.MISSING else f.default_factory()
+           for f in dataclasses.fields(TuningConfig) if f.name in NOT_IN_EXPERIMENT}  # their defaults
 
 
 def _place(config: TuningConfig, point) -> tuple:
     """What a measurement depends on besides the controller: the config (without NOT_IN_EXPERIMENT: a search's
     config without the forecast measures what the scenario's does), the FMU file (size, time), the point."""
     fmu = fmu_file(config).stat()
-    unread = {f.name: f.default if f.default is not dataclasses.MISSING else f.default_factory()
-              for f in dataclasses.fields(TuningConfig) if f.name in NOT_IN_EXPERIMENT}
-    return repr(dataclasses.replace(config, **unread)), fmu.st_size, fmu.st_mtime_ns, tuple(float(v) for v in point)
+    return repr(dataclasses.replace(config, **_UNREAD)), fmu.st_size, fmu.st_mtime_ns, tuple(float(v) for v in point)
 
 
 def _predicts(config: TuningConfig, m: Margins) -> bool:
