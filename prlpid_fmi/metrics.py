@@ -99,8 +99,9 @@ METRIC_NAMES = INTEGRAL_METRICS + CONTROL_METRICS + STEP_METRICS
 MIN_SEGMENT_STEPS = 2
 _REL_TOL = 1e-9
 CHATTER_THRESHOLD = 0.01  # a move counts towards Chatter when it exceeds this fraction of the actuator range
+SPIKE_RATIO = 0.5  # a one-sample pulse of the command is a spike when the moves around it are below this x its own
 
-__all__ = ["compute_metrics", "chatter_fraction", "metric_key", "METRIC_NAMES", "INTEGRAL_METRICS",
+__all__ = ["compute_metrics", "chatter_fraction", "fast_reversals", "metric_key", "METRIC_NAMES", "INTEGRAL_METRICS",
            "CONTROL_METRICS", "STEP_METRICS", "MIN_SEGMENT_STEPS", "overall_metric"]
 
 
@@ -226,6 +227,29 @@ def chatter_fraction(u, u_range: float | None = None) -> float:
     if a.ndim != 1:
         raise ValueError(f"u must be a 1-D array of one loop's control signal, got shape {np.shape(u)}")
     return _reversal_fraction(a, _chatter_threshold(a, None if u_range is None else float(u_range)))
+
+
+def fast_reversals(u, span: float | None) -> float:
+    """The fraction of the samples k = 3 .. n-1 of a command u (n,) at which it moves at the sample rate: its moves
+    du_k, du_(k-1), du_(k-2) alternate in sign and each exceeds CHATTER_THRESHOLD x span (an oscillation at the
+    sample rate), or it spikes: a pulse one sample wide (two moves of opposite sign above the threshold) between
+    moves less than SPIKE_RATIO of the pulse's (a command leaving a limit or a level for one sample; the peak of a
+    swing at the loop's bandwidth is flanked by larger moves). span: the loop's u_max - u_min [input units] (None or
+    not finite: max |u|, as Chatter's). The acceptance check's chatter (deliver.acceptance). NaN for fewer than 4
+    samples, a u that is not finite or a zero span."""
+    u = np.asarray(u, float)
+    if u.size < 4 or not np.all(np.isfinite(u)):
+        return math.nan
+    threshold = _chatter_threshold(u, None if span is None else float(span))
+    if not threshold > 0:
+        return math.nan
+    du = np.diff(u)
+    size = np.abs(du)
+    big = size > threshold
+    turn = (du[1:] * du[:-1] < 0) & big[1:] & big[:-1]  # turn[j]: moves j and j + 1
+    pulse = SPIKE_RATIO * np.minimum(size[1:-2], size[2:-1])  # the pulses of turn[1:-1]
+    spikes = turn[1:-1] & (size[:-3] < pulse) & (size[3:] < pulse)
+    return float(np.count_nonzero(turn[1:] & turn[:-1]) + np.count_nonzero(spikes)) / (u.size - 3)
 
 
 def _integral_metrics(t: np.ndarray, e: np.ndarray, u: np.ndarray, u_prev: float | None, ts: float) -> dict:

@@ -156,7 +156,7 @@ def test_chatter_from_measurement_noise_is_reported_and_chatter_without_noise_fa
     assert a.passed and a.chatter < 0.01 and 0.3 < a.noisy_chatter < 0.7 and a.noisy_chatter_where == "noisy"  # one reversal: the step
     # a two-sample limit cycle without noise (hand-made trajectory): the command reverses at every sample; a
     # swing at 1/20 of the sample rate (a loop damping an oscillatory plant) is not chatter
-    from prlpid_fmi.deliver.acceptance import fast_reversals
+    from prlpid_fmi.metrics import fast_reversals
     k = np.arange(201)
     assert fast_reversals(np.sin(2 * np.pi * k / 20), 2.0) == 0.0
     assert fast_reversals(np.where(k % 2, 1.0, -1.0), 20.0) == pytest.approx(1.0)

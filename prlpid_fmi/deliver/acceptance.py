@@ -39,14 +39,14 @@ from typing import Callable
 import numpy as np
 
 from prlpid_fmi.config import Disturbance, TuningConfig
-from prlpid_fmi.metrics import CHATTER_THRESHOLD, NOISE_BAND, overall_metric
+from prlpid_fmi.loop.evaluation import command_chatter
+from prlpid_fmi.metrics import NOISE_BAND, overall_metric
 
 LONG_HOLD = 4  # an unsettled step is replayed with holds this many times as long
 OVERSHOOT_FLOOR = 25.0  # [%] the overshoot limit is max(this, deploy.max_overshoot)
 LIMIT_TAIL = 0.25  # fraction of the long hold at its end over which a command at its limit excuses a setpoint
 MIN_STEP = 0.05  # overshoot is a fraction of the step, or of this fraction of the setpoint range if larger
 LIMIT_TOLERANCE = 0.005  # a command within this fraction of the span of a limit sits at it
-SPIKE_RATIO = 0.5  # a one-sample pulse of the command is a spike when the moves around it are below this x its own
 
 Replay = Callable[[TuningConfig, int], tuple]  # (config, seed) -> (metrics, loop.evaluation.Trajectory)
 
@@ -184,11 +184,7 @@ def _check_episode(ep: Episode, replay: Replay, t: _Tally) -> None:
                                   "or unstable plant, or a setpoint range the actuator can hold", ep.label))
         return
     if noise_free(config):
-        u = np.asarray(traj.pid_output)
-        spans = [loop.u_max - loop.u_min if math.isfinite(loop.u_max - loop.u_min) else float(np.max(np.abs(u[:, i])))
-                 for i, loop in enumerate(config.loops)]  # the Chatter metric's span where the limits are not finite
-        found = [x for x in (fast_reversals(u[:, i], span) for i, span in enumerate(spans)) if math.isfinite(x)]
-        c = max(found, default=math.nan)
+        c = command_chatter(traj, config)
         if math.isfinite(c) and not c <= t.chatter:
             t.chatter, t.chatter_where = c, ep.label
     else:
@@ -217,25 +213,6 @@ def _check_episode(ep: Episode, replay: Replay, t: _Tally) -> None:
 
 def _is_step(seg: dict) -> bool:
     return not math.isnan(seg["SettlingTime"])
-
-
-def fast_reversals(u, span: float) -> float:
-    """The fraction of the samples k = 3 .. n-1 of a command u (n,) at which it moves at the sample rate: its moves
-    du_k, du_(k-1), du_(k-2) alternate in sign and each exceeds CHATTER_THRESHOLD x span (an oscillation at the
-    sample rate), or it spikes: a pulse one sample wide (two moves of opposite sign above the threshold) between
-    moves less than SPIKE_RATIO of the pulse's (a command leaving a limit or a level for one sample; the peak of a
-    swing at the loop's bandwidth is flanked by larger moves); NaN for fewer than 4 samples or a span that is not
-    finite and positive."""
-    u = np.asarray(u, float)
-    if u.size < 4 or not (math.isfinite(span) and span > 0) or not np.all(np.isfinite(u)):
-        return math.nan
-    du = np.diff(u)
-    size = np.abs(du)
-    big = size > CHATTER_THRESHOLD * span
-    turn = (du[1:] * du[:-1] < 0) & big[1:] & big[:-1]  # turn[j]: moves j and j + 1
-    pulse = SPIKE_RATIO * np.minimum(size[1:-2], size[2:-1])  # the pulses of turn[1:-1]
-    spikes = turn[1:-1] & (size[:-3] < pulse) & (size[3:] < pulse)
-    return float(np.count_nonzero(turn[1:] & turn[:-1]) + np.count_nonzero(spikes)) / (u.size - 3)
 
 
 def noise_free(config: TuningConfig) -> bool:

@@ -25,6 +25,7 @@ from prlpid_fmi.loop.evaluation import constant_gains, evaluate_gains, gains_rol
 from prlpid_fmi.loop.gains import Gains
 from prlpid_fmi.robustness.margins import margins_of, operating_point, setpoint_range_points
 from prlpid_fmi.robustness.status import status
+from prlpid_fmi.tuning.full_range import full_range_episodes, quiet
 from prlpid_fmi.tuning.load_experiment import load_experiment, parameter_samples
 from prlpid_fmi.tuning.margin_experiments import measure_ahead
 from prlpid_fmi.metrics import overall_metric
@@ -162,9 +163,7 @@ def held_out(scenario, schedule: GainSchedule, seed: int, clean: bool = False) -
     (seed + HOLDOUT_SEED_OFFSET + i) are disjoint from those the table was built and chosen on, and from the
     evaluation's. clean: the same setpoints without training.load_disturbance's random load steps and without
     measurement or actuator noise (the acceptance check's overshoot and chatter of the controller itself)."""
-    config = scenario.tuning
-    if clean:
-        config = dataclasses.replace(config, load_disturbance=0.0, measurement_noise_std=0.0, actuator_noise_std=0.0)
+    config = quiet(scenario.tuning) if clean else scenario.tuning
     out = []
     for i in range(HOLDOUT_EPISODES):
         s = seed + HOLDOUT_SEED_OFFSET + i
@@ -173,6 +172,16 @@ def held_out(scenario, schedule: GainSchedule, seed: int, clean: bool = False) -
         out.append(Episode(label, config, s, metrics, traj))
         if metrics.get("terminated"):
             break
+    return out
+
+
+def full_range(scenario, schedule: GainSchedule, seed: int) -> list[Episode]:
+    """The table replayed as a plain PID on the full-range episodes of the training distribution
+    (tuning.full_range: every step from one end of the setpoint range to the other, without load steps and noise)."""
+    out = []
+    for label, config, s in full_range_episodes(scenario.tuning, seed):
+        metrics, traj = replay_schedule(schedule, config, seed=s)
+        out.append(Episode(label, config, s, metrics, traj))
     return out
 
 
@@ -207,6 +216,7 @@ def assess(scenario, schedule: GainSchedule | None, fixed_gains: Gains, seed: in
             c.holdout_ise, c.holdout_tv, c.holdout_unsettled = _held_out_totals(held)
             if random_loads(scenario.tuning) or not noise_free(scenario.tuning):
                 held += held_out(scenario, s, seed, clean=True)  # overshoot and chatter without loads and noise
+            held += full_range(scenario, s, seed)
             c.acceptance = check([c.evaluation, *held], lambda cfg, sd, s=s: replay_schedule(s, cfg, seed=sd),
                                  scenario.deploy.max_overshoot, scenario.deploy.max_chatter)
     decision = choose_among(sched, table, fixed, limit, scenario.deploy.allow_unverified)

@@ -7,6 +7,7 @@ given either way produce the same trajectory.
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Callable
 
 import numpy as np
@@ -17,7 +18,7 @@ from prlpid_fmi.loop.core import LoopCore, Termination
 from prlpid_fmi.loop.env import PidTuningEnv
 from prlpid_fmi.loop.gains import GainValues
 from prlpid_fmi.loop.isolated import make_core
-from prlpid_fmi.metrics import compute_metrics
+from prlpid_fmi.metrics import compute_metrics, fast_reversals
 
 GAIN_NAMES = ("Kp", "Ti", "Td", "coupling")  # order of the gains tuple LoopCore.step takes
 Policy = Callable[[np.ndarray], np.ndarray]
@@ -213,6 +214,14 @@ def measure(traj: Trajectory, config: TuningConfig, intervals=None) -> dict:
     metrics["terminated"] = traj.terminated
     metrics["termination"] = termination.as_dict() if termination is not None else None
     return metrics
+
+
+def command_chatter(traj: Trajectory, config: TuningConfig) -> float:
+    """The worst loop's fast_reversals (metrics) of a Trajectory's PID output over its whole run (NaN: none)."""
+    u = np.asarray(traj.pid_output)
+    found = [x for x in (fast_reversals(u[:, i], loop.u_max - loop.u_min) for i, loop in enumerate(config.loops))
+             if math.isfinite(x)]
+    return max(found, default=math.nan)
 
 
 def evaluate(policy: Policy, config: TuningConfig, seed: int = 0, intervals=None,

@@ -101,6 +101,29 @@ class Followed:
         return _with_on_models(cls, data)
 
 
+@dataclass(frozen=True)
+class ChatterCheck:
+    """The fixed PID's command on the design's quiet episodes (tuning.design_rule.quiet_command): its worst
+    metrics.fast_reversals before [fraction of samples], the target it was held to (CHATTER_MARGIN x
+    deploy.max_chatter), lambda of the detuning (Kp / lambda, Ti and Td x lambda; 1: none), the fraction after, and
+    the episodes it was measured on."""
+
+    before: float
+    target: float
+    detuned_by: float = 1.0
+    after: float = math.nan
+    episodes: int = 0
+
+    @property
+    def met(self) -> bool:
+        return bool(min(self.before, self.after if math.isfinite(self.after) else math.inf) <= self.target
+                    or not math.isfinite(self.before))
+
+    @classmethod
+    def from_json(cls, data: dict | None) -> "ChatterCheck | None":
+        return cls(**{k: math.nan if v is None else v for k, v in _known(cls, data).items()}) if data else None
+
+
 @dataclass
 class ModelPath:
     """Which path the load search took (fixed_pid.json's "design_model", tuning.load_design.LoadDesign.
@@ -220,6 +243,7 @@ class DesignDetails:
     noise_increment_limit_relaxed: bool = False
     noise: dict | None = None
     design_model: ModelPath = dataclasses.field(default_factory=ModelPath)
+    chatter: ChatterCheck | None = None
     candidates: tuple[CandidateRecord, ...] = ()
 
     @property
@@ -243,6 +267,7 @@ class DesignDetails:
                       "followed_setpoints": Followed.from_json(known.get("followed_setpoints")),
                       "setpoint_refined": ModelSearch.from_json(known.get("setpoint_refined")),
                       "design_model": ModelPath.from_json(known.get("design_model")),
+                      "chatter": ChatterCheck.from_json(known.get("chatter")),
                       "candidates": tuple(CandidateRecord.from_json(c) for c in known.get("candidates") or ())})
 
 

@@ -6,7 +6,13 @@ baseline.objective "load" (the default) keeps, in this order:
    free, the low, middle and high setpoint of robustness.margins.setpoint_range_points visited by every step between
    them, low -> middle -> high and back, each held RANGE_HOLD x training.setpoint_hold_steps samples), no
    divergence and every step inside the 2 % band to the end of its hold (metrics.compute_metrics' SettlingTime);
-   a step that settles only after setpoint_hold_steps is *slow*, not unsettled;
+   a step that settles only after setpoint_hold_steps is *slow*, not unsettled; and its command does not chatter:
+   metrics.fast_reversals (the acceptance check's chatter) at most CHATTER_MARGIN x deploy.max_chatter on the
+   full-range episodes (tuning.full_range: every step from one end of the setpoint range to the other) and
+   CHATTER_EPISODES quiet training episodes (`quiet_command`; the margin because the acceptance check replays
+   other episodes), else the gains are detuned together (Kp / lambda, Ti and Td x lambda) until it is: a loop
+   that rings at the sample rate after a large step (a saturating or strongly nonlinear plant, which the linear
+   Ms at the operating points does not see) is slowed, not deployed;
 2. Ms <= deploy.max_sensitivity at every operating point and parameter draw (the load search's Kp interval, then
    the check on the FMU, tuning.fixed_pid.detune_over);
 3. overshoot <= deploy.max_overshoot (the setpoint weight b, then, where no b meets it, gains traded for it within
@@ -43,16 +49,17 @@ import numpy as np
 
 from prlpid_fmi.config import BaselineConfig, DeployConfig, TuningConfig
 from prlpid_fmi.loop.core import pid_structure
-from prlpid_fmi.loop.evaluation import gains_rollout
+from prlpid_fmi.loop.evaluation import command_chatter, gains_rollout
 from prlpid_fmi.loop.gains import GainValues, gains_from_values
 from prlpid_fmi.metrics import compute_metrics
 from prlpid_fmi.progress import QUIET, Steps
 from prlpid_fmi.robustness.margins import margins_of, setpoint_range_points
 from prlpid_fmi.robustness.status import meets_limit
 from prlpid_fmi.tuning.classical_rules import load_bound
-from prlpid_fmi.tuning.design_result import (CandidateRecord, DesignDetails, DesignReport, DesignResult, Followed,
+from prlpid_fmi.tuning.design_result import (CandidateRecord, ChatterCheck, DesignDetails, DesignReport, DesignResult, Followed,
                                              Following, ModelPath, ModelSearch, Relaxation, Requirement, Trade)
-from prlpid_fmi.tuning.fixed_pid import FixedPid, detune_over, setpoint_pid
+from prlpid_fmi.tuning.fixed_pid import DETUNE_STEP, FixedPid, detune_over, detuned, setpoint_pid
+from prlpid_fmi.tuning.full_range import full_range_episodes, quiet
 from prlpid_fmi.tuning.load_design import (MODEL_TOLERANCE, SETPOINT_MODEL_MINIMUM, LoadDesign, SetpointDesign,
                                            model_budget, setpoint_weight)
 from prlpid_fmi.tuning.load_experiment import DIVERGED_COST, approach, open_core, parameter_samples, start_measurement
@@ -64,6 +71,9 @@ RANGE_ORDER = (0, 1, 2, 1, 0)  # indices into (low, middle, high): up and down t
 SETTLING_BAND = 0.02  # a step is settled when |r - y| stays within this fraction of the step to the end of its hold
 RELAX_FACTORS = (2.0, 5.0, math.inf)  # factors on a noise limit the relaxation tries, in turn
 STABILISING_GENERATIONS = 6  # generations of the setpoint search that finds the PID the plant is measured with
+CHATTER_MARGIN = 0.8  # the design holds the command's chatter to this x deploy.max_chatter (the acceptance's limit)
+CHATTER_EPISODES = 8  # quiet random training episodes of the chatter check, besides the two full-range ones
+CHATTER_DETUNINGS = 16  # the chatter check tries lambda = DETUNE_STEP**k for k = 1 .. this (up to 9.4)
 
 
 # -- typed results ------------------------------------------------------------------------------------------------
@@ -134,6 +144,42 @@ def following(config: TuningConfig, gains: GainValues, structure: tuple) -> Foll
     r, y = traj.setpoint[hold:], traj.measurement[hold:]
     ise = float(np.sum((r - y) ** 2) * config.sample_time_s)
     return Following(len(segments), unsettled, slow, False, float(overshoot), ise)
+
+
+def quiet_command(config: TuningConfig, gains: GainValues, structure: tuple, max_chatter: float, seed: int
+                  ) -> tuple[ChatterCheck, GainValues]:
+    """Requirement 1's chatter (module docstring): the worst metrics.fast_reversals of the PID's command on the
+    full-range episodes (tuning.full_range) and CHATTER_EPISODES quiet training episodes (random setpoints, no load
+    steps or noise; seeds seed + i). Above CHATTER_MARGIN x max_chatter the gains are detuned together (Kp / lambda,
+    Ti and Td x lambda, lambda = DETUNE_STEP**k, k = 1 .. CHATTER_DETUNINGS) to the first k that meets it; where none
+    does, the gains stay (the acceptance check then says so). Returns (the check's record, the gains)."""
+    target = CHATTER_MARGIN * max_chatter
+    episodes = [(c, s) for _, c, s in full_range_episodes(config, seed)]
+    episodes += [(quiet(dataclasses.replace(config, forecast_horizon=0)), seed + i) for i in range(CHATTER_EPISODES)]
+    cores = {}
+    try:
+        def worst(g: GainValues) -> float:
+            found = []
+            for c, s in episodes:
+                if id(c) not in cores:
+                    cores[id(c)] = open_core(c)
+                    cores[id(c)].set_structure(*structure)
+                traj = gains_rollout(lambda _: g, c, seed=s, core=cores[id(c)])
+                found.append(math.inf if traj.terminated else command_chatter(traj, c))
+            return max((x for x in found if not math.isnan(x)), default=math.nan)
+
+        before = worst(gains)
+        if not before > target:
+            return ChatterCheck(before, target, episodes=len(episodes)), gains
+        for k in range(1, CHATTER_DETUNINGS + 1):
+            slower = detuned(config, gains, k, keep_ti=False)
+            after = worst(slower)
+            if after <= target:
+                return ChatterCheck(before, target, DETUNE_STEP ** k, after, len(episodes)), slower
+        return ChatterCheck(before, target, episodes=len(episodes)), gains
+    finally:
+        for core in cores.values():
+            core.close()
 
 
 def priority(candidate: Candidate, deploy: DeployConfig, load_limit: float) -> tuple:
@@ -256,6 +302,8 @@ class Designer:
                 checked = dataclasses.replace(config, tuned_structure=tuple(zip(*structure)))
                 ms_met = all(meets_limit(margins_of(plant, gains, p), self.limit)
                              for plant in (checked, *parameter_samples(checked)) for p in points)
+        progress.step("the command's chatter on the full-range and quiet training episodes (requirement 1)")
+        chatter, gains = quiet_command(design.search_config, gains, structure, deploy.max_chatter, seed)
         cost = design.load_cost(gains, tf)
         ise, overshoot = self._setpoint_response(config, gains, structure)
         details = DesignDetails(
@@ -266,7 +314,7 @@ class Designer:
             feasible=bool(getattr(result, "constr_violation", 0) <= 0),
             fell_back_to_setpoint_search=fallback is not None,
             noise_increment_limit_relaxed=design.increment_relaxed, noise=noise_shares(design, gains, tf),
-            design_model=self.model_record)
+            design_model=self.model_record, chatter=chatter)
         if design.increment_relaxed:  # no Kp met it with Ms for the stabilising PID's Ti, Td (LoadDesign.prepare)
             relaxed = tuple(r for r in relaxed if r.limit != "max_noise_increment") + (
                 Relaxation("max_noise_increment", self.deploy.max_noise_increment, math.inf),)
@@ -479,6 +527,10 @@ def requirements(candidate: Candidate, deploy: DeployConfig, max_sensitivity: fl
         value = noise.get(key)
         value = math.nan if value is None else float(value)
         out.append(Requirement(6, name, value, limit, bool(not value > limit * (1.0 + 1e-9))))
+    chatter = d.chatter
+    if chatter is not None:  # requirement 1's chatter, last so that the positions above stay (bound_by)
+        worst = chatter.after if math.isfinite(chatter.after) else chatter.before
+        out.append(Requirement(1, "command chatter on quiet episodes", float(worst), chatter.target, chatter.met))
     return tuple(out)
 
 
@@ -486,7 +538,7 @@ def bound_by(candidate: Candidate, reqs: tuple[Requirement, ...]) -> str:
     """The requirement that bound the design: the first one not met; else requirement 1 where a noise limit was
     relaxed for it; else the first requirement whose limit is active (2: Ms at its limit, 3: gains traded for the
     overshoot, 6: a noise limit held the design); else 4 (the load optimum)."""
-    failed = [r for r in reqs if not r.met and r.rank != 5]
+    failed = sorted((r for r in reqs if not r.met and r.rank != 5), key=lambda r: r.rank)
     if failed:
         return failed[0].name
     if candidate.relaxed:

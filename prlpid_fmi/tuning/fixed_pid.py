@@ -161,10 +161,10 @@ def detune(config: TuningConfig, gains: GainValues, point: list[float], limit: f
     if found is not None and _meets(plant, found, point, limit):
         return found
     if found is None:  # predicted: no k passes; the most promising k measured, and where it fails too, none
-        predicted = [(predicted_ms(plant, _detuned(config, gains, k, keep_ti), point), k) for k in DETUNE_SCAN]
+        predicted = [(predicted_ms(plant, detuned(config, gains, k, keep_ti), point), k) for k in DETUNE_SCAN]
         if all(ms is not None for ms, _ in predicted):
             expected, k = min(predicted)
-            measured = margins_of(plant, _detuned(config, gains, k, keep_ti), point)
+            measured = margins_of(plant, detuned(config, gains, k, keep_ti), point)
             confirmed = (not math.isfinite(expected) and not math.isfinite(measured.Ms)) or \
                 abs(measured.Ms - expected) <= PREDICTION_TOLERANCE * expected
             if not meets_limit(measured, limit) and confirmed:
@@ -172,7 +172,7 @@ def detune(config: TuningConfig, gains: GainValues, point: list[float], limit: f
     return _detune(config, gains, point, limit, keep_ti, plant, _meets)
 
 
-def _detuned(config: TuningConfig, gains: GainValues, k: float, keep_ti: bool) -> GainValues:
+def detuned(config: TuningConfig, gains: GainValues, k: float, keep_ti: bool) -> GainValues:
     """gains detuned by lambda = DETUNE_STEP**k (`detune`), clipped into config's gain ranges."""
     Kp, Ti, Td, coupling = gains
     lam = DETUNE_STEP ** k
@@ -185,20 +185,20 @@ def _detuned(config: TuningConfig, gains: GainValues, k: float, keep_ti: bool) -
 def _detune(config: TuningConfig, gains: GainValues, point: list[float], limit: float, keep_ti: bool,
             plant: TuningConfig, meets) -> GainValues | None:
     """`detune`'s scan and bisection with meets(plant, gains, point, limit) deciding each step."""
-    def detuned(k):
-        return _detuned(config, gains, k, keep_ti)
+    def at(k):
+        return detuned(config, gains, k, keep_ti)
 
     low = 0.0  # k known to fail (the gains themselves)
     for k in DETUNE_SCAN:
-        if meets(plant, detuned(k), point, limit):
+        if meets(plant, at(k), point, limit):
             high = float(k)
             for _ in range(DETUNE_BISECTIONS):
                 mid = 0.5 * (low + high)
-                if meets(plant, detuned(mid), point, limit):
+                if meets(plant, at(mid), point, limit):
                     high = mid
                 else:
                     low = mid
-            return detuned(high)
+            return at(high)
         low = float(k)
     return None
 
