@@ -280,3 +280,34 @@ def test_a_tune_whose_gain_range_cannot_settle_deploys_nothing_and_export_refuse
     forced = cli("export", str(run), "--format", "st", "--fixed", "-o", str(tmp_path / "pid.st"),
                  "--force-not-deployable")
     assert forced.returncode == 0 and (tmp_path / "pid.st").is_file()
+
+
+def test_the_full_range_episodes_step_between_the_ends_of_the_range_quietly_and_fail_a_ringing_pi(tmp_path):
+    """deliver.evidence.full_range: two episodes of training's length (200 samples, holds of 100) with the setpoint
+    alternating between the ends of setpoint_range [-1, 2], from the low end and from the high end, no noise and no
+    load steps; a PI that cancels the lag's pole settles each step (y within 2 % of it at the hold's end), and one
+    whose sampled loop rings at the sample rate (pole exp(-Ts) - (1 - exp(-Ts)) Kp = -0.90 at Kp 19) fails the
+    check there, on chatter, named by the episode."""
+    from prlpid_fmi.deliver.evidence import full_range
+
+    sc = scenario(tmp_path, [0.0, 1.0], noise=0.05)
+    table = fixed_schedule(pi(1.0), sc.tuning)
+    episodes = full_range(sc, table, seed=0)
+    assert [e.label for e in episodes] == ["the full-range steps from the low end",
+                                           "the full-range steps from the high end"]
+    for e, ends in zip(episodes, ((-1.0, 2.0), (2.0, -1.0))):
+        r, y = e.trajectory.setpoint[:, 0], e.trajectory.measurement[:, 0]
+        assert e.config.measurement_noise_std == 0 and e.config.load_disturbance == 0 and len(r) == 2 * HOLD + 1
+        assert np.all(r[:HOLD] == ends[0]) and np.all(r[HOLD:2 * HOLD] == ends[1])
+        for k, target in ((HOLD - 1, ends[0]), (2 * HOLD - 1, ends[1])):
+            assert abs(y[k] - target) <= 0.02 * 3.0
+    ringing = fixed_schedule(pi(19.0, 20.0), sc.tuning)
+
+    def replay(cfg, seed):
+        return replay_schedule(ringing, cfg, seed=seed)
+    a = check(full_range(sc, ringing, seed=0), replay, sc.deploy.max_overshoot, sc.deploy.max_chatter)
+    assert not a.passed and a.failures[0].check == "chatter" and "the full-range steps" in a.failures[0].text
+    import dataclasses
+
+    scheduled = dataclasses.replace(sc, tuning=dataclasses.replace(sc.tuning, setpoint_schedule=((0, (0.5,)),)))
+    assert full_range(scheduled, table, seed=0) == []  # training's own setpoints: nothing drawn from the range

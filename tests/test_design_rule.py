@@ -11,6 +11,7 @@ import dataclasses
 import math
 
 import numpy as np
+import pytest
 from scipy.signal import cont2discrete
 
 from prlpid_fmi.config import BaselineConfig, DeployConfig
@@ -203,3 +204,78 @@ def test_the_design_report_is_json():
     reqs = requirements(c, DeployConfig(), 2.0, 1.15)
     text = json.dumps(DesignReport("Ms", (), reqs, c.following, c.details).as_json())
     assert [r["rank"] for r in json.loads(text)["requirements"]] == [1, 2, 3, 4, 5, 6, 6]
+
+
+def reversals_by_hand(u, span: float) -> float:
+    """deploy.max_chatter's definition written out as a loop: the fraction of k = 3 .. n-1 at which the moves
+    u_k - u_(k-1), u_(k-1) - u_(k-2), u_(k-2) - u_(k-3) alternate in sign, each above 1 % of the span, plus the
+    one-sample pulses (two such moves of opposite sign) between moves under half the pulse's smaller move."""
+    du = [u[k] - u[k - 1] for k in range(1, len(u))]
+    big = [abs(d) > 0.01 * span for d in du]
+    count = 0
+    for k in range(3, len(u)):
+        a, b, c = du[k - 3], du[k - 2], du[k - 1]
+        if big[k - 3] and big[k - 2] and big[k - 1] and a * b < 0 and b * c < 0:
+            count += 1
+    for j in range(1, len(du) - 2):  # a pulse of moves j, j + 1 between moves j - 1 and j + 2
+        if big[j] and big[j + 1] and du[j] * du[j + 1] < 0:
+            small = 0.5 * min(abs(du[j]), abs(du[j + 1]))
+            if abs(du[j - 1]) < small and abs(du[j + 2]) < small:
+                count += 1
+    return count / (len(u) - 3)
+
+
+def command_by_recursion(Kp: float, Ti: float, setpoints) -> list[float]:
+    """The PI's command on first_order over the setpoints r_k (n,): 1/(s - 1) sampled exactly (ZOH), x(0) = 0,
+    |u| <= 10 with clamping; the PID is the frozen eq. 2 law (tests/eq2_pid_reference.py; b = c = 1, Tf = 0,
+    u0 = 0)."""
+    from eq2_pid_reference import PID as Eq2PID
+
+    A, B, _, _, _ = cont2discrete((np.array([[1.0]]), np.array([[1.0]]), np.array([[1.0]]), np.array([[0.0]])), TS,
+                                  "zoh")
+    a, b = float(A[0, 0]), float(B[0, 0])
+    pid = Eq2PID(TS, 1, u_min=-10.0, u_max=10.0, anti_windup="clamping")
+    x, out = 0.0, []
+    for r in setpoints:
+        u = float(pid.step(float(r), x, Kp, Ti, 0.0)[0])
+        out.append(u)
+        x = a * x + b * u
+    return out
+
+
+def test_a_pi_that_rings_after_setpoint_steps_is_detuned_until_it_does_not():
+    """1/(s - 1) at Ts 0.1 s with Kp 19: the sampled loop's pole a - b Kp = -0.89 rings at the sample rate after
+    every step. quiet_command must detune it by the first lambda = 1.15**k whose ring, by the independent recursion
+    on the same setpoints (the full-range episodes: -1 and 1 alternating every 100 samples, from either end; the
+    quiet training episodes: the setpoints the core drew for seeds 0 .. 7), is within the design's margin, and
+    report the ring before it as the recursion computes it."""
+    from prlpid_fmi.tuning.full_range import full_range_episodes, quiet
+    from prlpid_fmi.tuning.load_experiment import open_core
+    from prlpid_fmi.loop.evaluation import gains_rollout
+
+    config = preset("first_order")
+    span, Ti = 20.0, 20.0
+    sequences = [[(-1.0, 1.0)[(first + k // 100) % 2] for k in range(200)] for first in (0, 1)]
+    random = quiet(dataclasses.replace(config, forecast_horizon=0))
+    core = open_core(random)
+    try:
+        sequences += [gains_rollout(lambda _: ([1.0], [1.0], [0.0], None), random, seed=s, core=core).setpoint[:200, 0]
+                      for s in range(design_rule.CHATTER_EPISODES)]
+    finally:
+        core.close()
+    assert len(full_range_episodes(config, 0)) == 2
+
+    def worst(Kp):
+        return max(reversals_by_hand(command_by_recursion(Kp, Ti, r), span) for r in sequences)
+
+    target = design_rule.CHATTER_MARGIN * 0.05
+    assert worst(19.0) > 2 * target  # the premise: it rings
+    check, found = design_rule.quiet_command(config, ([19.0], [Ti], [0.0], None), ([1.0], [1.0], [0.0]), 0.05, 0)
+    assert check.before == pytest.approx(worst(19.0), abs=1e-12)
+    assert check.detuned_by > 1 and check.met and check.after <= target
+    k = round(math.log(check.detuned_by) / math.log(design_rule.DETUNE_STEP))
+    assert found[0][0] == pytest.approx(19.0 / check.detuned_by) and found[1][0] == Ti  # Ti x lambda, clipped at 20
+    assert check.after == pytest.approx(worst(found[0][0]), abs=1e-12) and worst(found[0][0]) <= target
+    assert worst(19.0 / design_rule.DETUNE_STEP ** (k - 1)) > target  # the k before did not meet it
+    quiet_check, same = design_rule.quiet_command(config, ([4.0], [1.0], [0.0], None), ([1.0], [1.0], [0.0]), 0.05, 0)
+    assert quiet_check.detuned_by == 1 and same == ([4.0], [1.0], [0.0], None) and quiet_check.before <= target

@@ -791,8 +791,10 @@ class DeployModel(Section):
         0.05, description="acceptance check: the largest fraction of samples at which a deployed controller's command "
                           "may oscillate at the sample rate (three moves in a row of alternating sign, each above 1 % "
                           "of the control span: a limit cycle, a ringing derivative, a command toggling at a limit) "
-                          "on noise-free held-out episodes: a controller above it is never deployed; the Chatter "
-                          "metric with the scenario's measurement noise above it is reported, not refused")
+                          "on noise-free held-out episodes and on steps from one end of the setpoint range to the "
+                          "other: a controller above it is never deployed (the fixed PID's design holds it to 0.8 x "
+                          "this); the Chatter metric with the scenario's measurement noise above it is reported, "
+                          "not refused")
     allow_unverified: Flag = Field(False, description="deploy a gain schedule whose robustness could not be verified "
                                                       "(an Ms estimate impossible to make: the plant varies faster "
                                                       "than the margin experiment); default false: such a schedule "
