@@ -311,3 +311,42 @@ def test_the_full_range_episodes_step_between_the_ends_of_the_range_quietly_and_
 
     scheduled = dataclasses.replace(sc, tuning=dataclasses.replace(sc.tuning, setpoint_schedule=((0, (0.5,)),)))
     assert full_range(scheduled, table, seed=0) == []  # training's own setpoints: nothing drawn from the range
+
+
+def test_a_step_its_random_load_cuts_short_is_judged_on_the_clean_replay_and_the_load_where_it_happens(tmp_path):
+    """Training's random load steps (load_disturbance, half-way through each hold) split the replay's segments
+    (loop.evaluation.measure), so a step's segment ends at the load: that step is judged on the episode's clean
+    replay, with its whole hold, and the load's recovery on the loaded one. A PI that cancels the lag's pole with
+    Kp 0.3 settles a step in ln(50)/0.3 = 13 s, slower than a 10 s hold but within the 40 s long hold: it passes,
+    its steps slow. The same Kp with Ti 20 s (integral action 20x too slow) leaves each load's offset
+    (1/(1 + Kp) of the load's static gain) for longer than any hold: it fails on a disturbance."""
+    import dataclasses
+
+    from prlpid_fmi.deliver.acceptance import judged, late
+    from prlpid_fmi.deliver.evidence import held_out
+
+    sc = scenario(tmp_path, [0.0, 1.0])
+    sc = dataclasses.replace(sc, tuning=dataclasses.replace(sc.tuning, load_disturbance=0.05))
+    assert HOLD * TS < settling_time(0.3) < LONG_HOLD * HOLD * TS
+
+    def run(gains):
+        table = fixed_schedule(gains, sc.tuning)
+        episodes = held_out(sc, table, seed=0)[:3] + held_out(sc, table, seed=0, clean=True)[:3]
+
+        def replay(cfg, seed):
+            return replay_schedule(table, cfg, seed=seed)
+        return episodes, check(episodes, replay, sc.deploy.max_overshoot, sc.deploy.max_chatter)
+
+    episodes, a = run(pi(0.3))
+    loaded = episodes[0]
+    starts = [start for start, _, _, _ in loaded.trajectory.loads]
+    assert starts == [HOLD // 2, HOLD + HOLD // 2]  # half-way through each hold
+    ends = [s["end_step"] for s in loaded.metrics["segments"]]
+    assert set(starts) <= set(ends)  # the loads split the segments
+    assert all(not (s["end_step"] in starts and not math.isnan(s["SettlingTime"]))
+               for s in judged(loaded.metrics, loaded.trajectory))
+    assert a.passed, a.failures
+    assert a.slow and all("without its load steps" in x for x in a.slow if "the step to" in x)
+    assert late(episodes[3].metrics, episodes[3].trajectory, steps_only=True)  # the clean replay's step: not in 10 s
+    _, weak = run(pi(0.3, 20.0))
+    assert not weak.passed and any(f.check == "settles" and "the disturbance" in f.text for f in weak.failures)

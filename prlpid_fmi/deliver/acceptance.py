@@ -6,7 +6,10 @@ held-out episodes of the training distribution (deliver.evidence). On every one 
 
 1. it follows: the episode runs to its end (no divergence, no rejected FMU step);
 2. it settles every setpoint step (metrics: SettlingTime finite) and recovers from every disturbance (RecoveryTime
-   finite). An episode with a step left unsettled is replayed once with every hold LONG_HOLD times as long (the
+   finite). A step whose hold a random load step cuts short (training.load_disturbance: the step's segment ends
+   where the load begins, half-way through the hold) is judged on the episode's clean replay, where it has its whole
+   hold (deliver.evidence replays every such episode without its loads and noise too); the load's recovery is
+   judged where it happens. An episode with a step left unsettled is replayed once with every hold LONG_HOLD times as long (the
    same setpoints in the same order, the scenario's disturbances and the episode's random load steps moved with
    their holds: `stretched`).
    A step that settles then is *slow*: reported, not failed. One that still does not settle fails, unless no input
@@ -193,7 +196,7 @@ def _check_episode(ep: Episode, replay: Replay, t: _Tally) -> None:
             t.noisy, t.noisy_where = c, ep.label
     index = {l.output: i for i, l in enumerate(config.loops)}
     unsettled = []
-    for seg in m["segments"]:
+    for seg in judged(m, traj):
         i = index.get(seg["loop"], 0)
         step = _is_step(seg)
         if step:
@@ -209,6 +212,21 @@ def _check_episode(ep: Episode, replay: Replay, t: _Tally) -> None:
             t.settled += 1
     if unsettled:
         _long_hold(ep, unsettled, replay, t, index)
+
+
+def judged(metrics: dict, traj) -> list[dict]:
+    """The segments of a replay's metrics the check judges: all but the setpoint steps a random load step cuts short
+    (their segment ends where the load begins: loop.evaluation.measure splits segments there), which the episode's
+    clean replay judges."""
+    cut = {start for start, _, _, _ in traj.loads}
+    return [seg for seg in metrics["segments"] if not (_is_step(seg) and seg["end_step"] in cut)]
+
+
+def late(metrics: dict, traj, steps_only: bool = False) -> list[dict]:
+    """The judged segments (`judged`) of a replay left unsettled (a step) or unrecovered (a disturbance; not with
+    steps_only) at the end of their hold."""
+    return [seg for seg in judged(metrics, traj) if (seg["SettlingTime"] if _is_step(seg) else
+                                                      math.nan if steps_only else seg["RecoveryTime"]) == math.inf]
 
 
 def _is_step(seg: dict) -> bool:

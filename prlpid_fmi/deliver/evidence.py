@@ -19,7 +19,7 @@ import dataclasses
 import math
 import warnings
 
-from prlpid_fmi.deliver.acceptance import Episode, check, noise_free, random_loads
+from prlpid_fmi.deliver.acceptance import Episode, check, late, noise_free, random_loads
 from prlpid_fmi.deliver.rule import Candidate, Decision, Deployed, choose_among
 from prlpid_fmi.loop.evaluation import constant_gains, evaluate_gains, gains_rollout
 from prlpid_fmi.loop.gains import Gains
@@ -196,7 +196,7 @@ def _held_out_totals(episodes: list[Episode]) -> tuple[float, float, int]:
 
 
 def _unsettled(e: Episode) -> int:
-    return int(overall_metric(e.metrics["overall"], "SettlingTime") == math.inf)
+    return int(bool(late(e.metrics, e.trajectory, steps_only=True)))
 
 
 def assess(scenario, schedule: GainSchedule | None, fixed_gains: Gains, seed: int | None = None,

@@ -185,7 +185,8 @@ def measure(traj: Trajectory, config: TuningConfig, intervals=None) -> dict:
     An episode that ended early is measured over the samples it has: a last sample without a
     measurement (a rejected step, a non-finite output) is left out, intervals are cut at the end
     (an entry then holds "requested_end_step") and intervals starting after it are left out.
-    Adds "terminated" (bool) and "termination" (None or {kind, step, time_s, message}).
+    Adds "terminated" (bool) and "termination" (None or {kind, step, time_s, message}). The scenario's disturbances
+    and the episode's random load steps (traj.loads) are events: they split segments (metrics.compute_metrics).
     """
     termination = traj.termination
     n = len(traj.time_s)
@@ -203,7 +204,8 @@ def measure(traj: Trajectory, config: TuningConfig, intervals=None) -> dict:
     metrics = compute_metrics(traj.time_s[:n], traj.setpoint[:n], traj.measurement[:n],
                               traj.control_signal[:n], config.sample_time_s, intervals=windows or None,
                               loop_names=[l.output for l in config.loops],
-                              events=sorted({d.start_step for d in config.disturbances}),
+                              events=sorted({d.start_step for d in config.disturbances}
+                                            | {start for start, _, _, _ in traj.loads}),
                               u_range=[l.u_max - l.u_min for l in config.loops], command=command,
                               # the measurement noise is known here; actuator noise moves y by an amount only
                               # the data can tell (then the estimate)
