@@ -154,8 +154,9 @@ def quiet_command(config: TuningConfig, gains: GainValues, structure: tuple, max
     Ti and Td x lambda, lambda = DETUNE_STEP**k, k = 1 .. CHATTER_DETUNINGS) to the first k that meets it; where none
     does, the gains stay (the acceptance check then says so). Returns (the check's record, the gains)."""
     target = CHATTER_MARGIN * max_chatter
+    config = dataclasses.replace(config, forecast_horizon=0)
     episodes = [(c, s) for _, c, s in full_range_episodes(config, seed)]
-    episodes += [(quiet(dataclasses.replace(config, forecast_horizon=0)), seed + i) for i in range(CHATTER_EPISODES)]
+    episodes += [(quiet(config), seed + i) for i in range(CHATTER_EPISODES)]
     cores = {}
     try:
         def worst(g: GainValues) -> float:

@@ -944,9 +944,10 @@ class SetpointDesign(OutcomeCache):
 
     @classmethod
     def replica(cls, design_args: tuple, prepared: dict, best_load: float, load_tolerance: float,
-                max_overshoot: float, seeds: list[int]) -> "SetpointDesign":
+                max_overshoot: float, seeds: list[int], on_models: bool = False) -> "SetpointDesign":
         """A search worker's copy (tuning.search_pool) on a replica of the load design (LoadDesign.replica)."""
-        trade = cls(LoadDesign.replica(design_args, prepared), best_load, load_tolerance, max_overshoot, seeds)
+        trade = cls(LoadDesign.replica(design_args, prepared), best_load, load_tolerance, max_overshoot, seeds,
+                    on_models=on_models)
         trade._owns_design = True
         return trade
 
@@ -1025,11 +1026,11 @@ class SetpointDesign(OutcomeCache):
             init = np.clip(start + rng.normal(0.0, INIT_SPREAD, (popsize * self.n, self.n)), -1.0, 1.0)
             init[0] = start
         d = self.design
-        # on the local models in this process (microseconds a candidate), else the FMU on the search pool
-        with (contextlib.nullcontext() if self.on_models else
-              SearchPool(self, SetpointDesign.replica, (d.args, d.prepared(), self.best_load, self.load_tolerance,
-                                                        self.max_overshoot_fraction, self.seeds),
-                         d.pool_workers(), fmus=search_fmus(d.config))) as pool:
+        # on the search pool: each candidate on the local models (milliseconds: the Kp intervals of every loop and
+        # point, the setpoint and load responses) or on the FMU
+        with SearchPool(self, SetpointDesign.replica, (d.args, d.prepared(), self.best_load, self.load_tolerance,
+                                                       self.max_overshoot_fraction, self.seeds, self.on_models),
+                        d.pool_workers(), fmus=search_fmus(d.config)) as pool:
             constraints = batch_counted(lambda x: np.array(self._batch(x, pool, self.constraint_values)).T, progress)
             result = differential_evolution(lambda x: np.array(self._batch(x, pool, self.cost)),
                                             [(-1.0, 1.0)] * self.n, maxiter=maxiter, popsize=popsize, seed=seed,
