@@ -9,9 +9,9 @@ held-out episodes of the training distribution (deliver.evidence). On every one 
    finite). A step whose hold a random load step cuts short (training.load_disturbance: the step's segment ends
    where the load begins, half-way through the hold) is judged on the episode's clean replay, where it has its whole
    hold (deliver.evidence replays every such episode without its loads and noise too); the load's recovery is
-   judged where it happens. An episode with a step left unsettled is replayed once with every hold LONG_HOLD times as long (the
-   same setpoints in the same order, the scenario's disturbances and the episode's random load steps moved with
-   their holds: `stretched`).
+   judged where it happens. An episode with a step left unsettled is replayed once with every hold LONG_HOLD times
+   as long (the same setpoints in the same order, the scenario's disturbances and the episode's random load steps
+   moved with their holds: `stretched`).
    A step that settles then is *slow*: reported, not failed. One that still does not settle fails, unless no input
    within the limits can hold its setpoint: the controller's command sits at one of its limits over the last
    quarter of the long hold while the measurement stays short of the setpoint on the side it came from. Such a
@@ -225,8 +225,14 @@ def judged(metrics: dict, traj) -> list[dict]:
 def late(metrics: dict, traj, steps_only: bool = False) -> list[dict]:
     """The judged segments (`judged`) of a replay left unsettled (a step) or unrecovered (a disturbance; not with
     steps_only) at the end of their hold."""
-    return [seg for seg in judged(metrics, traj) if (seg["SettlingTime"] if _is_step(seg) else
-                                                      math.nan if steps_only else seg["RecoveryTime"]) == math.inf]
+    out = []
+    for seg in judged(metrics, traj):
+        if _is_step(seg):
+            if seg["SettlingTime"] == math.inf:
+                out.append(seg)
+        elif not steps_only and seg["RecoveryTime"] == math.inf:
+            out.append(seg)
+    return out
 
 
 def _is_step(seg: dict) -> bool:

@@ -11,9 +11,8 @@ baseline.objective "load" (the default) keeps, in this order:
    full-range episodes (tuning.full_range: every step from one end of the setpoint range to the other) and
    CHATTER_EPISODES quiet training episodes (`quiet_command`; the margin because the acceptance check replays
    other episodes), else the gains are detuned until it is (Kp / lambda, with Ti and Td x lambda or kept, the
-   way of less load IAE): a loop
-   that rings at the sample rate after a large step (a saturating or strongly nonlinear plant, which the linear
-   Ms at the operating points does not see) is slowed, not deployed;
+   way of less load IAE): a loop that rings at the sample rate after a large step (a saturating or strongly
+   nonlinear plant, which the linear Ms at the operating points does not see) is slowed, not deployed;
 2. Ms <= deploy.max_sensitivity at every operating point and parameter draw (the load search's Kp interval, then
    the check on the FMU, tuning.fixed_pid.detune_over);
 3. overshoot <= deploy.max_overshoot (the setpoint weight b, then, where no b meets it, gains traded for it within
@@ -57,8 +56,9 @@ from prlpid_fmi.progress import QUIET, Steps
 from prlpid_fmi.robustness.margins import margins_of, setpoint_range_points
 from prlpid_fmi.robustness.status import meets_limit
 from prlpid_fmi.tuning.classical_rules import load_bound
-from prlpid_fmi.tuning.design_result import (CandidateRecord, ChatterCheck, DesignDetails, DesignReport, DesignResult, Followed,
-                                             Following, ModelPath, ModelSearch, Relaxation, Requirement, Trade)
+from prlpid_fmi.tuning.design_result import (CandidateRecord, ChatterCheck, DesignDetails, DesignReport, DesignResult,
+                                             Followed, Following, ModelPath, ModelSearch, Relaxation, Requirement,
+                                             Trade)
 from prlpid_fmi.tuning.fixed_pid import DETUNE_STEP, FixedPid, detune_over, detuned, setpoint_pid
 from prlpid_fmi.tuning.full_range import full_range_episodes, quiet
 from prlpid_fmi.tuning.load_design import (MODEL_TOLERANCE, SETPOINT_MODEL_MINIMUM, LoadDesign, SetpointDesign,
