@@ -131,7 +131,8 @@ def _acceptance_lines(a) -> list[str]:
                    f"{a.overshoot_limit_pct:g} %.")
     if a.steps:
         where = ("on the evaluation" if a.episodes == 1 else
-                 f"over {a.episodes} replays (the evaluation and held-out episodes of the training distribution)")
+                 f"over {a.episodes} replays (the evaluation, held-out episodes of the training distribution and "
+                 "its full-range steps)")
         more = [f"{len(a.slow)} steps or disturbances settle only on a {LONG_HOLD}x longer hold (slow)" if a.slow else "",
                 f"{len(a.excused)} excused" if a.excused else ""]
         out.append(f"It settles {a.settled} of {a.steps} setpoint steps within their holds {where}"
