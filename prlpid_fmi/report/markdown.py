@@ -306,9 +306,8 @@ def design_section(fixed: DesignResult, loop_names) -> str:
         rang = (f"On the quiet episodes (steps across the whole setpoint range and random training setpoints, no "
                 f"noise) the command oscillated at the sample rate on {chatter.before:.1%} of the samples, above "
                 f"the design's {chatter.target:.1%} (a margin below deploy.max_chatter)")
-        how = "Kp / lambda, Ti and Td kept" if chatter.keep_ti else "Kp / lambda, Ti and Td x lambda"
-        lines.append(rang + (f": the gains were detuned by lambda = {number(chatter.detuned_by, 3)} ({how}; of the "
-                             f"two ways the one of less load IAE) to {chatter.after:.1%}." if chatter.met else
+        lines.append(rang + (f": the gains were detuned by lambda = {number(chatter.detuned_by, 3)} (Kp / lambda, Ti "
+                             f"and Td x lambda) to {chatter.after:.1%}." if chatter.met else
                              ": no detuning in the design's range met it; the acceptance check decides."))
     lines += _rule_sentences(report)
     return "\n".join(lines) + "\n"

@@ -105,15 +105,14 @@ class Followed:
 class ChatterCheck:
     """The fixed PID's command on the design's quiet episodes (tuning.design_rule.quiet_command): its worst
     metrics.fast_reversals before [fraction of samples], the target it was held to (CHATTER_MARGIN x
-    deploy.max_chatter), lambda of the detuning (Kp / lambda, and Ti and Td x lambda unless keep_ti; 1: none), the
-    fraction after, and the episodes it was measured on."""
+    deploy.max_chatter), lambda of the detuning (Kp / lambda, Ti and Td x lambda; 1: none), the fraction after, and
+    the episodes it was measured on."""
 
     before: float
     target: float
     detuned_by: float = 1.0
     after: float = math.nan
     episodes: int = 0
-    keep_ti: bool = False
 
     @property
     def met(self) -> bool:

@@ -10,9 +10,9 @@ baseline.objective "load" (the default) keeps, in this order:
    metrics.fast_reversals (the acceptance check's chatter) at most CHATTER_MARGIN x deploy.max_chatter on the
    full-range episodes (tuning.full_range: every step from one end of the setpoint range to the other) and
    CHATTER_EPISODES quiet training episodes (`quiet_command`; the margin because the acceptance check replays
-   other episodes), else the gains are detuned until it is (Kp / lambda, with Ti and Td x lambda or kept, the
-   way of less load IAE): a loop that rings at the sample rate after a large step (a saturating or strongly
-   nonlinear plant, which the linear Ms at the operating points does not see) is slowed, not deployed;
+   other episodes), else the gains are detuned together (Kp / lambda, Ti and Td x lambda) until it is: a loop that
+   rings at the sample rate after a large step (a saturating or strongly nonlinear plant, which the linear Ms at
+   the operating points does not see) is slowed, not deployed;
 2. Ms <= deploy.max_sensitivity at every operating point and parameter draw (the load search's Kp interval, then
    the check on the FMU, tuning.fixed_pid.detune_over);
 3. overshoot <= deploy.max_overshoot (the setpoint weight b, then, where no b meets it, gains traded for it within
@@ -147,15 +147,14 @@ def following(config: TuningConfig, gains: GainValues, structure: tuple) -> Foll
     return Following(len(segments), unsettled, slow, False, float(overshoot), ise)
 
 
-def quiet_command(config: TuningConfig, gains: GainValues, structure: tuple, max_chatter: float, seed: int,
-                  load_cost=lambda gains: 0.0) -> tuple[ChatterCheck, GainValues]:
+def quiet_command(config: TuningConfig, gains: GainValues, structure: tuple, max_chatter: float, seed: int
+                  ) -> tuple[ChatterCheck, GainValues]:
     """Requirement 1's chatter (module docstring): the worst metrics.fast_reversals of the PID's command on the
     full-range episodes (tuning.full_range) and CHATTER_EPISODES quiet training episodes (random setpoints, no load
-    steps or noise; seeds seed + i). Above CHATTER_MARGIN x max_chatter the gains are detuned (lambda =
-    DETUNE_STEP**k, k = 1 .. CHATTER_DETUNINGS) to the first k that meets it, in two ways as the Ms check does
-    (tuning.fixed_pid.detuned: Kp / lambda with Ti and Td x lambda, or with Ti and Td kept); of the two the one of
-    lower load_cost(gains) is kept (the ways in that order on a tie). Where none meets it the gains stay (the
-    acceptance check then says so). Returns (the check's record, the gains)."""
+    steps or noise; seeds seed + i). Above CHATTER_MARGIN x max_chatter the gains are detuned together (Kp / lambda,
+    Ti and Td x lambda, lambda = DETUNE_STEP**k, k = 1 .. CHATTER_DETUNINGS: the same controller on a slower time
+    axis, so the setpoint response b was chosen for keeps its shape) to the first k that meets it; where none does,
+    the gains stay (the acceptance check then says so). Returns (the check's record, the gains)."""
     target = CHATTER_MARGIN * max_chatter
     config = dataclasses.replace(config, forecast_horizon=0)
     episodes = [(c, s) for _, c, s in full_range_episodes(config, seed)]
@@ -175,18 +174,12 @@ def quiet_command(config: TuningConfig, gains: GainValues, structure: tuple, max
         before = worst(gains)
         if not before > target:
             return ChatterCheck(before, target, episodes=len(episodes)), gains
-        found = []
-        for keep_ti in (False, True):
-            for k in range(1, CHATTER_DETUNINGS + 1):
-                slower = detuned(config, gains, k, keep_ti=keep_ti)
-                after = worst(slower)
-                if after <= target:
-                    found.append((load_cost(slower), keep_ti, k, after, slower))
-                    break
-        if not found:
-            return ChatterCheck(before, target, episodes=len(episodes)), gains
-        _, keep_ti, k, after, slower = min(found, key=lambda f: f[:3])
-        return ChatterCheck(before, target, DETUNE_STEP ** k, after, len(episodes), keep_ti), slower
+        for k in range(1, CHATTER_DETUNINGS + 1):
+            slower = detuned(config, gains, k, keep_ti=False)
+            after = worst(slower)
+            if after <= target:
+                return ChatterCheck(before, target, DETUNE_STEP ** k, after, len(episodes)), slower
+        return ChatterCheck(before, target, episodes=len(episodes)), gains
     finally:
         for core in cores.values():
             core.close()
@@ -313,8 +306,7 @@ class Designer:
                 ms_met = all(meets_limit(margins_of(plant, gains, p), self.limit)
                              for plant in (checked, *parameter_samples(checked)) for p in points)
         progress.step("the command's chatter on the full-range and quiet training episodes (requirement 1)")
-        chatter, gains = quiet_command(design.search_config, gains, structure, deploy.max_chatter, seed,
-                                       lambda g: design.load_cost(g, tf))
+        chatter, gains = quiet_command(design.search_config, gains, structure, deploy.max_chatter, seed)
         cost = design.load_cost(gains, tf)
         ise, overshoot = self._setpoint_response(config, gains, structure)
         details = DesignDetails(
