@@ -151,7 +151,8 @@ def quiet_command(config: TuningConfig, gains: GainValues, structure: tuple, max
                   ) -> tuple[ChatterCheck, GainValues]:
     """Requirement 1's chatter (module docstring): the worst metrics.fast_reversals of the PID's command on the
     full-range episodes (tuning.full_range) and CHATTER_EPISODES quiet training episodes (random setpoints, no load
-    steps or noise; seeds seed + i). Above CHATTER_MARGIN x max_chatter the gains are detuned together (Kp / lambda,
+    steps or noise; seeds seed + i; an episode that diverges counts in the range episode's following, not here).
+    Above CHATTER_MARGIN x max_chatter the gains are detuned together (Kp / lambda,
     Ti and Td x lambda, lambda = DETUNE_STEP**k, k = 1 .. CHATTER_DETUNINGS: the same controller on a slower time
     axis, so the setpoint response b was chosen for keeps its shape) to the first k that meets it; where none does,
     the gains stay (the acceptance check then says so). Returns (the check's record, the gains)."""
@@ -168,7 +169,7 @@ def quiet_command(config: TuningConfig, gains: GainValues, structure: tuple, max
                     cores[id(c)] = open_core(c)
                     cores[id(c)].set_structure(*structure)
                 traj = gains_rollout(lambda _: g, c, seed=s, core=cores[id(c)])
-                found.append(math.inf if traj.terminated else command_chatter(traj, c))
+                found.append(math.nan if traj.terminated else command_chatter(traj, c))  # diverging: requirement 1
             return max((x for x in found if not math.isnan(x)), default=math.nan)
 
         before = worst(gains)
