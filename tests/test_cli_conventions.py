@@ -385,7 +385,8 @@ def test_tune_progress_goes_to_stderr_and_never_passes_the_target(tmp_path, caps
     assert "load design: the identified models' choice verified on the FMU" in steps
     assert steps[0].startswith("Ms check on the FMU of the stabilising PID")
     assert steps[1] == "frequency response of the plant at 3 operating points"
-    assert steps[-2].startswith("Ms check on the FMU (3 operating points")
+    assert steps[-3].startswith("Ms check on the FMU (3 operating points")
+    assert steps[-2] == "the command's chatter on the full-range and quiet training episodes (requirement 1)"
     assert steps[-1] == "setpoint steps across the setpoint range (requirement 1)"  # tuning.design_rule
     assert search[-1].startswith("done in ")
     assert "prlpid-fmi: training" not in out and "fixed-PID search:" not in out
