@@ -350,3 +350,42 @@ def test_a_step_its_random_load_cuts_short_is_judged_on_the_clean_replay_and_the
     assert late(episodes[3].metrics, episodes[3].trajectory, steps_only=True)  # the clean replay's step: not in 10 s
     _, weak = run(pi(0.3, 20.0))
     assert not weak.passed and any(f.check == "settles" and "the disturbance" in f.text for f in weak.failures)
+
+
+def test_a_step_still_converging_at_the_end_of_the_long_hold_is_slow_and_its_decay_is_the_loops(tmp_path):
+    """With Ti = 1 s cancelling the lag's pole the error after a step is exp(-Kp t): at Kp 0.05 it is 14 % of the
+    step at the end of the 40 s long hold (unsettled), but its largest value over the last quarter (30-40 s after the
+    step) is exp(-0.05 x 10) = 61 % of that over the quarter before: converging, so slow, not failed."""
+    import re
+
+    Kp = 0.05
+    assert settling_time(Kp) > LONG_HOLD * HOLD * TS
+    a = run_check(scenario(tmp_path, [0.0, 1.0]), pi(Kp))
+    assert a.passed, a.failures
+    converging = [s for s in a.slow if "still converging" in s]
+    assert len(converging) == 1 and "the step to 1 at t = 10 s" in converging[0]
+    ratio = float(re.search(r"is (\d+)% of that", converging[0]).group(1)) / 100
+    assert ratio == pytest.approx(math.exp(-Kp * LONG_HOLD * HOLD * TS / 4), abs=0.03)
+
+
+def test_the_noise_free_replays_with_loads_keep_the_loads_and_drop_the_noise(tmp_path):
+    """held_out(clean=True, loads=True): the held-out seeds again with training's random load steps and without
+    noise (other setpoints than the noisy episodes': the noise is drawn first); a noisy episode marked settling=False
+    is judged on following and Chatter only (its steps are not counted)."""
+    import dataclasses
+
+    from prlpid_fmi.deliver.evidence import held_out
+
+    sc = scenario(tmp_path, [0.0, 1.0], noise=0.05)
+    sc = dataclasses.replace(sc, tuning=dataclasses.replace(sc.tuning, load_disturbance=0.05))
+    table = fixed_schedule(pi(1.0), sc.tuning)
+    noisy, kept = held_out(sc, table, seed=0)[:2], held_out(sc, table, seed=0, clean=True, loads=True)[:2]
+    for n, k in zip(noisy, kept):
+        assert k.label == n.label + " without noise" and k.config.measurement_noise_std == 0
+        assert [start for start, _, _, _ in k.trajectory.loads] == [HOLD // 2, HOLD + HOLD // 2]  # loads kept
+        assert np.all(k.trajectory.measurement[1:] == k.trajectory.measurement[1:])  # finite: ran to its end
+
+    def replay(cfg, seed):
+        return replay_schedule(table, cfg, seed=seed)
+    quiet = check([dataclasses.replace(e, settling=False) for e in noisy], replay, 0.05, 0.05)
+    assert quiet.passed and quiet.steps == 0 and quiet.episodes == 2

@@ -157,18 +157,24 @@ def range_points(config, loop: int) -> list[list[float]]:
     return points
 
 
-def held_out(scenario, schedule: GainSchedule, seed: int, clean: bool = False) -> list[Episode]:
+def held_out(scenario, schedule: GainSchedule, seed: int, clean: bool = False, loads: bool = False
+             ) -> list[Episode]:
     """HOLDOUT_EPISODES seeded episodes of the training distribution (scenario.tuning: its random setpoints, noise,
     disturbances, randomisation) of the table replayed as a plain PID, up to the first that diverges. The seeds
     (seed + HOLDOUT_SEED_OFFSET + i) are disjoint from those the table was built and chosen on, and from the
-    evaluation's. clean: the same setpoints without training.load_disturbance's random load steps and without
-    measurement or actuator noise (the acceptance check's overshoot and chatter of the controller itself)."""
-    config = quiet(scenario.tuning) if clean else scenario.tuning
+    evaluation's. clean: the same seeds without training.load_disturbance's random load steps and without
+    measurement or actuator noise (the acceptance check's overshoot and chatter of the controller itself); with
+    loads, without the noise only (the loads' recovery). The noise is drawn first from an episode's seed, so a clean
+    replay of a noisy distribution draws other setpoints and loads: further held-out episodes, not the same ones."""
+    config = scenario.tuning
+    if clean:
+        config = dataclasses.replace(quiet(config), load_disturbance=config.load_disturbance if loads else 0.0)
     out = []
     for i in range(HOLDOUT_EPISODES):
         s = seed + HOLDOUT_SEED_OFFSET + i
         metrics, traj = replay_schedule(schedule, config, seed=s)
-        label = f"held-out episode {i + 1}" + (" without its load steps and noise" if clean else "")
+        label = f"held-out episode {i + 1}" + ((" without noise" if loads else " without its load steps and noise")
+                                               if clean else "")
         out.append(Episode(label, config, s, metrics, traj))
         if metrics.get("terminated"):
             break
@@ -214,6 +220,10 @@ def assess(scenario, schedule: GainSchedule | None, fixed_gains: Gains, seed: in
         if c is not None and s is not None:
             held = held_out(scenario, s, seed)
             c.holdout_ise, c.holdout_tv, c.holdout_unsettled = _held_out_totals(held)
+            if not noise_free(scenario.tuning):  # settling and recovery judged on the noise-free replays below
+                held = [dataclasses.replace(e, settling=False) for e in held]
+                if random_loads(scenario.tuning):
+                    held += held_out(scenario, s, seed, clean=True, loads=True)
             if random_loads(scenario.tuning) or not noise_free(scenario.tuning):
                 held += held_out(scenario, s, seed, clean=True)  # overshoot and chatter without loads and noise
             held += full_range(scenario, s, seed)
