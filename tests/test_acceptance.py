@@ -352,20 +352,34 @@ def test_a_step_its_random_load_cuts_short_is_judged_on_the_clean_replay_and_the
     assert not weak.passed and any(f.check == "settles" and "the disturbance" in f.text for f in weak.failures)
 
 
-def test_a_step_still_converging_at_the_end_of_the_long_hold_is_slow_and_its_decay_is_the_loops(tmp_path):
-    """With Ti = 1 s cancelling the lag's pole the error after a step is exp(-Kp t): at Kp 0.05 it is 14 % of the
-    step at the end of the 40 s long hold (unsettled), but its largest value over the last quarter (30-40 s after the
-    step) is exp(-0.05 x 10) = 61 % of that over the quarter before: converging, so slow, not failed."""
+def test_a_load_still_being_recovered_at_the_end_of_the_long_hold_is_slow_a_step_must_settle(tmp_path):
+    """With Ti = 1 s cancelling the lag's pole the error decays as exp(-Kp t). At Kp 0.12 a random load (half-way
+    through a 10 s hold, on noise-free episodes) is not back within 10 % of its peak deviation 20 s after it starts
+    (the long hold's share: about 23 s needed), but its error over the last quarter of that is about
+    exp(-0.12 x 5) = 55 % of the quarter before's: converging, so slow, not failed. A step is held to settling:
+    at Kp 0.05 (settling ln(50)/0.05 = 78 s, beyond the 40 s long hold) the evaluation's step fails though it is
+    converging just the same."""
+    import dataclasses
     import re
 
-    Kp = 0.05
-    assert settling_time(Kp) > LONG_HOLD * HOLD * TS
-    a = run_check(scenario(tmp_path, [0.0, 1.0]), pi(Kp))
+    from prlpid_fmi.deliver.evidence import held_out
+
+    sc = scenario(tmp_path, [0.0, 1.0])
+    sc = dataclasses.replace(sc, tuning=dataclasses.replace(sc.tuning, load_disturbance=0.05))
+    table = fixed_schedule(pi(0.12), sc.tuning)
+
+    def replay(cfg, seed):
+        return replay_schedule(table, cfg, seed=seed)
+    a = check(held_out(sc, table, seed=0)[:4], replay, sc.deploy.max_overshoot, sc.deploy.max_chatter)
     assert a.passed, a.failures
     converging = [s for s in a.slow if "still converging" in s]
-    assert len(converging) == 1 and "the step to 1 at t = 10 s" in converging[0]
-    ratio = float(re.search(r"is (\d+)% of that", converging[0]).group(1)) / 100
-    assert ratio == pytest.approx(math.exp(-Kp * LONG_HOLD * HOLD * TS / 4), abs=0.03)
+    assert converging and all("the disturbance" in s for s in converging)
+    for s in converging:
+        ratio = float(re.search(r"is (\d+)% of that", s).group(1)) / 100
+        assert ratio == pytest.approx(math.exp(-0.12 * LONG_HOLD * HOLD * TS / 2 / 4), abs=0.06)
+    assert settling_time(0.05) > LONG_HOLD * HOLD * TS
+    slow_step = run_check(scenario(tmp_path, [0.0, 1.0]), pi(0.05))
+    assert not slow_step.passed and slow_step.failures[0].check == "settles"
 
 
 def test_the_noise_free_replays_with_loads_keep_the_loads_and_drop_the_noise(tmp_path):

@@ -16,9 +16,10 @@ held-out episodes of the training distribution (deliver.evidence). On every one 
    their Chatter. An episode with a step left unsettled is replayed once with every hold LONG_HOLD times
    as long (the same setpoints in the same order, the scenario's disturbances and the episode's random load steps
    moved with their holds: `stretched`).
-   A step that settles then is *slow*: reported, not failed; so is a noise-free one still converging at the end of
-   the long hold (its largest error over the last LIMIT_TAIL at most CONVERGING x that over the LIMIT_TAIL before:
-   a slow load recovery, not an offset or a swing that stays). One that still does not settle fails, unless no input
+   A step that settles then is *slow*: reported, not failed; so is a noise-free disturbance still being recovered at
+   the end of the long hold (its largest error over the last LIMIT_TAIL at most CONVERGING x that over the
+   LIMIT_TAIL before: a slow load recovery, not an offset or a swing that stays). One that still does not settle
+   fails, unless no input
    within the limits can hold its setpoint: the controller's command sits at one of its limits over the last
    quarter of the long hold while the measurement stays short of the setpoint on the side it came from. Such a
    setpoint is *excused* and named;
@@ -334,7 +335,7 @@ def _long_hold(ep: Episode, unsettled: list[dict], replay: Replay, t: _Tally, in
                              "with the measurement short of the setpoint")
             continue
         ratio = _decay(traj, twin, i, target)
-        if noise_free(config) and ratio <= CONVERGING:
+        if noise_free(config) and not step and ratio <= CONVERGING:  # a step must settle within the long hold
             t.slow.append(f"{where}: still converging at the end of a {LONG_HOLD}x longer hold (its largest error over "
                           f"the last {LIMIT_TAIL:.0%} is {ratio:.0%} of that over the {LIMIT_TAIL:.0%} before)")
             continue
