@@ -152,10 +152,11 @@ def quiet_command(config: TuningConfig, gains: GainValues, structure: tuple, max
     """Requirement 1's chatter (module docstring): the worst metrics.fast_reversals of the PID's command on the
     full-range episodes (tuning.full_range) and CHATTER_EPISODES quiet training episodes (random setpoints, no load
     steps or noise; seeds seed + i; an episode that diverges counts in the range episode's following, not here).
-    Above CHATTER_MARGIN x max_chatter the gains are detuned together (Kp / lambda,
-    Ti and Td x lambda, lambda = DETUNE_STEP**k, k = 1 .. CHATTER_DETUNINGS: the same controller on a slower time
-    axis, so the setpoint response b was chosen for keeps its shape) to the first k that meets it; where none does,
-    the gains stay (the acceptance check then says so). Returns (the check's record, the gains)."""
+    Above CHATTER_MARGIN x max_chatter the gains are detuned together (Kp / lambda, Ti and Td x lambda, lambda =
+    DETUNE_STEP**k, k = 1 .. CHATTER_DETUNINGS: the same controller on a slower time axis, so the setpoint response
+    b was chosen for keeps its shape) to the first k that meets it; where none does, the gains stay (the acceptance
+    check then says so). Ms is not measured again here: the deliverable rule measures the result's. Returns (the
+    check's record, the gains)."""
     target = CHATTER_MARGIN * max_chatter
     config = dataclasses.replace(config, forecast_horizon=0)
     episodes = [(c, s) for _, c, s in full_range_episodes(config, seed)]
