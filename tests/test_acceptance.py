@@ -346,7 +346,7 @@ def test_a_step_its_random_load_cuts_short_is_judged_on_the_clean_replay_and_the
     assert all(not (s["end_step"] in starts and not math.isnan(s["SettlingTime"]))
                for s in judged(loaded.metrics, loaded.trajectory))
     assert a.passed, a.failures
-    assert a.slow and all("without its load steps" in x for x in a.slow if "the step to" in x)
+    assert a.slow and all("clean held-out episode" in x for x in a.slow if "the step to" in x)
     assert late(episodes[3].metrics, episodes[3].trajectory, steps_only=True)  # the clean replay's step: not in 10 s
     _, weak = run(pi(0.3, 20.0))
     assert not weak.passed and any(f.check == "settles" and "the disturbance" in f.text for f in weak.failures)
@@ -395,7 +395,7 @@ def test_the_noise_free_replays_with_loads_keep_the_loads_and_drop_the_noise(tmp
     table = fixed_schedule(pi(1.0), sc.tuning)
     noisy, kept = held_out(sc, table, seed=0)[:2], held_out(sc, table, seed=0, clean=True, loads=True)[:2]
     for n, k in zip(noisy, kept):
-        assert k.label == n.label + " without noise" and k.config.measurement_noise_std == 0
+        assert k.label == "noise-free " + n.label + " (with load steps)" and k.config.measurement_noise_std == 0
         assert [start for start, _, _, _ in k.trajectory.loads] == [HOLD // 2, HOLD + HOLD // 2]  # loads kept
         assert np.all(k.trajectory.measurement[1:] == k.trajectory.measurement[1:])  # finite: ran to its end
 
