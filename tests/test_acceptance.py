@@ -397,7 +397,7 @@ def test_the_noise_free_replays_with_loads_keep_the_loads_and_drop_the_noise(tmp
     for n, k in zip(noisy, kept):
         assert k.label == "noise-free " + n.label + " (with load steps)" and k.config.measurement_noise_std == 0
         assert [start for start, _, _, _ in k.trajectory.loads] == [HOLD // 2, HOLD + HOLD // 2]  # loads kept
-        assert np.all(k.trajectory.measurement[1:] == k.trajectory.measurement[1:])  # finite: ran to its end
+        assert np.all(np.isfinite(k.trajectory.measurement))  # ran to its end
 
     def replay(cfg, seed):
         return replay_schedule(table, cfg, seed=seed)

@@ -208,29 +208,25 @@ def _check_episode(ep: Episode, replay: Replay, t: _Tally) -> None:
     if not ep.settling:
         return
     index = {l.output: i for i, l in enumerate(config.loops)}
-    unsettled = []
     for seg in judged(m, traj):
+        if not _is_step(seg):
+            continue
         i = index.get(seg["loop"], 0)
-        step = _is_step(seg)
-        if step:
-            t.steps += 1
-            os = _overshoot(traj, seg, i, config) if not random_loads(config) else math.nan
-            if math.isfinite(os) and not os <= t.overshoot:
-                t.overshoot, t.overshoot_where = os, f"{ep.label}, the step to {traj.setpoint[seg['start_step'], i]:.4g} " \
-                                                      f"at t = {seg['start_time_s']:g} s"
-        late = seg["SettlingTime"] if step else seg["RecoveryTime"]
-        if late == math.inf:
-            unsettled.append(seg)
-        elif step:
-            t.settled += 1
+        t.steps += 1
+        t.settled += seg["SettlingTime"] != math.inf
+        os = _overshoot(traj, seg, i, config) if not random_loads(config) else math.nan
+        if math.isfinite(os) and not os <= t.overshoot:
+            t.overshoot, t.overshoot_where = os, f"{ep.label}, the step to {traj.setpoint[seg['start_step'], i]:.4g} " \
+                                                  f"at t = {seg['start_time_s']:g} s"
+    unsettled = late(m, traj)
     if unsettled:
         _long_hold(ep, unsettled, replay, t, index)
 
 
 def judged(metrics: dict, traj) -> list[dict]:
     """The segments of a replay's metrics the check judges: all but the setpoint steps a random load step cuts short
-    (their segment ends where the load begins: loop.evaluation.measure splits segments there), which the episode's
-    clean replay judges."""
+    (their segment ends where the load begins: loop.evaluation.measure splits segments there), which the clean
+    replays judge with their whole hold."""
     cut = {start for start, _, _, _ in traj.loads}
     return [seg for seg in metrics["segments"] if not (_is_step(seg) and seg["end_step"] in cut)]
 
