@@ -58,6 +58,23 @@ def test_identify_picks_the_lowest_order_that_fits_a_second_order_response():
     assert identify(MeasuredPlant(w, P, Ts, (0.0,), ()), max_order=1, high_order=1).fit_error > 0.05
 
 
+def test_a_pole_zero_pair_below_the_lowest_measured_octave_is_not_identified():
+    """Two tanks' 0.005 / ((s + 0.05)(s + 0.5)) at Ts 0.1 s, its response at the two lowest of 60 frequencies 9 % off
+    (a closed-loop estimate at high loop gain): no order fits within the tolerance, and orders 3-4 would follow the
+    error with a pole and a zero below 2x the lowest frequency (one outside the unit circle where the error is a
+    gain). The model taken is of order 2, its poles scipy's ZOH discretisation's within 0.2 % (a stable model)."""
+    Ts = 0.1
+    b, a = zoh([0.005], [1.0, 0.55, 0.025], Ts)
+    w = np.geomspace(0.004, math.pi / Ts, 60)
+    q = np.exp(-1j * w * Ts)
+    P = np.polyval(b[::-1], q) / np.polyval(a[::-1], q)
+    P[:2] *= 1.09
+    model = identify(MeasuredPlant(w, P, Ts, (0.0,), ()), tolerance=0.005)
+    assert model.order == 2 and len(model.numerator) == 3
+    np.testing.assert_allclose(np.sort(np.roots(model.denominator)), np.sort(np.roots(a)), rtol=2e-3)
+    assert np.max(np.abs(np.roots(model.denominator))) < 1.0
+
+
 def test_identify_finds_the_dead_time_of_a_delayed_lag():
     """A ZOH-discretised e^(-0.35 s)/(2 s + 1) at Ts = 0.05 (7 samples of delay, the ZOH's sample on top): no order
     1..4 without dead time fits it within the tolerance; with it, order 1 and d = 7, the coefficients within 1e-8 of
@@ -404,3 +421,25 @@ def test_the_quadrotors_loop_models_are_its_double_integrators_and_predict_the_f
                 assert design.cost(moved) >= found.fun * (1.0 - 1e-3)
     finally:
         design.close()
+
+
+def test_frequencies_where_the_measuring_loop_has_high_gain_weigh_less_in_the_fit():
+    """A closed-loop estimate is a ratio of small signals where |S| of the measuring loop is small: here two tanks'
+    0.005 / ((s + 0.05)(s + 0.5)) at Ts 0.1 s measured with a PI (Kp 5, Ti 10 s), each frequency's estimate off by
+    0.1 % / |S| (rotating phase). Unweighted, no order fits within FIT_TOLERANCE; with the measuring loop's |S|
+    (MeasuredPlant.sensitivity) order 2 fits and its poles are scipy's ZOH discretisation's within 0.2 %."""
+    from prlpid_fmi.robustness.local_model import FIT_TOLERANCE
+
+    Ts = 0.1
+    b, a = zoh([0.005], [1.0, 0.55, 0.025], Ts)
+    w = np.geomspace(0.0005, math.pi / Ts, 120)
+    q = np.exp(-1j * w * Ts)
+    P = np.polyval(b[::-1], q) / np.polyval(a[::-1], q)
+    S = np.abs(1.0 / (1.0 + pid_frequency_response(5.0, 10.0, 0.0, Ts, w) * P))
+    assert S.min() < 0.01  # high loop gain at the lowest frequencies
+    measured = P * (1.0 + 0.001 / S * np.exp(1j * np.arange(len(w))))
+    plain = identify(MeasuredPlant(w, measured, Ts, (0.0,), ()))
+    assert plain.order != 2 or plain.fit_error > FIT_TOLERANCE
+    model = identify(MeasuredPlant(w, measured, Ts, (0.0,), (), None, S))
+    assert model.order == 2 and model.fit_error <= FIT_TOLERANCE
+    np.testing.assert_allclose(np.sort(np.roots(model.denominator)), np.sort(np.roots(a)), rtol=2e-3)

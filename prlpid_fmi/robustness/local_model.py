@@ -7,12 +7,20 @@ The model: a discrete transfer function in q = z^-1 from the plant input u_k to 
 
 fitted to robustness.plant_response.MeasuredPlant's P(e^{j w Ts}) (the multisine experiment the Ms limits already
 use: the ZOH discretisation of the plant, one sample of delay included) by Sanathanan-Koerner iterations: linear
-least squares of the relative error |A P_meas - B| / (|A_prev| |P_meas|) over the measured frequencies, SK_ITERATIONS
-times. The order is the lowest of 1..MAX_ORDER whose RMS relative error over the measured frequencies is at most
-FIT_TOLERANCE; where none meets it, a dead time of d = 1..MAX_DELAY further samples is tried (q^d B(q) / A(q): the
-numerator's leading zeros), lowest order first, then least d; where none fits either, orders MAX_ORDER + 1 ..
+least squares of the relative error |A P_meas - B| / (|A_prev| |P_meas|) over the measured frequencies, each weighted
+by its estimate's reliability (MeasuredPlant.reliability: the measuring loop's |S|, full weight from
+RELIABLE_SENSITIVITY up; a closed-loop estimate where the loop gain is high is a ratio of small signals), SK_ITERATIONS
+times. The order is the lowest of 1..MAX_ORDER whose RMS relative error over the measured frequencies (weighted alike)
+is at most FIT_TOLERANCE; where none meets it, a dead time of d = 1..MAX_DELAY further samples is tried (q^d B(q) /
+A(q): the numerator's leading zeros), lowest order first, then least d; where none fits either, orders MAX_ORDER + 1 ..
 HIGH_ORDER without dead time (a high-order lag such as 1/(s + 1)^6; else the best of them). A ZOH-discretised linear
 plant of order n is matched exactly at order n, with its delay when that is a whole number of samples.
+
+A fit with a pole and a zero both slower than the lowest measured octave (|ln z| / Ts below LOWEST_OCTAVE x the
+lowest measured frequency) is not taken at its order (`unresolved`): the experiment cannot resolve such a pair, and a
+fit adds one to follow the error of its lowest frequencies' estimates (two_tank at 500k, seed 0, before the weights:
+poles at z = 1.00001 beside zeros at 1.00001, an unstable model of a stable plant that no PID stabilised, so the design
+fell back to simulating the FMU).
 
 The load response (`load_responses`): the loop held at the point, a step d at the plant input, the PID's
 feedback law (control.pid: measurement filter F, integral of the unfiltered error, backward-difference derivative
@@ -41,14 +49,14 @@ SK_ITERATIONS = 20  # Sanathanan-Koerner re-weightings
 MAX_DELAY = 40  # extra samples of dead time tried where no order fits without
 ZERO_RESPONSE = 1e-12  # |P| at most this x the largest |P| measured: a zero of the plant, left out of the fit
 HIGH_ORDER = 8  # orders MAX_ORDER + 1 .. HIGH_ORDER (no dead time) are tried last, where nothing above fits
+LOWEST_OCTAVE = 2.0  # a pole and a zero both slower than this x the lowest measured frequency: a pair not resolved
 
 
 @dataclass(frozen=True, eq=False)
 class LocalModel:
     """P(q) at one operating point: numerator (n+1+d,) d + 1 leading zeros, then b_1..b_n, and denominator (n+1,) 1,
-    a_1..a_n in powers
-    of q = z^-1; sample_time_s [s]; point: the setpoints per loop; fit_error: RMS over the measured frequencies of
-    |P_model - P_meas| / |P_meas|."""
+    a_1..a_n in powers of q = z^-1; sample_time_s [s]; point: the setpoints per loop; fit_error: RMS over the
+    measured frequencies, weighted by their reliability, of |P_model - P_meas| / |P_meas|."""
 
     numerator: np.ndarray
     denominator: np.ndarray
@@ -71,11 +79,12 @@ class LocalModel:
                 "denominator": self.denominator.tolist(), "fit_error": float(self.fit_error)}
 
 
-def _fit(omega: np.ndarray, P: np.ndarray, Ts: float, n: int) -> tuple[np.ndarray, np.ndarray]:
-    """(numerator, denominator) of order n by Sanathanan-Koerner iterations on the relative error."""
+def _fit(omega: np.ndarray, P: np.ndarray, Ts: float, n: int, reliability: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(numerator, denominator) of order n by Sanathanan-Koerner iterations on the relative error, each frequency's
+    weighted by its reliability (K,)."""
     q = np.exp(-1j * omega * Ts)
     powers = q[:, None] ** np.arange(1, n + 1)[None, :]  # (K, n): q^1 .. q^n
-    weight = 1.0 / np.abs(P)
+    weight = reliability / np.abs(P)
     a = np.zeros(n)
     for _ in range(SK_ITERATIONS):
         w = weight / np.abs(1.0 + powers @ a)
@@ -96,13 +105,14 @@ def identify(plant: MeasuredPlant, max_order: int = MAX_ORDER, tolerance: float 
     left out): the lowest order with fit_error <= tolerance; where no order meets it, the lowest order and then the
     least dead time of 1..max_delay extra samples that does (the numerator's leading zeros: q^d B(q) / A(q), fitted to
     P e^{j w Ts d}); where none does, the lowest order of max_order + 1..high_order without dead time (a high-order
-    lag); else the model with the least fit_error."""
+    lag); else the model with the least fit_error. A fit with a pair of poles and zeros slower than the lowest
+    measured frequency (`unresolved`) counts as not fitting."""
     omega = np.asarray(plant.frequencies_rad_s, float)
     P = np.asarray(plant.response, complex)
     # a zero of the plant on the grid (a double integrator's ZOH at the Nyquist frequency), measured as rounding
     # noise, is left out: the fit weighs relative errors
     nonzero = np.abs(P) > ZERO_RESPONSE * np.max(np.abs(P), initial=0.0)
-    omega, P = omega[nonzero], P[nonzero]
+    omega, P, reliability = omega[nonzero], P[nonzero], plant.reliability()[nonzero]
     if len(omega) < 2 or not np.all(np.isfinite(P)):
         raise ValueError("a local model needs a finite, nonzero response at two frequencies or more")
     Ts = float(plant.sample_time_s)
@@ -114,17 +124,27 @@ def identify(plant: MeasuredPlant, max_order: int = MAX_ORDER, tolerance: float 
             if 2 * len(omega) < 2 * n + 1:
                 break
             for d in delays:
-                num, den = _fit(omega, P * np.exp(1j * omega * Ts * d), Ts, n)
+                num, den = _fit(omega, P * np.exp(1j * omega * Ts * d), Ts, n, reliability)
                 num = np.concatenate([np.zeros(d), num])
                 model = LocalModel(num, den, Ts, tuple(plant.point), math.inf)
-                error = float(np.sqrt(np.mean(np.abs(model.response(omega) - P) ** 2 / np.abs(P) ** 2)))
-                error = error if math.isfinite(error) else math.inf
+                relative = np.abs(model.response(omega) - P) / np.abs(P)
+                error = float(np.sqrt(np.sum((reliability * relative) ** 2) / np.sum(reliability ** 2)))
+                error = error if math.isfinite(error) and not unresolved(model, float(np.min(omega))) else math.inf
                 model = LocalModel(num, den, Ts, tuple(plant.point), error)
                 if best is None or error < best.fit_error:
                     best = model
                 if error <= tolerance:
                     return model
     return best
+
+
+def unresolved(model: LocalModel, lowest_rad_s: float) -> bool:
+    """The model has a pole and a zero both slower than LOWEST_OCTAVE x lowest_rad_s [rad/s] (|ln z| / Ts below
+    it): a pair that a response measured from lowest_rad_s up does not resolve."""
+    def slow(poly):
+        roots = np.roots(np.trim_zeros(np.asarray(poly, float), "f")) if np.count_nonzero(poly) > 1 else []
+        return any(abs(np.log(complex(r))) < LOWEST_OCTAVE * lowest_rad_s * model.sample_time_s for r in roots if r != 0)
+    return slow(model.denominator) and slow(model.numerator)
 
 
 def measurement_filter(Tf: float, order: int, sample_time_s: float) -> tuple[np.ndarray, np.ndarray]:

@@ -44,7 +44,8 @@ def plant_responses(config: TuningConfig, gains: GainValues, points: list[list[f
             out.append(None)
             continue
         out.append([MeasuredPlant(x.frequencies_rad_s, x.plant_response, config.sample_time_s, tuple(p), (),
-                                  x.own_response) for x in loops])
+                                  x.own_response, np.abs(1.0 / (1.0 + x.controller_response * x.plant_response)))
+                    for x in loops])
     return out
 
 
