@@ -101,7 +101,7 @@ def pid_frequency_response(Kp: float, Ti: float, Td: float, sample_time_s: float
     the terms of `pid_transfer_function` evaluated at z directly (the search calls this for every candidate)."""
     Ts = float(sample_time_s)
     wT = np.asarray(omega, float) * Ts
-    z = np.where(np.isclose(wT, np.pi, rtol=1e-12, atol=0), -1.0 + 0j, np.exp(1j * wT))
+    z = np.where(np.abs(wT - np.pi) <= 1e-12 * np.pi, -1.0 + 0j, np.exp(1j * wT))  # np.isclose's test, 10x cheaper
     F = np.ones_like(z)
     if measurement_filter_s > 0:
         T = measurement_filter_s / measurement_filter_order
