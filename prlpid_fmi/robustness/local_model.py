@@ -9,12 +9,13 @@ fitted to robustness.plant_response.MeasuredPlant's P(e^{j w Ts}) (the multisine
 use: the ZOH discretisation of the plant, one sample of delay included) by Sanathanan-Koerner iterations: linear
 least squares of the relative error |A P_meas - B| / (|A_prev| |P_meas|) over the measured frequencies, each weighted
 by its estimate's reliability (MeasuredPlant.reliability: the measuring loop's |S|, full weight from
-RELIABLE_SENSITIVITY up; a closed-loop estimate where the loop gain is high is a ratio of small signals), SK_ITERATIONS
-times. The order is the lowest of 1..MAX_ORDER whose RMS relative error over the measured frequencies (weighted alike)
-is at most FIT_TOLERANCE; where none meets it, a dead time of d = 1..MAX_DELAY further samples is tried (q^d B(q) /
-A(q): the numerator's leading zeros), lowest order first, then least d; where none fits either, orders MAX_ORDER + 1 ..
-HIGH_ORDER without dead time (a high-order lag such as 1/(s + 1)^6; else the best of them). A ZOH-discretised linear
-plant of order n is matched exactly at order n, with its delay when that is a whole number of samples.
+plant_response.RELIABLE_SENSITIVITY up; a closed-loop estimate where the loop gain is high is a ratio of small
+signals), SK_ITERATIONS times. The order is the lowest of 1..MAX_ORDER whose RMS relative error over the measured
+frequencies (weighted alike) is at most FIT_TOLERANCE; where none meets it, a dead time of d = 1..MAX_DELAY further
+samples is tried (q^d B(q) / A(q): the numerator's leading zeros), lowest order first, then least d; where none fits
+either, orders MAX_ORDER + 1 .. HIGH_ORDER without dead time (a high-order lag such as 1/(s + 1)^6; else the best of
+them). A ZOH-discretised linear plant of order n is matched exactly at order n, with its delay when that is a whole
+number of samples.
 
 A fit with a pole and a zero both slower than the lowest measured octave (|ln z| / Ts below LOWEST_OCTAVE x the
 lowest measured frequency) is not taken at its order (`unresolved`): the experiment cannot resolve such a pair, and a
@@ -105,8 +106,8 @@ def identify(plant: MeasuredPlant, max_order: int = MAX_ORDER, tolerance: float 
     left out): the lowest order with fit_error <= tolerance; where no order meets it, the lowest order and then the
     least dead time of 1..max_delay extra samples that does (the numerator's leading zeros: q^d B(q) / A(q), fitted to
     P e^{j w Ts d}); where none does, the lowest order of max_order + 1..high_order without dead time (a high-order
-    lag); else the model with the least fit_error. A fit with a pair of poles and zeros slower than the lowest
-    measured frequency (`unresolved`) counts as not fitting."""
+    lag); else the model with the least fit_error. A fit with a pole and a zero in the lowest measured octave or
+    below (`unresolved`) counts as not fitting."""
     omega = np.asarray(plant.frequencies_rad_s, float)
     P = np.asarray(plant.response, complex)
     # a zero of the plant on the grid (a double integrator's ZOH at the Nyquist frequency), measured as rounding
@@ -141,9 +142,11 @@ def identify(plant: MeasuredPlant, max_order: int = MAX_ORDER, tolerance: float 
 def unresolved(model: LocalModel, lowest_rad_s: float) -> bool:
     """The model has a pole and a zero both slower than LOWEST_OCTAVE x lowest_rad_s [rad/s] (|ln z| / Ts below
     it): a pair that a response measured from lowest_rad_s up does not resolve."""
+    below = LOWEST_OCTAVE * lowest_rad_s * model.sample_time_s  # |ln z| of a root that slow
+
     def slow(poly):
         roots = np.roots(np.trim_zeros(np.asarray(poly, float), "f")) if np.count_nonzero(poly) > 1 else []
-        return any(abs(np.log(complex(r))) < LOWEST_OCTAVE * lowest_rad_s * model.sample_time_s for r in roots if r != 0)
+        return any(abs(np.log(complex(r))) < below for r in roots if r != 0)
     return slow(model.denominator) and slow(model.numerator)
 
 
