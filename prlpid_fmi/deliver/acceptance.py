@@ -19,22 +19,20 @@ held-out episodes of the training distribution (deliver.evidence). On every one 
    A step that settles then is *slow*: reported, not failed; so is a noise-free disturbance still being recovered at
    the end of the long hold (its largest error over the last LIMIT_TAIL at most CONVERGING x that over the
    LIMIT_TAIL before: a slow load recovery, not an offset or a swing that stays). One that still does not settle
-   fails, unless no input
-   within the limits can hold its setpoint: the controller's command sits at one of its limits over the last
-   quarter of the long hold while the measurement stays short of the setpoint on the side it came from. Such a
-   setpoint is *excused* and named;
+   fails, unless no input within the limits can hold its setpoint: the controller's command sits at one of its
+   limits over the last quarter of the long hold while the measurement stays short of the setpoint on the side it
+   came from. Such a setpoint is *excused* and named;
 3. its overshoot beyond NOISE_BAND standard deviations of the measurement noise is at most
    max(OVERSHOOT_FLOOR, deploy.max_overshoot) of the step (of MIN_STEP of the setpoint range for smaller steps),
    measured on episodes without random load steps (`random_loads`: deliver.evidence adds load-free replays of
-   the held-out episodes where the training distribution has them); between deploy.max_overshoot and that it passes, and the
-   verdict says by how much it is above the user's limit;
+   the held-out episodes where the training distribution has them); between deploy.max_overshoot and that it passes,
+   and the verdict says by how much it is above the user's limit;
 4. its command does not chatter by itself: on the noise-free replays (`noise_free`), the fraction of samples at which
-   the command oscillates at the sample rate (metrics.fast_reversals: three moves in a row of alternating sign, each above
-   CHATTER_THRESHOLD of the span, or a pulse one sample wide between small moves: a limit cycle, a ringing
-   derivative, a command toggling at a limit) is at most
-   deploy.max_chatter. A swing at the loop's own bandwidth (damping an oscillatory plant) is not chatter. On the
-   noisy replays the Chatter metric (metrics.chatter_fraction) is a preference, like the noise limits of the design:
-   reported (`noisy_chatter`), not failed.
+   the command oscillates at the sample rate (metrics.fast_reversals: three moves in a row of alternating sign, each
+   above CHATTER_THRESHOLD of the span, or a pulse one sample wide between small moves: a limit cycle, a ringing
+   derivative, a command toggling at a limit) is at most deploy.max_chatter. A swing at the loop's own bandwidth
+   (damping an oscillatory plant) is not chatter. On the noisy replays the Chatter metric (metrics.chatter_fraction)
+   is a preference, like the noise limits of the design: reported (`noisy_chatter`), not failed.
 
 The Ms limit is the rule's own check (deliver.rule.Candidate.problems). `check` returns an Acceptance: the failures,
 each with what failed, by how much and what would change it, and the slow and excused steps.
@@ -330,8 +328,8 @@ def _long_hold(ep: Episode, unsettled: list[dict], replay: Replay, t: _Tally, in
                              f"stays at its {limit} for the last {LIMIT_TAIL:.0%} of a {LONG_HOLD}x longer hold "
                              "with the measurement short of the setpoint")
             continue
-        ratio = _decay(traj, twin, i, target)
-        if noise_free(config) and not step and ratio <= CONVERGING:  # a step must settle within the long hold
+        ratio = math.nan if step or not noise_free(config) else _decay(traj, twin, i, target)
+        if ratio <= CONVERGING:  # a disturbance still being recovered; a step must settle within the long hold
             t.slow.append(f"{where}: still converging at the end of a {LONG_HOLD}x longer hold (its largest error over "
                           f"the last {LIMIT_TAIL:.0%} is {ratio:.0%} of that over the {LIMIT_TAIL:.0%} before)")
             continue

@@ -173,8 +173,9 @@ def held_out(scenario, schedule: GainSchedule, seed: int, clean: bool = False, l
     for i in range(HOLDOUT_EPISODES):
         s = seed + HOLDOUT_SEED_OFFSET + i
         metrics, traj = replay_schedule(schedule, config, seed=s)
-        label = (f"held-out episode {i + 1}" if not clean else f"noise-free held-out episode {i + 1} (with load steps)"
-                 if loads else f"clean held-out episode {i + 1} (no load steps, no noise)")
+        label = f"held-out episode {i + 1}"
+        if clean:
+            label = f"noise-free {label} (with load steps)" if loads else f"clean {label} (no load steps, no noise)"
         out.append(Episode(label, config, s, metrics, traj))
         if metrics.get("terminated"):
             break
