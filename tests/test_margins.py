@@ -192,6 +192,33 @@ def test_amplitude_is_halved_until_the_control_signal_stays_inside_its_limits():
     assert_close_margins(m, reference_margins(pid_by_hand(3.0, 2.0, 0.05) * first_order_zoh(1.0)))
 
 
+def test_a_saturated_attempt_stops_within_its_period_and_the_last_attempt_is_measured_as_if_alone():
+    """An attempt that hits a limit before the last is repeated at half the amplitude anyway: it ends within the
+    period it saturated in, and the response is the one measured from the settled state at the final amplitude."""
+    config = preset("two_tank")  # the pump's 0..50 cm3/s: a peak of 40 around its ~22 at 8 cm saturates
+    Ts = config.sample_time_s
+    rig = ClosedLoopRig(config, [5.0], [20.0], [0.0], [8.0])
+    settling = rig.settle()
+    C = lambda w: pid_transfer_function(5.0, 20.0, 0.0, Ts)(np.exp(1j * w * Ts))  # noqa: E731
+    calls, simulate = [], rig.simulate
+
+    def counted(loop, d):
+        out = simulate(loop, d)
+        calls.append(out[2])  # saturated
+        return out
+    rig.simulate = counted
+    bins = [1, 3, 10, 30, 100]
+    first = measure_response(rig, 0, bins, 1024, 40.0, C, settling.steps)
+    assert first.amplitude < 40.0 and not first.saturated
+    halvings = round(math.log2(40.0 / first.amplitude))
+    # each saturated attempt ends in the call (its wait or one period) it saturated in
+    assert sum(calls) == halvings >= 1
+    alone = measure_response(rig, 0, bins, 1024, first.amplitude, C, settling.steps)
+    np.testing.assert_array_equal(first.response, alone.response)
+    assert first.periods == alone.periods
+    rig.close()
+
+
 def test_operating_point_at_a_limit_has_no_margins():
     # 45 cm needs q_in = 7.89 sqrt(45) = 53 cm3/s > 50: the pump sits at its limit
     m = loop_margins(preset("two_tank"), [5.0], [20.0], [0.0], [45.0])

@@ -332,8 +332,8 @@ def measure_response(rig: ClosedLoopRig, loop: int, bins: Sequence[int], period:
     Starts from the settled state (rig.restore()), waits `wait` samples (at least MIN_WAIT, at most one
     period), then measures whole periods until the loop transfer L = C * P changes by at most
     CONVERGENCE_TOLERANCE * |1 + L| between consecutive periods (MAX_PERIODS at most, more when short).
-    When a control signal hits a limit or the loop diverges, the amplitude is halved and the experiment
-    repeated (AMPLITUDE_RETRIES times).
+    When a control signal hits a limit or the loop diverges, the attempt ends there, the amplitude is halved and
+    the experiment repeated (AMPLITUDE_RETRIES times; the last attempt runs to the end, flagged).
     `controller(w)` gives the loop's PID response C(e^{j w Ts}) at w [rad/s].
     """
     bins = np.unique(np.asarray(bins, dtype=int))
@@ -350,13 +350,14 @@ def measure_response(rig: ClosedLoopRig, loop: int, bins: Sequence[int], period:
     for attempt in range(AMPLITUDE_RETRIES + 1):
         rig.restore()
         d = multisine(bins, period, amplitude)
+        last = attempt == AMPLITUDE_RETRIES
         _, _, saturated, diverged = rig.simulate(loop, d[:wait])
         estimates, own, change, changes, periods, distortion, levels = [], [], math.inf, [], 0, math.nan, []
         start = wait
-        while not diverged:
+        while not diverged and (last or not saturated):  # a saturated attempt before the last is repeated anyway
             uu, yy, sat, diverged = rig.simulate(loop, np.roll(d, -(start % period)))
             saturated |= sat
-            if diverged:
+            if diverged or (saturated and not last):
                 break
             U = np.fft.rfft(uu[loop])
             Y = np.fft.rfft(yy, axis=1)
@@ -374,7 +375,7 @@ def measure_response(rig: ClosedLoopRig, loop: int, bins: Sequence[int], period:
                 changes.append(change)
                 if change <= CONVERGENCE_TOLERANCE or periods >= MAX_PERIODS * max(1, PERIODS_OF // period):
                     break
-        if not (saturated or diverged) or attempt == AMPLITUDE_RETRIES:
+        if not (saturated or diverged) or last:
             break
         amplitude /= 2  # a saturated unstable plant can escape: smaller is the cure for both
     response = estimates[-1] if estimates else np.full(len(bins), np.nan + 0j)
