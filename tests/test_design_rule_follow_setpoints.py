@@ -67,7 +67,7 @@ def _first() -> FixedPid:
 def test_the_search_without_a_load_limit_follows_the_episodes_within_the_limits(design):
     config, load_design = design
     best_load = 0.0252  # the Ms <= 2 load optimum of 1/(s - 1) (tests/test_load_design.py)
-    found, keep = follow_setpoints(config, load_design, _first(), best_load, DeployConfig(), SEEDS, 0, 4, 5, QUIET)
+    found, keep = follow_setpoints(config, load_design, _first, best_load, DeployConfig(), SEEDS, 0, 4, 5, QUIET)
     assert found.source == "search" and keep is not None
     vector, gains, (b, c, tf) = keep
     Kp, Ti, Td, _ = gains
@@ -96,20 +96,20 @@ def test_the_search_without_a_load_limit_follows_the_episodes_within_the_limits(
 def test_where_the_search_diverges_the_stabilising_pid_is_kept_and_where_it_diverges_too_nothing(design, monkeypatch):
     config, load_design = design
     monkeypatch.setattr(SetpointDesign, "evaluate", lambda self, vector: (1.0, math.inf, math.inf))
-    found, keep = follow_setpoints(config, load_design, _first(), 0.0252, DeployConfig(), SEEDS, 0, 1, 3, QUIET)
+    found, keep = follow_setpoints(config, load_design, _first, 0.0252, DeployConfig(), SEEDS, 0, 1, 3, QUIET)
     weight, rows = setpoint_weight(config, STABILISING, ([1.0], [0.0], [0.0]), SEEDS, DeployConfig().max_overshoot)
     assert found.source == "stabilising PID"
     _, gains, (b, c, tf) = keep
     assert gains == STABILISING and b == [weight] and c == [0.0] and tf == [0.0]
     assert found.ISE == next(r["ISE"] for r in rows if r["b"] == weight) and math.isfinite(found.ISE)
     # where the gains of steps 2-4 follow the episodes (only the overshoot limit unmet), nothing replaces them
-    found, keep = follow_setpoints(config, load_design, _first(), 0.0252, DeployConfig(), SEEDS, 0, 1, 3, QUIET,
+    found, keep = follow_setpoints(config, load_design, _first, 0.0252, DeployConfig(), SEEDS, 0, 1, 3, QUIET,
                                    diverged=False)
     assert found.source is None and keep is None and not found.load_optimal_diverged
 
     inf = math.inf
     monkeypatch.setattr(design_rule, "setpoint_weight", lambda *a: (0.0, [{"b": 0.0, "ISE": inf, "Overshoot": inf}]))
-    found, keep = follow_setpoints(config, load_design, _first(), 0.0252, DeployConfig(), SEEDS, 0, 1, 3, QUIET)
+    found, keep = follow_setpoints(config, load_design, _first, 0.0252, DeployConfig(), SEEDS, 0, 1, 3, QUIET)
     assert found.source is None and keep is None
 
 
@@ -124,7 +124,7 @@ def test_on_the_local_models_the_search_is_verified_on_the_fmu_and_rejects_loads
     try:
         identified.prepare(STABILISING)
         assert identified.models is not None, identified.model_note
-        found, keep = follow_setpoints(config, identified, _first(), best_load, DeployConfig(), SEEDS, 0, 4, 5, QUIET)
+        found, keep = follow_setpoints(config, identified, _first, best_load, DeployConfig(), SEEDS, 0, 4, 5, QUIET)
         record = found.on_models
         assert found.source == "search" and record.kept and keep is not None
         vector, gains, (b, c, tf) = keep
@@ -140,7 +140,7 @@ def test_on_the_local_models_the_search_is_verified_on_the_fmu_and_rejects_loads
             trade.close()
         assert found.load_cost == pytest.approx(fmu_design.load_cost(gains, tf), rel=1e-12)
         assert record.model_load_cost == pytest.approx(found.load_cost, rel=0.01)  # the models predict it
-        on_fmu, _ = follow_setpoints(config, fmu_design, _first(), best_load, DeployConfig(), SEEDS, 0, 4, 5, QUIET)
+        on_fmu, _ = follow_setpoints(config, fmu_design, _first, best_load, DeployConfig(), SEEDS, 0, 4, 5, QUIET)
         assert on_fmu.on_models is None and on_fmu.feasible
         assert found.load_cost <= 1.02 * on_fmu.load_cost
     finally:
@@ -154,7 +154,7 @@ def test_where_the_least_load_iae_leaves_range_steps_unsettled_the_least_setpoin
     from prlpid_fmi.tuning.design_result import Following
 
     config, load_design = design
-    by_load, _ = follow_setpoints(config, load_design, _first(), 0.0252, DeployConfig(), SEEDS, 0, 4, 5, QUIET)
+    by_load, _ = follow_setpoints(config, load_design, _first, 0.0252, DeployConfig(), SEEDS, 0, 4, 5, QUIET)
     unsettled = by_load.load_cost
 
     def following(config, gains, structure):
@@ -162,9 +162,9 @@ def test_where_the_least_load_iae_leaves_range_steps_unsettled_the_least_setpoin
         return Following(12, 0 if settles else 3, 0, False, 0.0, 1.0)
 
     monkeypatch.setattr(design_rule, "following", following)
-    found, keep = follow_setpoints(config, load_design, _first(), 0.0252, DeployConfig(), SEEDS, 0, 4, 5, QUIET)
+    found, keep = follow_setpoints(config, load_design, _first, 0.0252, DeployConfig(), SEEDS, 0, 4, 5, QUIET)
     assert found.objective == "setpoint" and keep is not None and found.load_cost != unsettled
     assert found.feasible and found.Overshoot <= 100.0 * DeployConfig().max_overshoot
     monkeypatch.setattr(design_rule, "following", lambda *a: Following(12, 3, 0, False, 0.0, 1.0))
-    found, keep = follow_setpoints(config, load_design, _first(), 0.0252, DeployConfig(), SEEDS, 0, 4, 5, QUIET)
+    found, keep = follow_setpoints(config, load_design, _first, 0.0252, DeployConfig(), SEEDS, 0, 4, 5, QUIET)
     assert found.objective == "load" and found.load_cost == unsettled and keep is not None

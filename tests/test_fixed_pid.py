@@ -159,3 +159,22 @@ def test_predictions_the_measurement_contradicts_do_not_end_the_detuning(monkeyp
     assert found is not None and exact_ms(found) <= 2.0 * 1.01
     monkeypatch.setattr(fixed_pid, "predicted_ms", lambda *a: None)
     assert found == fixed_pid.detune(CONFIG, TOGETHER, point, 2.0)
+
+
+def test_a_measuring_pid_above_the_limit_is_made_robust_where_it_becomes_a_candidate(run_context):
+    """The stabilising PID is measured with at up to design_rule.MEASURING_MS_FACTOR x the limit; robust_setpoint_pid
+    (what a candidate or fallback built from it deploys) detunes it onto the limit, checked on the exact loop; one
+    within the limit stays as it is."""
+    from prlpid_fmi.loop.gains import gains_from_values
+    from prlpid_fmi.tuning.design_rule import MEASURING_MS_FACTOR
+    from prlpid_fmi.tuning.fixed_pid import FixedPid, robust_setpoint_pid
+
+    loose = ([6.0], [0.4], [0.05], None)  # Ms 2.75 on the exact loop
+    assert 2.0 < exact_ms(loose) <= MEASURING_MS_FACTOR * 2.0  # a measuring PID the looser limit lets through
+    found = FixedPid(np.zeros(3), gains_from_values(*loose), 1.0, 10)
+    robust = robust_setpoint_pid(CONFIG, found, [0], 2.0)
+    gains = robust.gains.values()
+    assert gains[0][0] < loose[0][0] and exact_ms(gains) <= 2.0 * 1.01
+    assert robust.cost != found.cost  # its J on the seeds again, for the new gains
+    fine = FixedPid(np.zeros(3), gains_from_values(*gains), robust.cost, 10)
+    assert robust_setpoint_pid(CONFIG, fine, [0], 2.0) is fine

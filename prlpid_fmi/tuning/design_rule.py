@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -59,7 +60,8 @@ from prlpid_fmi.tuning.classical_rules import load_bound
 from prlpid_fmi.tuning.design_result import (CandidateRecord, ChatterCheck, DesignDetails, DesignReport, DesignResult,
                                              Followed, Following, ModelPath, ModelSearch, Relaxation, Requirement,
                                              Trade)
-from prlpid_fmi.tuning.fixed_pid import DETUNE_STEP, FixedPid, detune_over, detuned, setpoint_pid
+from prlpid_fmi.tuning.fixed_pid import (DETUNE_STEP, FixedPid, detune_over, detuned, robust_setpoint_pid,
+                                         setpoint_pid)
 from prlpid_fmi.tuning.full_range import full_range_episodes, quiet
 from prlpid_fmi.tuning.load_design import (MODEL_TOLERANCE, SETPOINT_MODEL_MINIMUM, LoadDesign, SetpointDesign,
                                            model_budget, setpoint_weight)
@@ -72,6 +74,8 @@ RANGE_ORDER = (0, 1, 2, 1, 0)  # indices into (low, middle, high): up and down t
 SETTLING_BAND = 0.02  # a step is settled when |r - y| stays within this fraction of the step to the end of its hold
 RELAX_FACTORS = (2.0, 5.0, math.inf)  # factors on a noise limit the relaxation tries, in turn
 STABILISING_GENERATIONS = 6  # generations of the setpoint search that finds the PID the plant is measured with
+MEASURING_MS_FACTOR = 1.5  # ... whose Ms may reach this x deploy.max_sensitivity: its measurements need a settled,
+# verified loop, not a deployable one (a lightly damped loop fails as unsettled there)
 CHATTER_MARGIN = 0.8  # the design holds the command's chatter to this x deploy.max_chatter (the acceptance's limit)
 CHATTER_EPISODES = 8  # quiet random training episodes of the chatter check, besides the two full-range ones
 CHATTER_DETUNINGS = 16  # the chatter check tries lambda = DETUNE_STEP**k for k = 1 .. this (up to 9.4)
@@ -208,10 +212,13 @@ class Designer:
         self.episodes, self.progress, self.limit = episodes, progress, max_sensitivity
         self.baseline, self.deploy = baseline, deploy
         self.seeds = [seed + i for i in range(episodes)]
-        # robust too (its Ms checked and detuned as the setpoint search does): a lightly damped loop does not settle
-        # in the frequency-response experiment, and an unverified response gives the design no constraint
-        self.first = setpoint_pid(config, seed, episodes, STABILISING_GENERATIONS, popsize, progress, max_sensitivity,
+        # its Ms checked and detuned as the setpoint search does, to MEASURING_MS_FACTOR x the limit: a lightly damped
+        # loop does not settle in the frequency-response experiment, and an unverified response gives the design no
+        # constraint; where it becomes a candidate itself, it is made robust to the limit then (`robust_first`)
+        self.first = setpoint_pid(config, seed, episodes, STABILISING_GENERATIONS, popsize, progress,
+                                  None if max_sensitivity is None else MEASURING_MS_FACTOR * max_sensitivity,
                                   name="stabilising PID (setpoint search)", workers=baseline.workers)
+        self._robust_first: FixedPid | None = None
         self.measured: dict | None = None
         self.evaluations = self.first.evaluations
         self.load_optimum: float | None = None
@@ -270,7 +277,7 @@ class Designer:
                     gains, tf = design.gains(vector[:-1]), design.filters(vector[:-1])
                     b = [SetpointDesign.weight(vector)] * config.n_loops
             if traded is not None and not traded.feasible and not traded.nearest_load_tolerance:
-                followed, found = follow_setpoints(config, design, self.first, best_load, deploy, seeds, seed,
+                followed, found = follow_setpoints(config, design, self.robust_first, best_load, deploy, seeds, seed,
                                                    maxiter, popsize, progress,
                                                    diverged=not follows_setpoints(choices, traded))
                 if found is not None:
@@ -454,9 +461,18 @@ class Designer:
                                        self.deploy.max_overshoot, grid=(float(b[0]),))
         return rows[0]["ISE"], rows[0]["Overshoot"]
 
+    def robust_first(self) -> FixedPid:
+        """The stabilising PID made robust to the Ms limit (tuning.fixed_pid.robust_setpoint_pid), once: what a
+        candidate or fallback built from it deploys."""
+        if self._robust_first is None:
+            self._robust_first = self.first if self.limit is None else \
+                robust_setpoint_pid(self.config, self.first, self.seeds, self.limit)
+        return self._robust_first
+
     def stabilising(self, limits: NoiseLimits) -> Candidate:
-        """The stabilising PID with its best b (setpoint_weight) as a candidate."""
-        config, first = self.config, self.first
+        """The stabilising PID (robust to the Ms limit: `robust_first`) with its best b (setpoint_weight) as a
+        candidate."""
+        config, first = self.config, self.robust_first()
         gains = first.gains.values()
         _, c, tf = first.structure
         loader = LoadDesign(config, self.baseline.load_step, self.limit, math.inf, self.baseline.widen_ranges)
@@ -616,16 +632,16 @@ def follows_setpoints(choices: list[dict], traded: Trade | None) -> bool:
     return any(math.isfinite(r["ISE"]) for r in choices) or bool(traded and traded.feasible)
 
 
-def follow_setpoints(config: TuningConfig, design: LoadDesign, first: FixedPid, best_load: float, deploy: DeployConfig,
-                     seeds: list[int], seed: int, maxiter: int, popsize: int, progress: Steps,
+def follow_setpoints(config: TuningConfig, design: LoadDesign, first: Callable[[], FixedPid], best_load: float,
+                     deploy: DeployConfig, seeds: list[int], seed: int, maxiter: int, popsize: int, progress: Steps,
                      diverged: bool = True) -> tuple[Followed, tuple | None]:
     """Where no gains within the load tolerance met the overshoot limit: the least load cost within the Ms, noise and
     overshoot limits (the rule's order: the overshoot limit before the load tolerance, nearest that), without a load
-    limit, searched over the whole box. Its best is kept where it meets every limit,
-    or where the gains of the load search diverged on the episodes (`diverged`) and it follows them; where they
-    diverged and it does not follow them either, the stabilising PID `first` with its best setpoint weight. Where the
-    load search used the local models the search runs on them first (`_follow_on_models`); its result stands where
-    the FMU confirms it and it settles the range episode, else the search runs with the setpoint episodes on the FMU.
+    limit, searched over the whole box. Its best is kept where it meets every limit, or where the gains of the load
+    search diverged on the episodes (`diverged`) and it follows them; where they diverged and it does not follow them
+    either, the stabilising PID first() (made robust) with its best setpoint weight. Where the load search used the
+    local models the search runs on them first (`_follow_on_models`); its result stands where the FMU confirms it and
+    it settles the range episode, else the search runs with the setpoint episodes on the FMU.
     Where the least load IAE leaves a step of the range episode unsettled (requirement 1 ranks first), the least
     setpoint ISE within the same limits is kept if it settles them (objective "setpoint"). Returns (what was
     found, a Followed, (vector, gains, (b, c, Tf)) to keep, or None: the gains stay)."""
@@ -647,6 +663,7 @@ def follow_setpoints(config: TuningConfig, design: LoadDesign, first: FixedPid, 
         return found, kept
     if not diverged:
         return dataclasses.replace(found, source=None), None
+    first = first()
     gains = first.gains.values()
     _, c, tf = first.structure
     weight, rows = setpoint_weight(config, gains, first.structure, seeds, deploy.max_overshoot)

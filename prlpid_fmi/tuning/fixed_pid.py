@@ -231,10 +231,8 @@ def _robust(config: TuningConfig, gain_map: ActionMap, population, energies, lim
             core: LoopCore, seeds: list[int]):
     """(vector, gains tuple) of the cheapest of the ROBUST_CANDIDATES cheapest population members with
     Ms <= limit at every operating point of the setpoint range (setpoint_range_points), on the nominal plant and
-    the Monte-Carlo draws (parameter_samples, with training.randomize); else the best member detuned both ways (`detune_over`, with and without keep_ti; a loop in a limit cycle has Ms inf and a slower loop
-    cures it), the one with the lower J on `seeds`; else the same PI (Td at its low end, detuned if need be); else
-    the best member as it is (the deliverable then
-    reports its Ms)."""
+    the Monte-Carlo draws (parameter_samples, with training.randomize); else the best member made robust
+    (`robust_gains`)."""
     points, draws = setpoint_range_points(config), parameter_samples(config)
     order = np.argsort(energies)
     checks = [(plant, p) for plant in (config, *draws) for p in points]
@@ -245,7 +243,18 @@ def _robust(config: TuningConfig, gain_map: ActionMap, population, energies, lim
                 all(_meets(plant, g, p, limit) for plant, p in checks):
             return population[i], g
     best = population[order[0]]
-    g = gain_map.values(best.tolist())
+    return best, robust_gains(config, gain_map.values(best.tolist()), limit, lambda r: _cost_of(r, core, seeds))
+
+
+def robust_gains(config: TuningConfig, g: GainValues, limit: float, cost) -> GainValues:
+    """g where its Ms <= limit at every operating point of the setpoint range (and Monte-Carlo draw); else g detuned
+    both ways (`detune_over`, with and without keep_ti; a loop in a limit cycle has Ms inf and a slower loop cures
+    it), the one of lower cost(gains) (J on the search's episodes); else the same PI (Td at its low end, detuned if
+    need be); else g as it is (the deliverable then reports its Ms)."""
+    points, draws = setpoint_range_points(config), parameter_samples(config)
+    checks = [(plant, p) for plant in (config, *draws) for p in points]
+    if all(_meets(plant, g, p, limit) for plant, p in checks):
+        return g
     repairs = [r for r in (detune_over(config, g, points, limit, keep_ti=False, draws=draws),
                            detune_over(config, g, points, limit, keep_ti=True, draws=draws)) if r]
     if not repairs and any(td > l.Td.low for td, l in zip(g[2], config.loops)):
@@ -254,7 +263,21 @@ def _robust(config: TuningConfig, gain_map: ActionMap, population, energies, lim
         pi = (g[0], g[1], [l.Td.low for l in config.loops], g[3])
         repairs = [pi] if all(_meets(plant, pi, p, limit) for plant, p in checks) else \
             [r for r in (detune_over(config, pi, points, limit, keep_ti=False, draws=draws),) if r]
-    return best, min(repairs, key=lambda r: _cost_of(r, core, seeds)) if repairs else g
+    return min(repairs, key=cost) if repairs else g
+
+
+def robust_setpoint_pid(config: TuningConfig, found: FixedPid, seeds: list[int], limit: float) -> FixedPid:
+    """`found` (a setpoint_pid result checked against a looser Ms limit) made robust to `limit` (`robust_gains`), its
+    cost J on `seeds` again where its gains changed."""
+    search = dataclasses.replace(config, forecast_horizon=0)
+    evaluator = SetpointSearch(search, seeds)
+    try:
+        gains = robust_gains(search, found.gains.values(), limit, lambda r: _cost_of(r, evaluator.core, seeds))
+        if gains == found.gains.values():
+            return found
+        return dataclasses.replace(found, gains=gains_from_values(*gains), cost=_cost_of(gains, evaluator.core, seeds))
+    finally:
+        evaluator.close()
 
 
 def setpoint_pid(config: TuningConfig, seed: int, episodes: int, maxiter: int, popsize: int, progress: Steps,
