@@ -43,7 +43,7 @@ def test_noise_and_increment_noise_gains_equal_the_impulse_response_norms(Kp, Ti
     assert plant.noise_gain(controller, increments=True) == pytest.approx(std_du, rel=0.01)
     # the vectorised scan gives the same for every K (Kp scales C as a whole)
     shape = lambda omega: pid_frequency_response(1.0, Ti, Td, TS, omega, None, Tf, 1)  # noqa: E731
-    _, noise, _, increments = plant.scan(np.array([Kp]), shape)
+    noise, increments = plant.noise_scan(np.array([Kp]), shape)
     assert noise[0] == pytest.approx(plant.noise_gain(controller), rel=1e-9)
     assert increments[0] == pytest.approx(plant.noise_gain(controller, increments=True), rel=1e-9)
     if Td > 0 and Tf < 0.1:  # a derivative on barely filtered noise: the increments dominate

@@ -287,7 +287,8 @@ def test_the_vectorised_kp_scan_equals_the_per_controller_estimates():
     plant = MeasuredPlant(w, np.polyval(b[::-1], q) / np.polyval(a[::-1], q), Ts, (0.0,), ())
     Ti, Td, N, Tf = 0.8, 0.05, 10.0, 0.2
     kps = np.geomspace(0.1, 40.0, 9)
-    ms, noise, winding, increments = plant.scan(kps, lambda x: pid_frequency_response(1.0, Ti, Td, Ts, x, N, Tf))
+    shape = lambda x: pid_frequency_response(1.0, Ti, Td, Ts, x, N, Tf)  # noqa: E731
+    (ms, winding), (noise, increments) = plant.scan(kps, shape), plant.noise_scan(kps, shape)
     for j, kp in enumerate(kps):
         C = lambda x, kp=kp: pid_frequency_response(kp, Ti, Td, Ts, x, N, Tf)  # noqa: E731
         assert ms[j] == pytest.approx(plant.sensitivity_peak(C), rel=1e-9)

@@ -119,22 +119,26 @@ class MeasuredPlant:
         q = 0.5 * (np.sqrt(disc[m]) - b[m])  # the larger root times a, without cancellation
         return np.column_stack([c / q, q / a[m]])
 
-    def scan(self, gains: np.ndarray, shape, noise: bool = True) -> tuple:
-        """(Ms, noise gain, winding, increment noise gain) of the PIDs K * shape(w) for every K in `gains` (m,) at
-        once: shape(w) is the feedback response of the PID with Kp = 1 (Kp scales C as a whole). Arrays of shape
-        (m,); the noise gains None unless `noise`. shape: a function of w or its values on `grid`'s frequencies."""
+    def scan(self, gains: np.ndarray, shape) -> tuple[np.ndarray, np.ndarray]:
+        """(Ms, winding) of the PIDs K * shape(w) for every K in `gains` (m,) at once: shape(w) is the feedback response
+        of the PID with Kp = 1 (Kp scales C as a whole). Arrays of shape (m,). shape: a function of w or its values on
+        `grid`'s frequencies."""
         w, P = self.grid()
         G = shape(w) if callable(shape) else shape
-        K = np.asarray(gains, float)[:, None]
-        R = 1.0 + K * (G * P)[None, :]  # 1 + C P, (m, K)
+        R = 1.0 + np.asarray(gains, float)[:, None] * (G * P)[None, :]  # 1 + C P, (m, K)
         with np.errstate(divide="ignore"):
             ms = 1.0 / np.sqrt(np.min(R.real ** 2 + R.imag ** 2, axis=1))
         # the unwrapped phase change: the sum of the phase steps between neighbouring frequencies, each in (-pi, pi]
-        winding = np.sum(np.angle(R[:, 1:] * np.conj(R[:, :-1])), axis=1)
-        if not noise:
-            return ms, None, winding, None
-        cs2, theta = np.abs(K * G[None, :] / R) ** 2, w * self.sample_time_s
-        return ms, _noise_gains(cs2, theta, False), winding, _noise_gains(cs2, theta, True)
+        return ms, np.sum(np.angle(R[:, 1:] * np.conj(R[:, :-1])), axis=1)
+
+    def noise_scan(self, gains: np.ndarray, shape) -> tuple[np.ndarray, np.ndarray]:
+        """(noise gain, increment noise gain) of the PIDs K * shape(w) for every K in `gains` (m,) (`scan`'s
+        arguments): std(u) / std(n) and std(u_k - u_{k-1}) / std(n), arrays (m,)."""
+        w, P = self.grid()
+        G = shape(w) if callable(shape) else shape
+        K = np.asarray(gains, float)[:, None]
+        cs2, theta = np.abs(K * G[None, :] / (1.0 + K * (G * P)[None, :])) ** 2, w * self.sample_time_s
+        return _noise_gains(cs2, theta, False), _noise_gains(cs2, theta, True)
 
 
 

@@ -172,13 +172,12 @@ def _scanned_interval(ok, sign: float, lo: float, hi: float):
     return sign, float(low), float(max(high, low))
 
 
-def _exact_ok(plants, shape, sign: float, lo: float, hi: float, limit: float):
+def _exact_ok(plants, shapes: list[np.ndarray], sign: float, lo: float, hi: float, limit: float):
     """Without measurement noise, `ok` of LoadDesign.kp_interval from the exact |Kp| intervals in [lo, hi] where Ms <=
     limit at every plant response on its grid (MeasuredPlant.ms_forbidden), each checked once for stability at
     STABILITY_CHECKS |Kp| along it (Nyquist against the reference winding: constant along such an interval, as the
     curve crosses -1 only where Ms is infinite): |Kp| (m,) -> passes (m,). None where the grid's winding still
-    varies along one (then the scan decides)."""
-    shapes = [shape(plant.grid()[0]) for plant, _ in plants]  # the PID with Kp = 1 on each response's grid
+    varies along one (then the scan decides). shapes: the PID with Kp = 1 on each plant response's grid."""
     forbidden = np.concatenate([plant.ms_forbidden(sign * g, limit) for (plant, _), g in zip(plants, shapes)])
     forbidden = forbidden[(forbidden[:, 1] > lo) & (forbidden[:, 0] < hi)]
     forbidden = forbidden[np.argsort(forbidden[:, 0])]
@@ -191,7 +190,7 @@ def _exact_ok(plants, shape, sign: float, lo: float, hi: float, limit: float):
     # every piece's checks at once: one scan per plant response
     starts, stops = np.array(pieces).T
     k = sign * np.geomspace(starts, stops, STABILITY_CHECKS, axis=1).ravel()  # the pieces' checks, piece after piece
-    stable = np.all([np.abs(plant.scan(k, g, noise=False)[2] - reference) < 0.5 * math.pi
+    stable = np.all([np.abs(plant.scan(k, g)[1] - reference) < 0.5 * math.pi
                      for (plant, reference), g in zip(plants, shapes)], axis=0).reshape(len(pieces), STABILITY_CHECKS)
     if np.any(stable.any(axis=1) & ~stable.all(axis=1)):
         return None
@@ -271,7 +270,8 @@ class LoadDesign(OutcomeCache):
         point, for these Ti, Td, Tf: a scan of KP_SCAN log-spaced |Kp| over the widened range, the feasible run with
         the largest |Kp|, its ends refined on a finer grid (`_scanned_interval`); each |Kp| checked against the exact
         Ms intervals without measurement noise (`_exact_ok`), else by robustness.plant_response.MeasuredPlant.scan
-        (Nyquist stability included); None when no Kp meets them. The whole range where nothing was measured."""
+        (Nyquist stability included), and the noise bounds (MeasuredPlant.noise_scan) where those hold; None when no
+        Kp meets them. The whole range where nothing was measured."""
         r = self.search_config.loops[loop].Kp
         sign = -1.0 if r.high <= 0 else 1.0
         lo, hi = (abs(r.high), abs(r.low)) if sign < 0 else (r.low if r.low > 0 else r.high * 1e-3, r.high)
@@ -287,17 +287,22 @@ class LoadDesign(OutcomeCache):
         limit = self.limit if self.limit is not None else math.inf
         sigma = c.measurement_noise_std
 
+        shapes = [shape(plant.grid()[0]) for plant, _ in plants]  # the PID with Kp = 1 on each response's grid
+
         def ok(mags: np.ndarray) -> np.ndarray:
             good = np.ones(len(mags), bool)
-            for plant, reference in plants:
-                ms, noise, winding, increments = plant.scan(sign * mags, shape, noise=sigma > 0)
+            for (plant, reference), g in zip(plants, shapes):
+                ms, winding = plant.scan(sign * mags, g)
                 good &= (ms <= limit) & (np.abs(winding - reference) < 0.5 * math.pi)  # stable: Nyquist
-                if sigma > 0:
-                    good &= sigma * noise / self.spans[loop] <= self.max_noise
-                    good &= sigma * increments / self.spans[loop] <= self.max_increment
+            if sigma > 0 and good.any():  # the noise bounds where Ms and stability hold
+                kept = np.flatnonzero(good)
+                for (plant, _), g in zip(plants, shapes):
+                    noise, increments = plant.noise_scan(sign * mags[kept], g)
+                    good[kept] &= (sigma * noise / self.spans[loop] <= self.max_noise) & \
+                        (sigma * increments / self.spans[loop] <= self.max_increment)
             return good
 
-        exact = _exact_ok(plants, shape, sign, lo, hi, limit) if sigma == 0 and 1.0 < limit < math.inf else None
+        exact = _exact_ok(plants, shapes, sign, lo, hi, limit) if sigma == 0 and 1.0 < limit < math.inf else None
         found = _scanned_interval(exact or ok, sign, lo, hi)
         if len(self._intervals) > 65536:
             self._intervals.clear()
