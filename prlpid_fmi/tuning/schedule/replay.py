@@ -79,12 +79,14 @@ def replay_schedule(schedule: GainSchedule, config: TuningConfig, seed: int = 0,
     core = make_core(config)
     try:
         probe = SchedulingVariable(schedule.variable, core)
-        values = []
+        values, last = [], [None, None]  # the last value looked up and its gains (a setpoint holds for many samples)
 
         def table_gains(core):  # called before every step: read the scheduling variable, look the gains up
             z = probe()
             values.append(z)
-            return schedule.gains_object(z).values()
+            if z != last[0]:
+                last[0], last[1] = z, schedule.gains_object(z).values()
+            return last[1]
 
         metrics, traj = evaluate_gains(table_gains, config, seed=seed, intervals=intervals, core=core)
     finally:
