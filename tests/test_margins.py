@@ -287,6 +287,29 @@ def test_a_measurement_is_kept_whatever_the_training_settings(monkeypatch):
         assert len(measured) == 2
 
 
+def test_a_local_design_at_one_setpoint_measures_what_the_scenario_does(monkeypatch):
+    """The classical schedule's local designs hold the setpoint range at one point, widen the gain ranges and carry
+    the fixed PID's structure as tuned_structure; none of it is read by the experiment, so the scenario's
+    measurement at that point with the same structure in force is kept for them. Another Tf is another experiment."""
+    import prlpid_fmi.robustness.margins as margins
+    from prlpid_fmi import runcontext
+    from prlpid_fmi.config import GainRange
+
+    measured = []
+    monkeypatch.setattr(margins, "measure_margins", lambda *a: measured.append(a) or loop_margins(
+        a[0], a[1][0], a[1][1], a[1][2], a[2]))
+    config = dataclasses.replace(preset("first_order"), setpoint_weight=0.5, measurement_filter=0.2)
+    gains = ([3.0], [2.0], [0.05], None)
+    loop = dataclasses.replace(config.loops[0], setpoint_range=(1.0, 1.0), Kp=GainRange(0.01, 400.0, "log"))
+    local = dataclasses.replace(config, loops=(loop,), measurement_filter="tuned", setpoint_weight="tuned",
+                                tuned_structure=((0.5, config.derivative_weight, 0.2),))
+    with runcontext.opened():
+        first = margins.margins_of(config, gains, [1.0])
+        assert margins.margins_of(local, gains, [1.0]) is first and len(measured) == 1
+        other_filter = dataclasses.replace(local, tuned_structure=((0.5, config.derivative_weight, 0.3),))
+        assert margins.margins_of(other_filter, gains, [1.0]).Ms != first.Ms and len(measured) == 2
+
+
 def test_a_growing_oscillation_fails_and_a_time_varying_plant_stays_impossible():
     """PI control of a double integrator is never stable (I s^3 + Kp s^2 + Kp/Ti has no s term: not Hurwitz). With a
     small Kp the quadrotor's loops oscillate slowly, beating, and grow without leaving their divergence bound within

@@ -40,7 +40,7 @@ import control
 import numpy as np
 
 from prlpid_fmi import runcontext
-from prlpid_fmi.config import TuningConfig
+from prlpid_fmi.config import LoopConfig, TuningConfig
 from prlpid_fmi.loop.core import pid_structure
 from prlpid_fmi.loop.gains import GainValues
 from prlpid_fmi.robustness.plant_response import MeasuredPlant
@@ -539,13 +539,30 @@ NOT_IN_EXPERIMENT = ("prior", "prior_mode", "forecast_horizon", "smoothing", "sm
                      "gain_mapping", "anchor_on", "anchor_bands")
 _UNREAD = {f.name: f.default if f.default is not dataclasses.MISSING else f.default_factory()
            for f in dataclasses.fields(TuningConfig) if f.name in NOT_IN_EXPERIMENT}  # their defaults
+# the controller's fields pid_structure reads only without a tuned_structure (_as_measured sets one), and the
+# coupling's gain range: their defaults
+_STRUCTURE = {f.name: f.default for f in dataclasses.fields(TuningConfig)
+              if f.name in ("setpoint_weight", "derivative_weight", "measurement_filter", "coupling_range")}
+_LOOP = LoopConfig(input="u", output="y")  # its setpoint and gain ranges: what _as_measured puts in every loop
 
 
 def _place(config: TuningConfig, point) -> tuple:
-    """What a measurement depends on besides the controller: the config (without NOT_IN_EXPERIMENT: a search's
-    config without the forecast measures what the scenario's does), the FMU file (size, time), the point."""
+    """What a measurement depends on besides the controller: the config as the experiment reads it (`_as_measured`:
+    a search's config without the forecast, or a local design's held at one setpoint, measures what the scenario's
+    does), the FMU file (size, time), the point."""
     fmu = fmu_file(config).stat()
-    return repr(dataclasses.replace(config, **_UNREAD)), fmu.st_size, fmu.st_mtime_ns, tuple(float(v) for v in point)
+    return repr(_as_measured(config)), fmu.st_size, fmu.st_mtime_ns, tuple(float(v) for v in point)
+
+
+def _as_measured(config: TuningConfig) -> TuningConfig:
+    """config with what the closed-loop experiment never reads at fixed values: NOT_IN_EXPERIMENT at their defaults,
+    the loops' setpoint ranges and gain ranges and the coupling's range (it runs given gains at a given point), and
+    the PID's structure as in force (loop.core.pid_structure: tuned_structure, or the controller's weights and
+    filter, "tuned" resolved)."""
+    loops = tuple(dataclasses.replace(l, setpoint_range=_LOOP.setpoint_range, Kp=_LOOP.Kp, Ti=_LOOP.Ti, Td=_LOOP.Td)
+                  for l in config.loops)
+    return dataclasses.replace(config, **_UNREAD, loops=loops, tuned_structure=tuple(zip(*pid_structure(config))),
+                               **_STRUCTURE)
 
 
 def _predicts(config: TuningConfig, m: Margins) -> bool:
