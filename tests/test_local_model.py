@@ -182,6 +182,27 @@ def test_load_response_of_a_p_controller_on_a_first_order_lag_by_hand():
     assert not closed_loop_stable(model, *feedback_polynomials(2.0, math.inf, 0.0, 1.0))  # pole at -1.5
 
 
+def test_the_schur_cohn_test_agrees_with_the_roots_numpy_finds():
+    """schur_stable against np.roots' largest |root| on random real polynomials of degree 1-8 whose roots lie at
+    least 1e-6 from the unit circle (both sides), scaled by a random leading coefficient of either sign."""
+    from prlpid_fmi.robustness.local_model import schur_stable
+
+    rng = np.random.default_rng(1)
+    stable = unstable = 0
+    for _ in range(5000):
+        degree = int(rng.integers(1, 9))
+        pairs = rng.uniform(0.0, 1.3, degree // 2) * np.exp(1j * rng.uniform(0.0, math.pi, degree // 2))
+        roots = np.concatenate([pairs, pairs.conj(), rng.uniform(-1.3, 1.3, degree % 2)])
+        if np.any(np.abs(np.abs(roots) - 1.0) < 1e-6):
+            continue
+        c = np.real(np.poly(roots)) * rng.choice([-1.0, 1.0]) * rng.uniform(0.1, 10.0)
+        expected = bool(np.max(np.abs(np.roots(c))) < 1.0)
+        assert schur_stable(c.tolist()) == expected, roots
+        stable, unstable = stable + expected, unstable + (not expected)
+    assert stable > 500 and unstable > 500  # both answers were asked for
+    assert schur_stable([3.0]) and not schur_stable([1.0, -1.0])  # a constant; a root on the circle is not inside
+
+
 def test_nonlinear_plants_model_matches_the_fmus_small_load_step():
     """The two tanks (nonlinear: outflow ~ sqrt(h)): the load IAE and chatter of a PID on the identified local
     models equal the FMU's load experiment with a small load (2 % of the span) within 5 %, at every point."""

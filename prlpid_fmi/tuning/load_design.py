@@ -184,20 +184,20 @@ def _exact_ok(plants, shapes: list[np.ndarray], sign: float, lo: float, hi: floa
     ends = np.maximum.accumulate(forbidden[:, 1]) if len(forbidden) else forbidden[:, 1]
     starts = np.concatenate([[lo], np.maximum(ends, lo)])      # an allowed piece starts where the covered run ends
     stops = np.concatenate([np.minimum(forbidden[:, 0], hi), [hi]])   # and stops where the next interval starts
-    pieces = [(a, b) for a, b in zip(starts, stops) if b >= a]
-    if not pieces:
+    pieces = stops >= starts
+    starts, stops = starts[pieces], stops[pieces]
+    if not len(starts):
         return lambda mags: np.zeros(len(mags), bool)
     # every piece's checks at once: one scan per plant response
-    starts, stops = np.array(pieces).T
     k = sign * np.geomspace(starts, stops, STABILITY_CHECKS, axis=1).ravel()  # the pieces' checks, piece after piece
     stable = np.all([np.abs(plant.scan(k, g)[1] - reference) < 0.5 * math.pi
-                     for (plant, reference), g in zip(plants, shapes)], axis=0).reshape(len(pieces), STABILITY_CHECKS)
+                     for (plant, reference), g in zip(plants, shapes)], axis=0).reshape(len(starts), STABILITY_CHECKS)
     if np.any(stable.any(axis=1) & ~stable.all(axis=1)):
         return None
-    kept = [piece for piece, ok in zip(pieces, stable.all(axis=1)) if ok]
-    if not kept:
+    kept = stable.all(axis=1)
+    if not kept.any():
         return lambda mags: np.zeros(len(mags), bool)
-    low, high = np.array(kept).T
+    low, high = starts[kept], stops[kept]
     return lambda mags: np.any((mags[:, None] >= low[None, :]) & (mags[:, None] <= high[None, :]), axis=1)
 
 
