@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import functools
 import math
 
 import numpy as np
@@ -64,6 +65,7 @@ from prlpid_fmi.tuning.search_pool import SearchPool, search_fmus, search_worker
 B_GRID = tuple(i / 20 for i in range(21))  # setpoint weights tried
 MODEL_GENERATIONS = 2  # a search on the local models runs this many x baseline.maxiter generations, ...
 STABILITY_KEPT = 100_000  # LoadDesign._stable's answers kept at most (then forgotten)
+POLYNOMIALS_KEPT = 4096  # LoadDesign._feedback's polynomials kept at most (then forgotten)
 MODEL_MIN_GENERATIONS, MODEL_MIN_POPSIZE = 20, 10  # ... and popsize, at least these (a model candidate costs ~0.1 ms)
 SETPOINT_MODEL_MINIMUM = (30, 15)  # the setpoint search on the models at least (its 5 parameters, no Kp-interval scans)
 TF_RANGE = (0.1, 100.0)  # measurement filter search range [sample times], log
@@ -150,10 +152,18 @@ class OutcomeCache:
         return vectors
 
 
+@functools.lru_cache(maxsize=64)
+def _kp_grid(lo: float, hi: float) -> np.ndarray:
+    """KP_SCAN log-spaced |Kp| in [lo, hi] (read-only: shared by every scan of a loop's range)."""
+    grid = np.geomspace(lo, hi, KP_SCAN)
+    grid.flags.writeable = False
+    return grid
+
+
 def _scanned_interval(ok, sign: float, lo: float, hi: float):
     """LoadDesign.kp_interval by a scan: KP_SCAN log-spaced |Kp| in [lo, hi] through ok (|Kp| (m,) -> passes (m,)),
     the passing run with the largest |Kp|, its ends refined on a finer grid (KP_REFINE); None when none passes."""
-    grid = np.geomspace(lo, hi, KP_SCAN)
+    grid = _kp_grid(lo, hi)
     good = ok(grid)
     if not good.any():
         return None
@@ -238,6 +248,7 @@ class LoadDesign(OutcomeCache):
         self._seen: dict = {}
         self._intervals: dict = {}
         self._stability: dict = {}  # `_stable`'s answers (keyed by the model's id: the models live as long)
+        self._polynomials: dict = {}  # `_feedback`'s (Nc, Dc) per (Kp, Ti, Td, Tf)
         self.reference: list = []
         self.loads: list = []  # per point: the load per loop [input units]
         self.start: list | None = None  # the FMU start state's measurement per loop
@@ -646,11 +657,21 @@ class LoadDesign(OutcomeCache):
         return found
 
     def _feedback(self, gains: GainValues, tf: list[float], loop: int) -> tuple[np.ndarray, np.ndarray]:
-        """(Nc, Dc) of loop `loop`'s PID (robustness.local_model.feedback_polynomials)."""
+        """(Nc, Dc) of loop `loop`'s PID (robustness.local_model.feedback_polynomials), kept per PID (a candidate asks
+        for them at every point; read-only arrays)."""
         c = self.config
         Kp, Ti, Td, _ = gains
-        return feedback_polynomials(Kp[loop], Ti[loop], Td[loop], c.sample_time_s, c.derivative_filter_N, tf[loop],
-                                    c.measurement_filter_order)
+        key = (Kp[loop], Ti[loop], Td[loop], tf[loop])
+        found = self._polynomials.get(key)
+        if found is None:
+            if len(self._polynomials) > POLYNOMIALS_KEPT:
+                self._polynomials.clear()
+            found = feedback_polynomials(*key[:3], c.sample_time_s, c.derivative_filter_N, key[3],
+                                         c.measurement_filter_order)
+            for a in found:
+                a.flags.writeable = False
+            self._polynomials[key] = found
+        return found
 
     def _loop_args(self, gains: GainValues, tf: list[float]) -> tuple:
         """The arguments after the models of robustness.loop_models.closed_loop and loop_plants for these gains."""
