@@ -30,8 +30,8 @@ baseline.objective "load" (the default) keeps, in this order:
 a noise limit held it (its estimate within 1 % of the limit: LoadDesign.active_limits), the noise limits are relaxed
 before they may cost following: first a measurement filter (the filter searched, where controller.measurement_filter
 is not "tuned"), then the limits that held it x RELAX_FACTORS in turn, up to none; the first design that meets 1
-ends it. Where none does, the stabilising PID the plant was measured with (the setpoint search's, with its best b)
-is a candidate too. Of the candidates the rule keeps the one first in `priority` (no divergence, fewest unsettled
+ends it. Where none does, the stabilising PID the plant was measured with (the setpoint search's, made robust to the
+Ms limit, with its best b) is a candidate too. Of the candidates the rule keeps the one first in `priority` (no divergence, fewest unsettled
 steps, Ms met, overshoot met, load within tolerance, least setpoint ISE, least relaxed): a candidate that diverges or
 leaves a step unsettled is never kept over one that settles. The result is a `DesignResult`; fixed_pid.json is
 written from it by run.tune.
