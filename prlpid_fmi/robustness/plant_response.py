@@ -94,11 +94,10 @@ class MeasuredPlant:
         return self.noise_gains(controller)[1 if increments else 0]
 
     def noise_gains(self, controller) -> tuple[float, float]:
-        """(std(u), std(u_k - u_{k-1})) / std(n) from one evaluation of the controller on the grid."""
-        w, P = self.grid()
-        C = controller(w)
-        cs2, theta = np.abs(C / (1.0 + C * P))[None, :] ** 2, w * self.sample_time_s
-        return float(_noise_gains(cs2, theta, False)[0]), float(_noise_gains(cs2, theta, True)[0])
+        """(std(u), std(u_k - u_{k-1})) / std(n) from one evaluation of the controller on the grid (`noise_scan` with
+        K = 1)."""
+        noise, increments = self.noise_scan(np.ones(1), controller)
+        return float(noise[0]), float(increments[0])
 
     def winding(self, controller) -> float:
         """The phase change [rad] of 1 + C P from the lowest grid frequency to Nyquist (unwrapped): twice it over
